@@ -1,0 +1,20 @@
+#include "core/frame.hpp"
+
+namespace facecap {
+
+std::string_view solve_stage_name(SolveStage stage) noexcept {
+  switch (stage) {
+    case SolveStage::kStabilise: return "stabilise";
+    case SolveStage::kCorrespond: return "correspond";
+    case SolveStage::kWeights: return "weights";
+    case SolveStage::kBlend: return "blend";
+    case SolveStage::kRhs: return "rhs";
+    case SolveStage::kBacksolve: return "backsolve";
+    case SolveStage::kCollide: return "collide";
+    case SolveStage::kFilter: return "filter";
+    case SolveStage::kCount: break;
+  }
+  return "?";
+}
+
+}  // namespace facecap

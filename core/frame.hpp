@@ -1,0 +1,99 @@
+#pragma once
+// The two frames that flow through facecap: raw markers in, solved face out.
+// Both are sized once (configure) and then copied into pre-reserved storage, so the
+// real-time loop never allocates when it moves them.
+#include <array>
+#include <cstdint>
+#include <cstring>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "core/time.hpp"
+
+namespace facecap {
+
+// Fixed-size label so that copying a marker never allocates.
+struct MarkerLabel {
+  static constexpr std::size_t kCapacity = 47;
+  std::array<char, kCapacity + 1> text{};
+
+  MarkerLabel() = default;
+  MarkerLabel(std::string_view s) { assign(s); }  // NOLINT: implicit from text on purpose
+  void assign(std::string_view s) noexcept {
+    const std::size_t n = s.size() < kCapacity ? s.size() : kCapacity;
+    std::memcpy(text.data(), s.data(), n);
+    text[n] = '\0';
+    for (std::size_t i = n + 1; i < text.size(); ++i) text[i] = '\0';
+  }
+  std::string_view view() const noexcept { return std::string_view(text.data()); }
+  bool empty() const noexcept { return text[0] == '\0'; }
+  bool operator==(const MarkerLabel& o) const noexcept { return view() == o.view(); }
+};
+
+enum MarkerFlags : uint32_t {
+  kMarkerMissing = 1u << 0,      // occluded or dropped: position is meaningless
+  kMarkerUnlabelled = 1u << 1,   // the source gave no identity
+  kMarkerRelabelled = 1u << 2,   // identity corrected by the labeller
+  kMarkerOutlier = 1u << 3,      // rejected by a robust fit this frame
+};
+
+struct Marker {
+  int32_t id = -1;                              // source id, -1 when none
+  MarkerLabel label;                            // source label, may be empty
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // in the units of its take or source
+  uint32_t flags = 0;
+  bool present() const noexcept { return (flags & kMarkerMissing) == 0; }
+};
+
+struct MarkerFrame {
+  int64_t frame_no = 0;
+  int64_t source_time_ns = 0;   // the source's own clock (file time, device time)
+  int64_t receive_time_ns = 0;  // CLOCK_MONOTONIC when facecap received it
+  Timecode timecode;
+  std::vector<Marker> markers;  // reserved at configure time
+
+  std::size_t present_count() const noexcept {
+    std::size_t n = 0;
+    for (const auto& m : markers) n += m.present() ? 1 : 0;
+    return n;
+  }
+};
+
+// Stages of one solve, in order; timings are reported per stage.
+enum class SolveStage : uint8_t {
+  kStabilise, kCorrespond, kWeights, kBlend, kRhs, kBacksolve, kCollide, kFilter, kCount
+};
+inline constexpr std::size_t kSolveStageCount = static_cast<std::size_t>(SolveStage::kCount);
+std::string_view solve_stage_name(SolveStage stage) noexcept;
+
+enum SolvedFlags : uint32_t {
+  kSolvedHeadPoseHeld = 1u << 0,  // too few stable markers: previous head pose reused
+  kSolvedNoMarkers = 1u << 1,     // nothing to solve from: previous face reused
+};
+
+struct SolvedFrame {
+  int64_t frame_no = 0;
+  int64_t source_time_ns = 0;
+  int64_t receive_time_ns = 0;
+  int64_t solve_start_ns = 0;
+  int64_t solve_end_ns = 0;
+  Timecode timecode;
+  Eigen::Quaterniond head_rotation = Eigen::Quaterniond::Identity();  // head in world
+  Eigen::Vector3d head_translation = Eigen::Vector3d::Zero();
+  Eigen::VectorXf weights;           // M, in rig shape order
+  Eigen::Matrix3Xf vertices;         // 3 x N, rig units, head space
+  std::array<int64_t, kSolveStageCount> stage_ns{};
+  uint32_t collision_constraints = 0;
+  uint32_t markers_used = 0;
+  uint32_t flags = 0;
+
+  void resize(Eigen::Index shapes, Eigen::Index vertex_count) {
+    weights.setZero(shapes);
+    vertices.setZero(3, vertex_count);
+  }
+};
+
+}  // namespace facecap

@@ -1,0 +1,36 @@
+#pragma once
+// Small file and hashing helpers shared by loaders, caches and recordings.
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace facecap {
+
+// Whole file into memory; throws Error naming the file on failure.
+std::vector<char> read_file_bytes(const std::filesystem::path& path);
+
+// Writes via a temporary file and rename, so readers never see a half-written file.
+void write_file_atomically(const std::filesystem::path& path, std::span<const char> bytes);
+
+// 64-bit FNV-1a: stable across runs and machines, used for identities and checksums.
+struct Fnv1a64 {
+  uint64_t state = 0xcbf29ce484222325ull;
+  void add(const void* data, std::size_t size) noexcept {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < size; ++i) {
+      state ^= p[i];
+      state *= 0x100000001b3ull;
+    }
+  }
+  template <typename T>
+  void add_value(const T& value) noexcept { add(&value, sizeof(T)); }
+  void add_string(const std::string& s) noexcept { add_value(s.size()); add(s.data(), s.size()); }
+  uint64_t digest() const noexcept { return state; }
+};
+
+// $FACECAP_CACHE_DIR, else $XDG_CACHE_HOME/facecap, else ~/.cache/facecap.
+std::filesystem::path user_cache_dir();
+
+}  // namespace facecap

@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# facecap quick start: installs the Debian packages facecap needs, builds, and then
+#   run   runs the main job on its built-in default (extra arguments are passed on)
+#   test  runs the whole test suite
+# Usage: scripts/quickstart.sh run|test [args...]
+set -euo pipefail
+
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+build_dir=${FACECAP_BUILD_DIR:-$here/build}
+mode=${1:-run}
+shift || true
+
+# Debian 12 packages: build tools and the libraries listed in docs/building.md.
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libeigen3-dev libsuitesparse-dev libqhull-dev libnanoflann-dev
+  libtomlplusplus-dev libtinygltf-dev nlohmann-json3-dev
+  libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev
+  catch2 libbenchmark-dev
+)
+
+install_packages() {
+  local missing=()
+  for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  echo "quickstart: installing ${missing[*]}"
+  local sudo=()
+  [ "$(id -u)" -eq 0 ] || sudo=(sudo)
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+build() {
+  cmake -S "$here" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
+  cmake --build "$build_dir" --parallel "$(nproc)"
+}
+
+case "$mode" in
+  run)
+    install_packages
+    build
+    exec "$build_dir/tools/facecap" demo "$@"
+    ;;
+  test)
+    install_packages
+    build
+    cd "$build_dir"
+    exec ctest --output-on-failure --parallel "$(nproc)" "$@"
+    ;;
+  *)
+    echo "usage: $0 run|test [args...]" >&2
+    exit 2
+    ;;
+esac

@@ -1,0 +1,26 @@
+#pragma once
+// A minimal, strict Wavefront OBJ reader for blendshape meshes. Strict on purpose:
+// a rig file with a bad number must fail with its line, not load as zeros.
+#include <string>
+#include <string_view>
+
+#include <Eigen/Core>
+
+namespace facecap {
+
+struct ObjMesh {
+  Eigen::Matrix3Xd vertices;   // 3 x N
+  Eigen::Matrix3Xi triangles;  // 3 x T, polygons fan-triangulated
+  int polygons = 0;            // faces as written (a quad counts once)
+};
+
+// Parses OBJ text; `file` names it in errors ("path:line: what").
+// Reads v and f (v, v/vt, v//vn, v/vt/vn, negative indices); ignores vt, vn, groups,
+// materials and smoothing. Throws Error.
+ObjMesh parse_obj(std::string_view text, const std::string& file);
+ObjMesh read_obj(const std::string& path);
+
+// Writes vertices and triangles (for tests and exports).
+std::string format_obj(const Eigen::Matrix3Xd& vertices, const Eigen::Matrix3Xi& triangles);
+
+}  // namespace facecap

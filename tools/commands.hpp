@@ -1,0 +1,11 @@
+#pragma once
+// Each facecap subcommand lives in its own file and registers itself here; main.cpp
+// holds the one ordered table of them.
+#include <CLI/CLI.hpp>
+
+namespace facecap::tools {
+
+// Each adds its subcommand to app; the callback runs it and sets exit_code.
+void add_inspect_rig_command(CLI::App& app, int& exit_code);
+
+}  // namespace facecap::tools

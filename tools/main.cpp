@@ -1,0 +1,29 @@
+// facecap: the command-line tool (inspect, convert, synth, bench, eval, calibrate, ...).
+#include <cstdio>
+
+#include <CLI/CLI.hpp>
+
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "tools/commands.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"facecap: facial performance-capture tools"};
+  app.require_subcommand(1);
+  std::string log_level = "warn";
+  app.add_option("--log-level", log_level, "trace, debug, info, warn, error, off")->capture_default_str();
+
+  int exit_code = 0;
+  // The ordered command table.
+  facecap::tools::add_inspect_rig_command(app, exit_code);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const facecap::Error& e) {
+    std::fprintf(stderr, "facecap: error: %s\n", e.what());
+    return 1;
+  }
+  return exit_code;
+}
