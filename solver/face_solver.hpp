@@ -63,6 +63,11 @@ class FaceSolver {
   // Real-time safe for nonlinear, linear and dt; meshik is an offline baseline.
   virtual void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept = 0;
 
+  // The mesh for given weights (M) and pins, skipping Eq. 2: for editing, for solving
+  // from captured weight curves, and for tests. Real-time safe like solve().
+  virtual void solve_with_weights(const Eigen::VectorXd& weights, const Eigen::Matrix3Xd& targets,
+                                  std::span<const uint8_t> present, SolveResult& out) noexcept = 0;
+
   // Forgets the warm start (previous weights). Real-time safe.
   virtual void reset() noexcept = 0;
 
