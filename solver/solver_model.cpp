@@ -160,6 +160,44 @@ ShapeTriangleTerms build_shape_terms(const Rig& rig, Eigen::Index shape, const T
   return terms;
 }
 
+// Marker paths from the shapes' per-triangle rotations around each marker's vertices.
+void build_marker_paths(SolverModel& model) {
+  const Rig& rig = model.rig;
+  const Eigen::Index K = model.marker_count(), M = rig.shape_count();
+  std::vector<std::vector<int>> incident(std::size_t(rig.vertex_count()));
+  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
+    for (int k = 0; k < 3; ++k) incident[std::size_t(rig.triangles(k, t))].push_back(int(t));
+  constexpr double kTurning = 0.05;  // radians; below this a straight path is as good
+  std::vector<int> entry_of(std::size_t(rig.triangle_count()), -1);
+  for (Eigen::Index s = 0; s < M; ++s) {
+    const auto& terms = model.shape_terms[std::size_t(s)];
+    for (std::size_t e = 0; e < terms.triangles.size(); ++e) entry_of[std::size_t(terms.triangles[e])] = int(e);
+    for (Eigen::Index k = 0; k < K; ++k) {
+      const auto& b = model.markers[std::size_t(k)];
+      Eigen::Vector3d r = Eigen::Vector3d::Zero();
+      for (int a = 0; a < 3; ++a) {
+        const auto& tris = incident[std::size_t(b.vertices[a])];
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int t : tris)
+          if (const int e = entry_of[std::size_t(t)]; e >= 0)
+            sum += Eigen::Vector3f(terms.log_rotation[3 * std::size_t(e)], terms.log_rotation[3 * std::size_t(e) + 1],
+                                   terms.log_rotation[3 * std::size_t(e) + 2]).cast<double>();
+        if (!tris.empty()) r += b.barycentric[a] * sum / double(tris.size());
+      }
+      const double theta = r.norm();
+      if (theta < kTurning || theta > 3.0) continue;  // near pi the axis is too uncertain to follow
+      const Eigen::Vector3d axis = r / theta;
+      const Eigen::Vector3d delta = model.marker_basis.block(3 * k, s, 3, 1);
+      const Eigen::Vector3d axial = axis.dot(delta) * axis;
+      // (exp(r) - I) arm = delta - axial with arm perpendicular to the axis.
+      const Eigen::Matrix3d turn = (rotation_exp(r) - Eigen::Matrix3d::Identity()) *
+                                       (Eigen::Matrix3d::Identity() - axis * axis.transpose()) + axis * axis.transpose();
+      model.marker_paths.push_back({int(k), int(s), r, turn.inverse() * (delta - axial), axial});
+    }
+    for (int t : terms.triangles) entry_of[std::size_t(t)] = -1;
+  }
+}
+
 // The mouth: the inner border loop (not the outer one) that jawOpen, or failing that
 // all shapes together, moves most. Candidates are vertices within a fraction of the
 // face's height of it.
@@ -286,6 +324,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
     model->setup.gradients_s = seconds_since(t0);
   }
 
+  build_marker_paths(*model);
   const Eigen::Index N = rig.vertex_count(), K = model->marker_count();
   {
     const auto t0 = Clock::now();

@@ -26,6 +26,17 @@ struct ShapeTriangleTerms {
   std::vector<float> gradient;      // 9 per entry: F - I column-major (deformation transfer)
 };
 
+// How a marker moves with one shape's weight t under Eq. 4 where the shape turns the
+// surface under it: f(t) = (exp(t r) - I) arm + t axial, a screw motion that reaches the
+// shape's delta at t = 1. Markers on shapes that do not turn move linearly (t delta).
+struct MarkerPath {
+  int marker = 0;
+  int shape = 0;
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero();  // r: the surface's rotation vector at the marker
+  Eigen::Vector3d arm = Eigen::Vector3d::Zero();       // from the rotation axis, perpendicular to it
+  Eigen::Vector3d axial = Eigen::Vector3d::Zero();     // slide along the axis at t = 1
+};
+
 struct SolverSetupTimes {
   double gradients_s = 0, factor_s = 0, modifications_s = 0, total_s = 0;
 };
@@ -41,6 +52,8 @@ class SolverModel {
   Eigen::VectorXd marker_neutral;   // 3K
   Eigen::MatrixXd gram_all;         // M x M: B~^T B~ over all markers
   Eigen::MatrixXd gram_per_marker;  // M x (M K): marker k's B_k^T B_k in columns kM..kM+M-1
+
+  std::vector<MarkerPath> marker_paths;         // (marker, shape) pairs that turn
 
   std::vector<SparseShapeDeltas> shape_deltas;  // M, for x0 + B w
 

@@ -37,10 +37,17 @@ class StageClock {
 // loses the missing markers' blocks, so its cost follows the dropouts, not K.
 class WeightsStage {
  public:
-  explicit WeightsStage(const SolverModel& model)
-      : model_(model), qp_(model.shape_count()), H_(model.shape_count(), model.shape_count()),
-        g_(model.shape_count()), previous_(Eigen::VectorXd::Zero(model.shape_count())),
-        residual_(3 * model.marker_count()) {}
+  // follow_paths: refine along the marker paths of the nonlinear blend (params.weight_refinements).
+  WeightsStage(const SolverModel& model, bool follow_paths)
+      : model_(model), refinements_(follow_paths && !model.marker_paths.empty() ? model.params.weight_refinements : 0),
+        qp_(model.shape_count()), H_(model.shape_count(), model.shape_count()), g_(model.shape_count()),
+        previous_(Eigen::VectorXd::Zero(model.shape_count())), residual_(3 * model.marker_count()),
+        present_(model.marker_count()) {
+    if (refinements_ > 0) {
+      jacobian_.resize(3 * model.marker_count(), model.shape_count());
+      predicted_.resize(3 * model.marker_count());
+    }
+  }
 
   // Returns the number of markers used. Real-time safe.
   uint32_t solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, Eigen::VectorXd& weights) noexcept {
@@ -50,8 +57,8 @@ class WeightsStage {
     H_ = m.gram_all;
     uint32_t used = 0;
     for (Eigen::Index k = 0; k < K; ++k) {
-      const bool ok = present[std::size_t(k)] != 0 && targets.col(k).allFinite();
-      if (ok) {
+      present_[k] = present[std::size_t(k)] != 0 && targets.col(k).allFinite();
+      if (present_[k]) {
         residual_.segment<3>(3 * k) = targets.col(k) - m.marker_neutral.segment<3>(3 * k);
         ++used;
       } else {
@@ -64,6 +71,7 @@ class WeightsStage {
     g_ += p.alpha * previous_;
     weights = previous_;
     qp_.solve(H_, g_, 0.0, 1.0, weights);
+    for (int i = 0; i < refinements_; ++i) refine(targets, weights);
     previous_ = weights;
     return used;
   }
@@ -75,10 +83,44 @@ class WeightsStage {
   }
 
  private:
+  // One Gauss-Newton step: linearise the marker model x0 + sum_i f_i(w_i) at w and solve
+  // the same box-constrained ridge problem for the new w.
+  void refine(const Eigen::Matrix3Xd& targets, Eigen::VectorXd& w) noexcept {
+    const SolverModel& m = model_;
+    const Eigen::Index K = m.marker_count();
+    const SolverParams& p = m.params;
+    jacobian_ = m.marker_basis;
+    predicted_.noalias() = m.marker_basis * w;
+    for (const MarkerPath& path : m.marker_paths) {
+      const double t = w[path.shape];
+      const Eigen::Matrix3d R = rotation_exp(t * path.rotation);
+      const Eigen::Vector3d turned = R * path.arm;
+      auto rows = predicted_.segment<3>(3 * path.marker);
+      rows += turned - path.arm + t * path.axial - t * m.marker_basis.block<3, 1>(3 * path.marker, path.shape);
+      jacobian_.block<3, 1>(3 * path.marker, path.shape) = path.rotation.cross(turned) + path.axial;
+    }
+    for (Eigen::Index k = 0; k < K; ++k) {
+      if (present_[k]) {
+        residual_.segment<3>(3 * k) = targets.col(k) - m.marker_neutral.segment<3>(3 * k) - predicted_.segment<3>(3 * k);
+      } else {
+        residual_.segment<3>(3 * k).setZero();
+        jacobian_.middleRows<3>(3 * k).setZero();
+      }
+    }
+    residual_.noalias() += jacobian_ * w;
+    H_.noalias() = jacobian_.transpose() * jacobian_;
+    H_.diagonal().array() += p.alpha + p.mu;
+    g_.noalias() = jacobian_.transpose() * residual_;
+    g_ += p.alpha * previous_;
+    qp_.solve(H_, g_, 0.0, 1.0, w);
+  }
+
   const SolverModel& model_;
+  int refinements_;
   BoxQpSolver qp_;
-  Eigen::MatrixXd H_;
-  Eigen::VectorXd g_, previous_, residual_;
+  Eigen::MatrixXd H_, jacobian_;
+  Eigen::VectorXd g_, previous_, residual_, predicted_;
+  Eigen::Array<bool, Eigen::Dynamic, 1> present_;
 };
 
 // x0 + B w over the active weights and each shape's non-zero vertices.
@@ -101,7 +143,7 @@ void linear_blend(const SolverModel& m, const Eigen::VectorXd& w, Eigen::Matrix3
 
 class LinearSolver final : public FaceSolver {
  public:
-  explicit LinearSolver(std::shared_ptr<const SolverModel> model) : FaceSolver(std::move(model)), weights_(*model_) {}
+  explicit LinearSolver(std::shared_ptr<const SolverModel> model) : FaceSolver(std::move(model)), weights_(*model_, false) {}
   std::string_view name() const noexcept override { return "linear"; }
   void reset() noexcept override { weights_.reset(); }
   void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
@@ -136,7 +178,8 @@ class PoissonSolver : public FaceSolver {
  public:
   enum class Blend { kNonlinear, kDeformationTransfer };
 
-  PoissonSolver(std::shared_ptr<const SolverModel> model, Blend blend) : FaceSolver(std::move(model)), blend_(blend), weights_(*model_) {
+  PoissonSolver(std::shared_ptr<const SolverModel> model, Blend blend)
+      : FaceSolver(std::move(model)), blend_(blend), weights_(*model_, blend == Blend::kNonlinear) {
     const SolverModel& m = *model_;
     const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
     blend_sum_.setZero(9, T);
