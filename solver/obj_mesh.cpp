@@ -34,6 +34,7 @@ ObjMesh parse_obj(std::string_view text, const std::string& file) {
   coords.reserve(text.size() / 12);
   tris.reserve(text.size() / 12);
   std::vector<int> polygon;
+  ObjMesh mesh;
   int64_t line_no = 0;
   std::size_t start = 0;
   while (start < text.size()) {
@@ -54,6 +55,7 @@ ObjMesh parse_obj(std::string_view text, const std::string& file) {
           throw line_error(file, line_no, fmt::format("vertex coordinate '{}' is not a number", tok));
         coords.push_back(value);
       }
+      mesh.vertex_lines.push_back(line_no);
       // A fourth (w) or colour values may follow; they are ignored.
     } else if (keyword == "f") {
       polygon.clear();
@@ -76,12 +78,13 @@ ObjMesh parse_obj(std::string_view text, const std::string& file) {
         tris.push_back(polygon[0]);
         tris.push_back(polygon[i]);
         tris.push_back(polygon[i + 1]);
+        mesh.triangle_lines.push_back(line_no);
       }
       ++polygons;
     }
     // vt, vn, o, g, s, usemtl, mtllib, comments, blank lines: not geometry we need.
   }
-  ObjMesh mesh;
+  mesh.line_count = line_no;
   mesh.vertices = Eigen::Map<const Eigen::Matrix3Xd>(coords.data(), 3, Eigen::Index(coords.size() / 3));
   mesh.triangles = Eigen::Map<const Eigen::Matrix3Xi>(tris.data(), 3, Eigen::Index(tris.size() / 3));
   mesh.polygons = polygons;

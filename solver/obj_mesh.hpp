@@ -1,7 +1,9 @@
 #pragma once
 // A minimal, strict Wavefront OBJ reader for blendshape meshes. Strict on purpose:
 // a rig file with a bad number must fail with its line, not load as zeros.
+#include <cstdint>
 #include <string>
+#include <vector>
 #include <string_view>
 
 #include <Eigen/Core>
@@ -12,6 +14,9 @@ struct ObjMesh {
   Eigen::Matrix3Xd vertices;   // 3 x N
   Eigen::Matrix3Xi triangles;  // 3 x T, polygons fan-triangulated
   int polygons = 0;            // faces as written (a quad counts once)
+  std::vector<int64_t> vertex_lines;    // N: the line each vertex was read from
+  std::vector<int64_t> triangle_lines;  // T: the line of the face each triangle came from
+  int64_t line_count = 0;
 };
 
 // Parses OBJ text; `file` names it in errors ("path:line: what").

@@ -1,0 +1,86 @@
+#pragma once
+// The per-frame face solve, libigl style: build_solver_model() precomputes everything
+// from a rig and a marker layout (off the real-time thread, may take a second);
+// make_solver() gives a solver whose solve() runs once per frame into pre-sized
+// outputs and never allocates, locks, throws or logs.
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/frame.hpp"
+#include "solver/rig.hpp"
+
+namespace facecap {
+
+// Where a marker sits on the rig: a surface point as barycentric coordinates over a
+// triangle's vertices. A marker on a vertex is {v, v, v} with weights {1, 0, 0}.
+struct MarkerBinding {
+  std::string label;
+  std::array<int, 3> vertices{};
+  Eigen::Vector3d barycentric{1.0, 0.0, 0.0};
+  static MarkerBinding at_vertex(std::string label, int vertex) {
+    return {std::move(label), {vertex, vertex, vertex}, {1.0, 0.0, 0.0}};
+  }
+};
+
+enum class CollisionRegion : uint8_t { kNone, kLips, kFace };
+
+struct SolverParams {
+  double alpha = 0.1;     // temporal weight regularisation (Eq. 2)
+  double mu = 0.001;      // weight magnitude regularisation (Eq. 2)
+  double beta = 100.0;    // marker pinning strength (Eq. 5)
+  CollisionRegion collision_region = CollisionRegion::kLips;
+  double collision_epsilon = 0.01;  // rig units: triangle pairs closer than this collide
+  double active_weight = 1e-4;      // weights below this are left out of T(w)
+};
+
+// One frame's result. Sized by FaceSolver::make_result(); solve() only writes into it.
+struct SolveResult {
+  Eigen::VectorXd weights;    // M
+  Eigen::Matrix3Xd vertices;  // 3 x N, rig units
+  std::array<int64_t, kSolveStageCount> stage_ns{};
+  int64_t total_ns = 0;
+  uint32_t markers_used = 0;
+  uint32_t collision_pairs = 0;        // colliding triangle pairs found
+  uint32_t collision_constraints = 0;  // vertices pinned to the linear blend
+  bool held = false;                   // too few markers: previous result kept
+};
+
+class SolverModel;
+
+class FaceSolver {
+ public:
+  virtual ~FaceSolver() = default;
+  virtual std::string_view name() const noexcept = 0;
+
+  // targets: 3 x K marker positions in rig space; present: K flags (0 = missing).
+  // Real-time safe for nonlinear, linear and dt; meshik is an offline baseline.
+  virtual void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept = 0;
+
+  // Forgets the warm start (previous weights). Real-time safe.
+  virtual void reset() noexcept = 0;
+
+  SolveResult make_result() const;
+  const SolverModel& model() const { return *model_; }
+
+ protected:
+  explicit FaceSolver(std::shared_ptr<const SolverModel> model) : model_(std::move(model)) {}
+  std::shared_ptr<const SolverModel> model_;
+};
+
+// Precomputes deformation gradients, the factorisation and the collision structure.
+// Throws Error on an unusable rig or binding.
+std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vector<MarkerBinding> markers,
+                                                      const SolverParams& params = {});
+
+// "nonlinear" (the paper, default), "linear", "dt", "meshik". Throws Error on an unknown name.
+std::unique_ptr<FaceSolver> make_solver(std::string_view name, std::shared_ptr<const SolverModel> model);
+std::span<const std::string_view> solver_names() noexcept;
+
+}  // namespace facecap

@@ -1,0 +1,71 @@
+#include "solver/marker_layout.hpp"
+
+#include <algorithm>
+
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+
+namespace facecap {
+
+std::vector<MarkerBinding> spread_marker_layout(const Rig& rig, int count) {
+  const Eigen::Index n = rig.vertex_count();
+  if (count <= 0 || count > n) throw Error(fmt::format("marker count {} must be between 1 and the rig's {} vertices", count, n));
+  // Border vertices (on an edge used by one triangle) sit on the mesh's cut and are
+  // where real markers never go; vertices no shape moves carry no information.
+  std::vector<uint8_t> usable(std::size_t(n), 1);
+  {
+    std::vector<std::pair<int, int>> edges;
+    edges.reserve(std::size_t(rig.triangle_count()) * 3);
+    for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
+      for (int k = 0; k < 3; ++k) {
+        int a = rig.triangles(k, t), b = rig.triangles((k + 1) % 3, t);
+        edges.emplace_back(std::min(a, b), std::max(a, b));
+      }
+    std::sort(edges.begin(), edges.end());
+    for (std::size_t i = 0; i < edges.size();) {
+      std::size_t j = i;
+      while (j < edges.size() && edges[j] == edges[i]) ++j;
+      if (j - i == 1) usable[std::size_t(edges[i].first)] = usable[std::size_t(edges[i].second)] = 0;
+      i = j;
+    }
+    const Eigen::Map<const Eigen::MatrixXd> d(rig.deltas.data(), 3, n * rig.shape_count());
+    for (Eigen::Index v = 0; v < n; ++v) {
+      double motion = 0.0;
+      for (Eigen::Index s = 0; s < rig.shape_count(); ++s) motion = std::max(motion, rig.deltas.col(s).segment<3>(3 * v).norm());
+      if (motion < 1e-6) usable[std::size_t(v)] = 0;
+    }
+  }
+  // Start at the usable vertex nearest the front of the face's centre.
+  const BoundingBox box = bounding_box(rig.neutral);
+  const Eigen::Vector3d front((box.min.x() + box.max.x()) / 2, (box.min.y() + box.max.y()) / 2, box.max.z());
+  Eigen::Index first = -1;
+  double best = 1e300;
+  for (Eigen::Index v = 0; v < n; ++v)
+    if (usable[std::size_t(v)] && (rig.neutral.col(v) - front).squaredNorm() < best) {
+      best = (rig.neutral.col(v) - front).squaredNorm();
+      first = v;
+    }
+  if (first < 0) throw Error("no vertex of the rig moves with any shape: cannot place markers");
+  Eigen::VectorXd distance = Eigen::VectorXd::Constant(n, 1e300);
+  std::vector<MarkerBinding> layout;
+  Eigen::Index next = first;
+  for (int m = 0; m < count; ++m) {
+    layout.push_back(MarkerBinding::at_vertex(fmt::format("M{:03d}", m), int(next)));
+    for (Eigen::Index v = 0; v < n; ++v)
+      distance[v] = std::min(distance[v], (rig.neutral.col(v) - rig.neutral.col(next)).squaredNorm());
+    double farthest = -1.0;
+    for (Eigen::Index v = 0; v < n; ++v)
+      if (usable[std::size_t(v)] && distance[v] > farthest) { farthest = distance[v]; next = v; }
+    if (farthest <= 0.0) throw Error(fmt::format("the rig has only {} usable marker vertices, {} asked", m + 1, count));
+  }
+  return layout;
+}
+
+std::vector<MarkerBinding> vertex_marker_layout(const std::vector<int>& vertices) {
+  std::vector<MarkerBinding> layout;
+  for (int v : vertices) layout.push_back(MarkerBinding::at_vertex(fmt::format("V{}", v), v));
+  return layout;
+}
+
+}  // namespace facecap

@@ -1,0 +1,246 @@
+#include "solver/rig.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <set>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <toml++/toml.h>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+#include "solver/builtin_face.hpp"
+#include "solver/gltf_rig.hpp"
+#include "solver/obj_mesh.hpp"
+#include "solver/rig_cache.hpp"
+
+namespace facecap {
+namespace fs = std::filesystem;
+
+std::optional<Eigen::Index> Rig::shape_index(const std::string& shape_name) const {
+  const auto it = std::find(shape_names.begin(), shape_names.end(), shape_name);
+  if (it == shape_names.end()) return std::nullopt;
+  return Eigen::Index(it - shape_names.begin());
+}
+
+Eigen::Matrix3Xd Rig::linear_blend(const Eigen::VectorXd& weights) const {
+  Eigen::Matrix3Xd out = neutral;
+  Eigen::Map<Eigen::VectorXd>(out.data(), out.size()) += deltas * weights;
+  return out;
+}
+
+Eigen::Matrix3Xd Rig::shape_positions(Eigen::Index shape) const {
+  Eigen::Matrix3Xd out = neutral;
+  Eigen::Map<Eigen::VectorXd>(out.data(), out.size()) += deltas.col(shape);
+  return out;
+}
+
+uint64_t Rig::content_hash() const {
+  Fnv1a64 h;
+  h.add(neutral.data(), sizeof(double) * std::size_t(neutral.size()));
+  h.add(triangles.data(), sizeof(int) * std::size_t(triangles.size()));
+  for (const auto& n : shape_names) h.add_string(n);
+  h.add(deltas.data(), sizeof(double) * std::size_t(deltas.size()));
+  return h.digest();
+}
+
+BoundingBox bounding_box(const Eigen::Matrix3Xd& points) {
+  if (points.cols() == 0) return {};
+  return {points.rowwise().minCoeff(), points.rowwise().maxCoeff()};
+}
+
+std::string guess_face_units(const BoundingBox& box) {
+  const double extent = box.size().maxCoeff();  // a face or head: roughly 0.1 to 0.4 m
+  if (extent >= 0.05 && extent <= 0.6) return "m";
+  if (extent >= 5.0 && extent <= 60.0) return "cm";
+  if (extent >= 50.0 && extent <= 600.0) return "mm";
+  return "unknown";
+}
+
+Eigen::VectorXd max_shape_displacement(const Rig& rig) {
+  Eigen::VectorXd out(rig.shape_count());
+  for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
+    const Eigen::Map<const Eigen::Matrix3Xd> d(rig.deltas.col(s).data(), 3, rig.vertex_count());
+    out[s] = d.cols() ? d.colwise().norm().maxCoeff() : 0.0;
+  }
+  return out;
+}
+
+namespace {
+
+struct ShapeFile {
+  std::string name;
+  fs::path path;
+};
+
+struct RigFiles {
+  std::string name;
+  fs::path neutral;
+  std::vector<ShapeFile> shapes;
+  std::vector<fs::path> inputs;  // every file the rig depends on (for the cache key)
+};
+
+constexpr const char* kIctNeutral = "generic_neutral_mesh.obj";
+constexpr const char* kManifestName = "rig.toml";
+
+// A manifest:
+//   neutral = "neutral.obj"
+//   [shapes]
+//   jawOpen = "jaw_open.obj"
+RigFiles read_manifest(const fs::path& manifest) {
+  toml::table table;
+  try {
+    table = toml::parse_file(manifest.string());
+  } catch (const toml::parse_error& e) {
+    const auto& b = e.source().begin;
+    throw Error(std::string(e.description()),
+                ErrorLocation{.file = manifest.string(), .line = b.line, .column = b.column});
+  }
+  const fs::path dir = manifest.parent_path();
+  RigFiles files;
+  files.name = table["name"].value_or(dir.filename().string());
+  const auto neutral = table["neutral"].value<std::string>();
+  if (!neutral) throw Error("missing 'neutral = \"file.obj\"'", ErrorLocation{.file = manifest.string(), .key = "neutral"});
+  files.neutral = dir / *neutral;
+  const toml::table* shapes = table["shapes"].as_table();
+  if (!shapes || shapes->empty())
+    throw Error("missing [shapes] table naming at least one shape", ErrorLocation{.file = manifest.string(), .key = "shapes"});
+  for (const auto& [key, value] : *shapes) {
+    const auto file = value.value<std::string>();
+    if (!file) {
+      const auto& b = value.source().begin;
+      throw Error("shape file must be a string", ErrorLocation{.file = manifest.string(), .line = b.line,
+                                                                .column = b.column, .key = "shapes." + std::string(key.str())});
+    }
+    files.shapes.push_back({std::string(key.str()), dir / *file});
+  }
+  files.inputs.push_back(manifest);
+  return files;
+}
+
+RigFiles scan_obj_directory(const fs::path& dir) {
+  if (fs::exists(dir / kManifestName)) return read_manifest(dir / kManifestName);
+  RigFiles files;
+  files.name = fs::path(dir).filename().string();
+  if (files.name.empty()) files.name = dir.parent_path().filename().string();
+  for (const char* candidate : {kIctNeutral, "neutral.obj"})
+    if (fs::exists(dir / candidate)) { files.neutral = dir / candidate; break; }
+  if (files.neutral.empty())
+    throw file_error(dir.string(), fmt::format("no neutral mesh: expected {} or neutral.obj (or a {} manifest)",
+                                               kIctNeutral, kManifestName));
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (!entry.is_regular_file() || entry.path().extension() != ".obj" || entry.path() == files.neutral) continue;
+    files.shapes.push_back({entry.path().stem().string(), entry.path()});
+  }
+  std::sort(files.shapes.begin(), files.shapes.end(),
+            [](const ShapeFile& a, const ShapeFile& b) { return a.name < b.name; });
+  if (files.shapes.empty()) throw file_error(dir.string(), "no blendshape OBJ files beside the neutral mesh");
+  return files;
+}
+
+Rig load_obj_rig(const RigFiles& files) {
+  std::set<std::string> seen;
+  for (const auto& s : files.shapes)
+    if (!seen.insert(s.name).second)
+      throw file_error(s.path.string(), fmt::format("duplicate shape name '{}'", s.name));
+
+  const ObjMesh neutral = read_obj(files.neutral.string());
+  if (neutral.vertices.cols() == 0) throw file_error(files.neutral.string(), "neutral mesh has no vertices");
+  if (neutral.triangles.cols() == 0) throw file_error(files.neutral.string(), "neutral mesh has no faces");
+  Rig rig;
+  rig.name = files.name;
+  rig.neutral = neutral.vertices;
+  rig.triangles = neutral.triangles;
+  rig.deltas.resize(3 * neutral.vertices.cols(), Eigen::Index(files.shapes.size()));
+  for (std::size_t i = 0; i < files.shapes.size(); ++i) {
+    const std::string path = files.shapes[i].path.string();
+    const ObjMesh shape = read_obj(path);
+    const std::string neutral_name = files.neutral.filename().string();
+    if (shape.vertices.cols() > neutral.vertices.cols())
+      throw line_error(path, shape.vertex_lines[std::size_t(neutral.vertices.cols())],
+                       fmt::format("vertex {} is one more than the neutral {} has ({}): all shapes must share its vertices",
+                                   neutral.vertices.cols() + 1, neutral_name, neutral.vertices.cols()));
+    if (shape.vertices.cols() < neutral.vertices.cols())
+      throw line_error(path, shape.line_count,
+                       fmt::format("file ends after {} vertices, the neutral {} has {} (truncated file?)",
+                                   shape.vertices.cols(), neutral_name, neutral.vertices.cols()));
+    if (shape.triangles.cols() != 0 && shape.triangles != neutral.triangles) {
+      Eigen::Index t = 0;
+      while (t < std::min(shape.triangles.cols(), neutral.triangles.cols()) &&
+             shape.triangles.col(t) == neutral.triangles.col(t))
+        ++t;
+      const int64_t line = t < shape.triangles.cols() ? shape.triangle_lines[std::size_t(t)] : shape.line_count;
+      throw line_error(path, line, fmt::format("face list differs from the neutral {} here: all shapes must share its topology",
+                                               neutral_name));
+    }
+    rig.shape_names.push_back(files.shapes[i].name);
+    rig.deltas.col(Eigen::Index(i)) =
+        Eigen::Map<const Eigen::VectorXd>(shape.vertices.data(), shape.vertices.size()) -
+        Eigen::Map<const Eigen::VectorXd>(neutral.vertices.data(), neutral.vertices.size());
+  }
+  return rig;
+}
+
+// Everything a file-based rig is loaded from, plus how: the cache key's input.
+std::vector<fs::path> rig_inputs(const RigFiles& files) {
+  std::vector<fs::path> inputs = files.inputs;
+  inputs.push_back(files.neutral);
+  for (const auto& s : files.shapes) inputs.push_back(s.path);
+  return inputs;
+}
+
+}  // namespace
+
+Rig load_rig(const std::string& spec, const RigLoadOptions& options, RigLoadReport* report) {
+  const auto start = std::chrono::steady_clock::now();
+  RigLoadReport local;
+  RigLoadReport& rep = report ? *report : local;
+  rep = {};
+  auto finish = [&](Rig rig) {
+    rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return rig;
+  };
+
+  if (spec == "builtin") {
+    Rig rig = BuiltinFace::instance().rig();
+    return finish(std::move(rig));
+  }
+  const fs::path path(spec);
+  if (!fs::exists(path)) throw file_error(spec, "no such file or directory");
+
+  const std::string ext = path.extension().string();
+  if (ext == ".gltf" || ext == ".glb") {
+    const RigCacheKey key = make_rig_cache_key("gltf", {path});
+    if (options.use_cache) {
+      if (auto cached = read_rig_cache(key, options.cache_dir, &rep.cache_file)) {
+        rep.from_cache = true;
+        return finish(std::move(*cached));
+      }
+    }
+    Rig rig = load_gltf_rig(path.string());
+    rig.source = fs::absolute(path).string();
+    if (options.use_cache) rep.cache_file = write_rig_cache(key, rig, options.cache_dir);
+    return finish(std::move(rig));
+  }
+
+  RigFiles files;
+  if (fs::is_directory(path)) files = scan_obj_directory(path);
+  else if (ext == ".toml") files = read_manifest(path);
+  else if (ext == ".obj") throw file_error(spec, "a single OBJ is not a rig: give its directory (neutral plus one OBJ per shape)");
+  else throw file_error(spec, "unknown rig format: expected a directory of OBJ files, a .toml manifest, .gltf or .glb");
+
+  const RigCacheKey key = make_rig_cache_key("obj", rig_inputs(files));
+  if (options.use_cache) {
+    if (auto cached = read_rig_cache(key, options.cache_dir, &rep.cache_file)) {
+      rep.from_cache = true;
+      return finish(std::move(*cached));
+    }
+  }
+  Rig rig = load_obj_rig(files);
+  rig.source = fs::absolute(path).string();
+  if (options.use_cache) rep.cache_file = write_rig_cache(key, rig, options.cache_dir);
+  return finish(std::move(rig));
+}
+
+}  // namespace facecap

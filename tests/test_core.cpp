@@ -1,0 +1,48 @@
+#include <catch2/catch.hpp>
+
+#include "core/error.hpp"
+#include "core/frame.hpp"
+#include "core/io.hpp"
+#include "tests/test_support.hpp"
+
+using namespace facecap;
+
+TEST_CASE("error text names the file and line and column") {
+  const Error e = Error("bad value", ErrorLocation{.file = "a.toml", .line = 3, .column = 7, .key = "solver.beta"});
+  CHECK(std::string(e.what()) == "a.toml:3:7 [solver.beta]: bad value");
+  CHECK(std::string(offset_error("x.c3d", 512, "truncated").what()) == "x.c3d @ byte 512: truncated");
+  CHECK(e.message() == "bad value");
+  CHECK(e.where().line == 3);
+}
+
+TEST_CASE("marker labels are fixed size and truncate long names") {
+  MarkerLabel label("Mouth_Lend");
+  CHECK(label.view() == "Mouth_Lend");
+  MarkerLabel long_label(std::string(100, 'x'));
+  CHECK(long_label.view().size() == MarkerLabel::kCapacity);
+  Marker m;
+  m.flags = kMarkerMissing;
+  MarkerFrame frame;
+  frame.markers = {m, Marker{}};
+  CHECK(frame.present_count() == 1);
+}
+
+TEST_CASE("solve stages have names") {
+  CHECK(solve_stage_name(SolveStage::kBacksolve) == "backsolve");
+  CHECK(solve_stage_name(SolveStage::kWeights) == "weights");
+}
+
+TEST_CASE("atomic write then read returns the same bytes and missing files name themselves") {
+  const auto dir = test::scratch_dir("io");
+  const std::string text = "facecap\0bytes";
+  write_file_atomically(dir / "f.bin", std::span<const char>(text.data(), text.size()));
+  const auto back = read_file_bytes(dir / "f.bin");
+  CHECK(std::string(back.begin(), back.end()) == text);
+  CHECK_THROWS_WITH(read_file_bytes(dir / "absent.bin"), Catch::Contains("absent.bin") && Catch::Contains("cannot open"));
+}
+
+TEST_CASE("FNV-1a matches the published test vector") {
+  Fnv1a64 h;
+  h.add("a", 1);
+  CHECK(h.digest() == 0xaf63dc4c8601ec8cull);
+}
