@@ -260,7 +260,8 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
 
   // DATA_START: the parameter wins, the header fills in when it is 0 or absent.
   const std::size_t block_count = (bytes.size() + kBlockBytes - 1) / kBlockBytes;
-  auto usable_block = [&](int64_t block) { return block >= 2 && std::size_t(block) <= block_count; };
+  // The data may start at the very end of the file (a take of 0 frames).
+  auto usable_block = [&](int64_t block) { return block >= 2 && std::size_t(block) <= block_count + 1; };
   int64_t data_start = values.count(params.find("POINT", "DATA_START")).value_or(0);
   if (!usable_block(data_start)) {
     if (data_start != 0) {

@@ -591,6 +591,7 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
       {"rig_name", h.rig_name},
       {"rig_hash", fmt::format("{:016x}", h.rig_hash)},
       {"source", h.source_description},
+      {"calibration_bytes", fmt::format("{}", h.calibration.size())},
       {"solved_frames", fmt::format("{}", reader.solved_frame_count())},
       {"index", reader.index_rebuilt() ? "rebuilt by scanning" : "present"},
   };

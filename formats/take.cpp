@@ -121,14 +121,18 @@ MarkerTake read_take(std::span<const char> bytes, const std::string& name) {
   throw file_error(name, "unknown format");
 }
 
-MarkerTake read_take(const std::filesystem::path& path) {
+TakeFormat detect_file_format(const std::filesystem::path& path) {
   char head[64];
   std::size_t head_size = 0;
   if (std::ifstream in(path, std::ios::binary); in) {
     in.read(head, sizeof head);
     head_size = std::size_t(in.gcount());
   }
-  if (detect_format(std::span<const char>(head, head_size), path) == TakeFormat::kRecording) {
+  return detect_format(std::span<const char>(head, head_size), path);
+}
+
+MarkerTake read_take(const std::filesystem::path& path) {
+  if (detect_file_format(path) == TakeFormat::kRecording) {
     return take_from_recording(RecordingReader(path));  // mapped, not read: recordings can be large
   }
   const auto bytes = read_file_bytes(path);

@@ -29,6 +29,8 @@ std::optional<TakeFormat> format_from_extension(const std::filesystem::path& pat
 // By content (magic bytes or first line); falls back to the extension. Throws Error
 // naming the file when neither identifies a format.
 TakeFormat detect_format(std::span<const char> head, const std::filesystem::path& path);
+// The same for a file, reading only its first bytes.
+TakeFormat detect_file_format(const std::filesystem::path& path);
 
 struct MarkerTake {
   TakeFormat format = TakeFormat::kC3d;
