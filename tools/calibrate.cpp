@@ -24,6 +24,7 @@ struct Options {
   int64_t frame = 0;
   bool auto_neutral = false;
   int stable_count = 6;
+  int average = 0;
   bool json = false;
   bool force = false;
 };
@@ -104,14 +105,27 @@ void run_calibrate(const Options& o, bool frame_given) {
     neutral = align::find_neutral_frame(take.frames, stable_slots, search);
     index = neutral.frame_index;
   }
+  // Average a still stretch (noise / sqrt(n)): the auto-neutral window, or --average frames
+  // centred on --frame.
+  std::size_t first = index, count = 1;
+  if (!frame_given) first = neutral.window_start, count = neutral.window_frames;
+  if (o.average > 0) {
+    count = std::min<std::size_t>(std::size_t(o.average), take.frames.size());
+    first = index >= count / 2 ? index - count / 2 : 0;
+    first = std::min(first, take.frames.size() - count);
+  }
   std::vector<uint8_t> present;
-  const Eigen::Matrix3Xd P = frame_positions(take.frames[index], present);
+  const Eigen::Matrix3Xd P = count > 1 ? align::average_positions(take.frames, first, count, index, stable_slots, present)
+                                       : frame_positions(take.frames[index], present);
   align::CalibrationOptions copts;
   copts.take_mm_per_unit = given_units;
   copts.rig_mm_per_unit = rig_mm;
   align::Calibration cal = align::calibrate(rig, take.labels, P, present, copts);
   cal.source_take = std::filesystem::path(o.take).filename().string();
   cal.source_frame = take.frames[index].frame_no;
+  if (count > 1)
+    cal.notes.push_back(fmt::format("neutral positions are the mean of frames {} to {} stabilised onto frame {}",
+                                    take.frames[first].frame_no, take.frames[first + count - 1].frame_no, cal.source_frame));
   for (int s : stable_slots)
     if (cal.find(take.labels[std::size_t(s)]) >= 0) cal.stable_markers.push_back(take.labels[std::size_t(s)]);
   if (cal.stable_markers.size() < 3)
@@ -195,6 +209,8 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
   auto* autoneutral = cmd->add_flag("--auto-neutral", opts->auto_neutral,
                                     "Find the most neutral stretch of the take (the default without --frame)");
   frame->excludes(autoneutral);
+  cmd->add_option("--average", opts->average,
+                  "Average this many frames around the calibration frame (default: the auto-neutral stretch, or 1 with --frame)");
   cmd->add_option("--markers", opts->markers, "Comma-separated markers to calibrate (default: all)");
   cmd->add_option("--stable", opts->stable, "Comma-separated stable markers for head stabilisation (default: found)");
   cmd->add_option("--stable-count", opts->stable_count, "How many stable markers to find")->capture_default_str()->check(CLI::Range(3, 64));

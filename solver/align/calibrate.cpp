@@ -96,11 +96,14 @@ IcpResult icp_hulls(const Eigen::Matrix3Xd& marker_hull, const Eigen::Matrix3Xd&
 namespace {
 
 // One ICP run against the surface; the trimmed RMS over the best (1 - trim) markers.
+// The first steps match points to their closest surface points (point-to-point, wide
+// basin); then Gauss-Newton on the point-to-plane distance, which does not stall on the
+// slow sliding along a smooth face that point-to-point ICP shows.
 IcpResult surface_icp(const Eigen::Matrix3Xd& points, const SurfaceIndex& surface, const Similarity& start, double smin,
-                      double smax, double trim, int iterations, double length) {
+                      double smax, double trim, double trim_floor, int iterations, double length) {
   const Eigen::Index K = points.cols();
   IcpResult r{start, 0.0, 0};
-  Eigen::Matrix3Xd matched(3, K);
+  Eigen::Matrix3Xd matched(3, K), normal(3, K);
   std::vector<double> distance(static_cast<std::size_t>(K)), sorted(static_cast<std::size_t>(K)),
       weights(static_cast<std::size_t>(K));
   const std::size_t keep = std::max<std::size_t>(3, std::size_t(std::ceil(double(K) * (1.0 - trim))));
@@ -108,15 +111,19 @@ IcpResult surface_icp(const Eigen::Matrix3Xd& points, const SurfaceIndex& surfac
     for (Eigen::Index k = 0; k < K; ++k) {
       const SurfacePoint sp = surface.closest(T.apply(Eigen::Vector3d(points.col(k))));
       matched.col(k) = sp.position;
+      normal.col(k) = surface.triangle_normal(sp.triangle);
       distance[std::size_t(k)] = sp.distance;
     }
+    // Trimmed ICP (Chetverikov et al. 2002): the worst `trim` of the markers, where the
+    // actor's face departs most from the rig's, are left out of each step and of the score,
+    // unless they are within trim_floor of the surface.
     sorted = distance;
     std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(keep - 1), sorted.end());
-    const double cutoff = sorted[keep - 1];
+    const double cutoff = std::max(sorted[keep - 1], trim_floor);
     double sum = 0;
     std::size_t n = 0;
     for (Eigen::Index k = 0; k < K; ++k) {
-      const bool kept = distance[std::size_t(k)] <= cutoff && n < keep;
+      const bool kept = distance[std::size_t(k)] <= cutoff;
       weights[std::size_t(k)] = kept ? 1.0 : 0.0;
       if (kept) {
         sum += distance[std::size_t(k)] * distance[std::size_t(k)];
@@ -125,16 +132,49 @@ IcpResult surface_icp(const Eigen::Matrix3Xd& points, const SurfaceIndex& surfac
     }
     return std::sqrt(sum / double(std::max<std::size_t>(n, 1)));
   };
+  constexpr int kPointToPointSteps = 10;
   r.trimmed_rms = correspond(r.transform);
   for (int it = 0; it < iterations; ++it) {
     Similarity next;
-    if (!fit_similarity(points, matched, weights, true, next)) break;
+    if (it < kPointToPointSteps) {
+      if (!fit_similarity(points, matched, weights, true, next)) break;
+    } else {
+      // Linearised update about the kept points' centroid c: y -> y + w x (y - c) + d (y - c) + tau.
+      const Eigen::Matrix3Xd Y = r.transform.apply(points);
+      Eigen::Vector3d c = Eigen::Vector3d::Zero();
+      double total = 0;
+      for (Eigen::Index k = 0; k < K; ++k) c += weights[std::size_t(k)] * Y.col(k), total += weights[std::size_t(k)];
+      c /= std::max(total, 1.0);
+      Eigen::Matrix<double, 7, 7> H = Eigen::Matrix<double, 7, 7>::Zero();
+      Eigen::Matrix<double, 7, 1> g = Eigen::Matrix<double, 7, 1>::Zero();
+      for (Eigen::Index k = 0; k < K; ++k) {
+        if (weights[std::size_t(k)] <= 0.0) continue;
+        const Eigen::Vector3d n = normal.col(k), a = Y.col(k) - c;
+        Eigen::Matrix<double, 7, 1> J;
+        J << a.cross(n), n.dot(a), n;
+        const double res = n.dot(Y.col(k) - matched.col(k));
+        H += J * J.transpose();
+        g += J * res;
+      }
+      H.diagonal().array() += 1e-9 * (H.diagonal().maxCoeff() + 1e-30);
+      const Eigen::Matrix<double, 7, 1> step = -H.ldlt().solve(g);
+      if (!step.allFinite()) break;
+      const Eigen::Vector3d w = step.head<3>();
+      const double angle = w.norm();
+      const Eigen::Matrix3d dR = angle > 0 ? Eigen::AngleAxisd(angle, w / angle).toRotationMatrix() : Eigen::Matrix3d::Identity();
+      Similarity U;
+      U.rotation = dR;
+      U.scale = 1.0 + step[3];
+      if (!(U.scale > 0.5 && U.scale < 2.0)) break;
+      U.translation = c + step.tail<3>() - U.scale * (dR * c);
+      next = U * r.transform;
+    }
     clamp_scale(points, matched, weights, smin, smax, next);
     const bool done = converged(r.transform, next, length);
     r.transform = next;
     r.iterations = it + 1;
     r.trimmed_rms = correspond(r.transform);
-    if (done) break;
+    if (done && it >= kPointToPointSteps) break;
   }
   return r;
 }
@@ -144,7 +184,8 @@ IcpResult surface_icp(const Eigen::Matrix3Xd& points, const SurfaceIndex& surfac
 IcpResult icp_to_surface(const Eigen::Matrix3Xd& points, const Rig& rig, const Similarity& start, double scale_min,
                          double scale_max, double trim_fraction, int iterations) {
   const SurfaceIndex surface(rig.neutral, rig.triangles);
-  return surface_icp(points, surface, start, scale_min, scale_max, trim_fraction, iterations, rms_radius(rig.neutral));
+  return surface_icp(points, surface, start, scale_min, scale_max, trim_fraction, 0.0, iterations,
+                     rms_radius(rig.neutral));
 }
 
 Calibration calibrate(const Rig& rig, const std::vector<std::string>& labels, const Eigen::Matrix3Xd& neutral,
@@ -219,7 +260,7 @@ Calibration calibrate(const Rig& rig, const std::vector<std::string>& labels, co
     start.translation = cV - s0 * (starts[i] * cP);
     const IcpResult hull = icp_hulls(HP, HV, start, smin, smax, options.hull_iterations);
     const IcpResult fine = surface_icp(P, surface, hull.transform, smin, smax, options.trim_fraction,
-                                       options.surface_iterations, length);
+                                       options.trim_floor_mm / options.rig_mm_per_unit, options.surface_iterations, length);
     if (fine.trimmed_rms < best.trimmed_rms) {
       best = fine;
       best_hull_rms = hull.trimmed_rms;

@@ -41,7 +41,8 @@ struct CalibrationOptions {
   std::optional<double> take_mm_per_unit;  // nullopt: detect from the hulls' sizes
   double rig_mm_per_unit = 10.0;           // the rig's units (ICT FaceKit and the built-in face: cm)
   double scale_band = 1.6;                 // actor / rig face size allowed in [1/band, band]
-  double trim_fraction = 0.2;              // worst markers left out of each surface ICP step
+  double trim_fraction = 0.2;              // the worst markers left out of each surface ICP step ...
+  double trim_floor_mm = 0.5;              // ... unless this close to the surface
   int hull_iterations = 40;
   int surface_iterations = 60;
   int minimum_markers = 6;

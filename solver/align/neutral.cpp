@@ -93,6 +93,8 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
       best.window_score = score;
       best.speed_mm_s = vsum / double(W);
       best.frame_index = start;
+      best.window_start = start;
+      best.window_frames = W;
       for (std::size_t f = start; f < start + W; ++f)
         if (distance[f] < distance[best.frame_index]) best.frame_index = f;
       best.distance_mm = distance[best.frame_index];
@@ -106,6 +108,45 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
                             "name a frame with --frame",
                             W, best.frame_index, best.distance_mm, o.max_distance_mm, best.speed_mm_s, o.max_speed_mm_s));
   return best;
+}
+
+Eigen::Matrix3Xd average_positions(std::span<const MarkerFrame> frames, std::size_t first, std::size_t count,
+                                   std::size_t anchor, std::span<const int> stable_slots, std::vector<uint8_t>& present) {
+  if (count == 0 || first + count > frames.size() || anchor >= frames.size())
+    throw Error(fmt::format("average: frames {}..{} (anchor {}) outside the take's {}", first, first + count, anchor, frames.size()));
+  const std::size_t K = frames[anchor].markers.size();
+  Eigen::Matrix3Xd reference(3, Eigen::Index(stable_slots.size()));
+  for (std::size_t i = 0; i < stable_slots.size(); ++i) {
+    const int s = stable_slots[i];
+    if (s < 0 || std::size_t(s) >= K) throw Error("average: stable marker index out of range");
+    const Marker& m = frames[anchor].markers[std::size_t(s)];
+    if (!m.present() || !m.position.allFinite())
+      throw Error(fmt::format("average: stable marker {} is missing in the anchor frame", s));
+    reference.col(Eigen::Index(i)) = m.position;
+  }
+  HeadStabiliser stabiliser(std::vector<int>(stable_slots.begin(), stable_slots.end()), reference);
+  Eigen::Matrix3Xd sum = Eigen::Matrix3Xd::Zero(3, Eigen::Index(K));
+  std::vector<int> n(K, 0);
+  for (std::size_t f = first; f < first + count; ++f) {
+    if (frames[f].markers.size() != K) throw Error("average: frames have different marker counts");
+    HeadPoseResult pose;
+    if (stabiliser.process(frames[f].markers, pose)) continue;  // held: no fit this frame
+    const Eigen::Matrix3d Rt = pose.pose.rotation.transpose();
+    for (std::size_t k = 0; k < K; ++k) {
+      const Marker& m = frames[f].markers[k];
+      if (!m.present() || !m.position.allFinite()) continue;
+      sum.col(Eigen::Index(k)) += Rt * (m.position - pose.pose.translation);
+      ++n[k];
+    }
+  }
+  present.assign(K, 0);
+  Eigen::Matrix3Xd mean = Eigen::Matrix3Xd::Constant(3, Eigen::Index(K), std::numeric_limits<double>::quiet_NaN());
+  for (std::size_t k = 0; k < K; ++k) {
+    if (2 * std::size_t(n[k]) < count || n[k] == 0) continue;
+    present[k] = 1;
+    mean.col(Eigen::Index(k)) = sum.col(Eigen::Index(k)) / double(n[k]);
+  }
+  return mean;
 }
 
 }  // namespace facecap::align

@@ -7,6 +7,9 @@
 // and its frame closest to the median shape is returned. Not real-time.
 #include <cstdint>
 #include <span>
+#include <vector>
+
+#include <Eigen/Core>
 
 #include "core/frame.hpp"
 
@@ -23,6 +26,8 @@ struct NeutralSearchOptions {
 
 struct NeutralFrame {
   std::size_t frame_index = 0;   // index into frames
+  std::size_t window_start = 0;  // the chosen stretch: frames [window_start, window_start + window_frames)
+  std::size_t window_frames = 0;
   double distance_mm = 0.0;      // RMS distance of that frame to the median shape
   double speed_mm_s = 0.0;       // mean RMS marker speed over the chosen window
   double window_score = 0.0;
@@ -34,5 +39,14 @@ struct NeutralFrame {
 // stretch is neutral-looking (the message gives the best stretch's figures).
 NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<const int> stable_slots,
                                 const NeutralSearchOptions& options = {});
+
+// Mean marker positions over frames [first, first + count), each frame first moved onto
+// frame `anchor` by a rigid fit of the stable markers, so the average is taken in the
+// anchor frame's coordinates. Averaging a still stretch divides the capture noise by
+// sqrt(count) before calibration. present (K) says which markers were present in at
+// least half of the frames used. Frames whose head pose cannot be fitted are skipped.
+// Throws Error on bad ranges or when the anchor frame lacks 3 stable markers.
+Eigen::Matrix3Xd average_positions(std::span<const MarkerFrame> frames, std::size_t first, std::size_t count,
+                                   std::size_t anchor, std::span<const int> stable_slots, std::vector<uint8_t>& present);
 
 }  // namespace facecap::align

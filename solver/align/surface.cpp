@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 
+#include <Eigen/Geometry>
 #include <nanoflann.hpp>
 
 #include "core/error.hpp"
@@ -121,6 +122,13 @@ SurfacePoint SurfaceIndex::closest(const Eigen::Vector3d& p) const noexcept {
     }
   }
   return best;
+}
+
+Eigen::Vector3d SurfaceIndex::triangle_normal(int t) const noexcept {
+  const Eigen::Matrix3Xd& V = vertices();
+  const Eigen::Vector3d n = (V.col(triangles_(1, t)) - V.col(triangles_(0, t))).cross(V.col(triangles_(2, t)) - V.col(triangles_(0, t)));
+  const double len = n.norm();
+  return len > 0.0 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
 }
 
 SurfacePoint SurfaceIndex::closest_exhaustive(const Eigen::Vector3d& p) const noexcept {

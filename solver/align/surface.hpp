@@ -53,6 +53,8 @@ class SurfaceIndex {
   // Exhaustive over every triangle: slow, exact, for binding and tests.
   SurfacePoint closest_exhaustive(const Eigen::Vector3d& p) const noexcept;
   const PointIndex& vertex_index() const { return vertex_index_; }
+  // Unit normal of triangle t (right-handed winding).
+  Eigen::Vector3d triangle_normal(int t) const noexcept;
 
  private:
   const Eigen::Matrix3Xd& vertices() const { return vertex_index_.points(); }
