@@ -57,26 +57,36 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
     for (std::size_t k = 0; k < K; ++k)
       shape[f].col(Eigen::Index(k)) = Rt * (frames[f].markers[k].position - pose.pose.translation);
   }
-  // Median shape, coordinate by coordinate.
-  Eigen::Matrix3Xd median(3, Eigen::Index(K));
+  const double mm = o.take_mm_per_unit;
+  const double inf = std::numeric_limits<double>::infinity();
+  // Speed over a 50 ms baseline (3 frames at 60 Hz), so marker noise reads as little motion.
+  const std::size_t h = std::max<std::size_t>(1, std::size_t(std::lround(0.05 * o.rate_hz)));
+  std::vector<double> distance(F, inf), speed(F, inf);
+  for (std::size_t f = 0; f < F; ++f) {
+    if (!ok[f]) continue;
+    const std::size_t a = f >= h && ok[f - h] ? f - h : f, b = f + h < F && ok[f + h] ? f + h : f;
+    if (a != b) speed[f] = std::sqrt((shape[b] - shape[a]).colwise().squaredNorm().mean()) * mm * o.rate_hz / double(b - a);
+  }
+  // The typical resting shape: coordinate-wise median over the stillest 30% of the frames
+  // (the face returns to rest between expressions; motion frames would drag a median of
+  // all frames towards the expressions).
   std::vector<double> values;
+  for (std::size_t f = 0; f < F; ++f)
+    if (std::isfinite(speed[f])) values.push_back(speed[f]);
+  if (values.empty()) throw Error("auto-neutral: too few consecutive complete frames to measure motion");
+  std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() * 3 / 10), values.end());
+  const double still = values[values.size() * 3 / 10];
+  Eigen::Matrix3Xd median(3, Eigen::Index(K));
   for (Eigen::Index k = 0; k < Eigen::Index(K); ++k)
     for (int c = 0; c < 3; ++c) {
       values.clear();
       for (std::size_t f = 0; f < F; ++f)
-        if (ok[f]) values.push_back(shape[f](c, k));
+        if (std::isfinite(speed[f]) && speed[f] <= still) values.push_back(shape[f](c, k));
       std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
       median(c, k) = values[values.size() / 2];
     }
-  const double mm = o.take_mm_per_unit;
-  const double inf = std::numeric_limits<double>::infinity();
-  std::vector<double> distance(F, inf), speed(F, inf);
-  for (std::size_t f = 0; f < F; ++f) {
-    if (!ok[f]) continue;
-    distance[f] = std::sqrt((shape[f] - median).colwise().squaredNorm().mean()) * mm;
-    const std::size_t a = f > 0 && ok[f - 1] ? f - 1 : f, b = f + 1 < F && ok[f + 1] ? f + 1 : f;
-    if (a != b) speed[f] = std::sqrt((shape[b] - shape[a]).colwise().squaredNorm().mean()) * mm * o.rate_hz / double(b - a);
-  }
+  for (std::size_t f = 0; f < F; ++f)
+    if (ok[f]) distance[f] = (shape[f] - median).colwise().norm().maxCoeff() * mm;  // any marker off rest counts
   NeutralFrame best;
   best.window_score = inf;
   best.candidate_frames = candidates;

@@ -1,8 +1,9 @@
 #pragma once
 // Finding the most neutral stretch of a take for calibration (`calibrate --auto-neutral`):
-// the face at rest is still and looks like the take's typical (median) shape. Each frame
+// the face at rest is still and looks like the take's typical resting shape. Each frame
 // with every marker present is stabilised on the stable markers; per frame the RMS
-// distance to the median shape (mm) and the RMS marker speed (mm/s) are measured; the
+// marker speed (mm/s, over 50 ms) and the largest marker distance (mm) to the median shape of the
+// stillest 30% of frames are measured; the
 // window (window_seconds) with the lowest mean of distance + speed_weight_s x speed wins,
 // and its frame closest to the median shape is returned. Not real-time.
 #include <cstdint>
@@ -20,7 +21,7 @@ struct NeutralSearchOptions {
   double take_mm_per_unit = 10.0;
   double window_seconds = 0.25;
   double speed_weight_s = 0.05;     // 20 mm/s of motion counts like 1 mm off the median shape
-  double max_distance_mm = 4.0;     // the best stretch must be this close to the median shape ...
+  double max_distance_mm = 5.0;     // the best stretch must be this close to the median shape ...
   double max_speed_mm_s = 40.0;     // ... and this still, or the take has no neutral stretch
 };
 
@@ -28,7 +29,7 @@ struct NeutralFrame {
   std::size_t frame_index = 0;   // index into frames
   std::size_t window_start = 0;  // the chosen stretch: frames [window_start, window_start + window_frames)
   std::size_t window_frames = 0;
-  double distance_mm = 0.0;      // RMS distance of that frame to the median shape
+  double distance_mm = 0.0;      // largest marker distance of that frame to the median shape
   double speed_mm_s = 0.0;       // mean RMS marker speed over the chosen window
   double window_score = 0.0;
   std::size_t candidate_frames = 0;  // frames with every marker present

@@ -41,6 +41,14 @@ std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int co
                                : std::numeric_limits<double>::infinity();
       deviation(Eigen::Index(a), Eigen::Index(b)) = deviation(Eigen::Index(b), Eigen::Index(a)) = sd;
     }
+  // Mean position of each candidate (for spread), over the frames where it is present.
+  std::vector<Eigen::Vector3d> mean(C, Eigen::Vector3d::Zero());
+  for (std::size_t c = 0; c < C; ++c) {
+    std::size_t n = 0;
+    for (const auto& f : frames)
+      if (usable(f.markers[std::size_t(candidates[c])])) mean[c] += f.markers[std::size_t(candidates[c])].position, ++n;
+    mean[c] /= double(std::max<std::size_t>(n, 1));
+  }
   const std::size_t want = std::min<std::size_t>(std::size_t(std::max(count, 3)), C);
   std::vector<std::size_t> best_set;
   double best_cost = std::numeric_limits<double>::infinity();
@@ -49,10 +57,19 @@ std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int co
     std::vector<double> worst(C, 0.0);  // largest deviation of each candidate to the set
     for (std::size_t c = 0; c < C; ++c) worst[c] = deviation(Eigen::Index(c), Eigen::Index(seed));
     while (set.size() < want) {
+      // Among the candidates nearly as steady as the steadiest (within 1.5x), the one
+      // farthest from the set: a spread-out set pins the head's rotation; a tight cluster
+      // turns marker noise into large rotations at the chin.
+      double steadiest = std::numeric_limits<double>::infinity();
+      for (std::size_t c = 0; c < C; ++c)
+        if (std::find(set.begin(), set.end(), c) == set.end()) steadiest = std::min(steadiest, worst[c]);
       std::size_t pick = C;
+      double pick_distance = -1.0;
       for (std::size_t c = 0; c < C; ++c) {
-        if (std::find(set.begin(), set.end(), c) != set.end()) continue;
-        if (pick == C || worst[c] < worst[pick]) pick = c;
+        if (std::find(set.begin(), set.end(), c) != set.end() || worst[c] > 1.5 * steadiest) continue;
+        double nearest = std::numeric_limits<double>::infinity();
+        for (std::size_t m : set) nearest = std::min(nearest, (mean[c] - mean[m]).norm());
+        if (nearest > pick_distance) pick = c, pick_distance = nearest;
       }
       set.push_back(pick);
       for (std::size_t c = 0; c < C; ++c) worst[c] = std::max(worst[c], deviation(Eigen::Index(c), Eigen::Index(pick)));
@@ -112,38 +129,34 @@ bool HeadStabiliser::process(std::span<const Marker> markers, HeadPoseResult& ou
     return n;
   };
   Similarity pose;
-  bool fitted = false;
-  if (present >= params_.minimum_markers) {
-    // Iterative trimmed Kabsch: fit, gate at max(factor x median, floor), refit on the kept.
-    for (int it = 0; it < params_.iterations; ++it) {
-      if (!fit_similarity(reference_, current_, weight_, false, pose)) {
-        fitted = false;
-        break;
-      }
-      fitted = true;
-      const std::size_t n = update_residuals(pose);
-      std::nth_element(scratch_.begin(), scratch_.begin() + std::ptrdiff_t(n / 2), scratch_.begin() + std::ptrdiff_t(n));
-      const double gate = std::max(params_.outlier_factor * scratch_[n / 2], params_.outlier_floor);
-      bool changed = false;
-      int kept = 0;
-      for (std::size_t i = 0; i < S; ++i) {
-        if (!present_[i]) continue;
-        const bool keep = residual_[i] <= gate;
-        changed |= keep != (weight_[i] > 0.0);
-        weight_[i] = keep ? 1.0 : 0.0;
-        kept += keep;
-      }
-      if (kept < params_.minimum_markers) {
-        fitted = false;
-        break;
-      }
-      if (!changed) break;
-      if (it + 1 == params_.iterations) {  // last gate changed the set: fit once more on it
-        fitted = fit_similarity(reference_, current_, weight_, false, pose);
-        if (fitted) update_residuals(pose);
-      }
+  bool fitted = present >= params_.minimum_markers && fit_similarity(reference_, current_, weight_, false, pose);
+  int kept = present;
+  // Robust rigid fit, one rejection at a time: the worst inlier is refitted without; if it
+  // lies beyond max(factor x median of the others' residuals, floor) from that fit, it is
+  // an outlier (a bumped or mislabelled marker). Leaving it out of its own test keeps a
+  // large error from hiding itself by pulling the fit, which matters with few markers.
+  for (int it = 0; fitted && it < params_.iterations && kept > params_.minimum_markers; ++it) {
+    update_residuals(pose);
+    std::size_t worst = S;
+    for (std::size_t i = 0; i < S; ++i)
+      if (weight_[i] > 0.0 && (worst == S || residual_[i] > residual_[worst])) worst = i;
+    weight_[worst] = 0.0;
+    Similarity without;
+    if (!fit_similarity(reference_, current_, weight_, false, without)) {
+      weight_[worst] = 1.0;
+      break;
     }
+    const std::size_t n = update_residuals(without);
+    std::nth_element(scratch_.begin(), scratch_.begin() + std::ptrdiff_t(n / 2), scratch_.begin() + std::ptrdiff_t(n));
+    const double gate = std::max(params_.outlier_factor * scratch_[n / 2], params_.outlier_floor);
+    if (residual_[worst] <= gate) {
+      weight_[worst] = 1.0;
+      break;
+    }
+    pose = without;
+    --kept;
   }
+  if (fitted) update_residuals(pose);
   out.inliers = 0;
   out.rms = 0.0;
   if (fitted) {

@@ -15,9 +15,10 @@
 namespace facecap::align {
 
 // The markers whose mutual distances vary least over frames: for each seed marker a set
-// grows greedily by the marker whose largest distance deviation (standard deviation over
-// the frames where both are present) to the set is smallest; the set with the smallest
-// mean pairwise deviation wins. frames: every frame has the same marker slots; markers
+// grows greedily by a marker whose largest distance deviation (standard deviation over
+// the frames where both are present) to the set is within 1.5x the smallest, the one
+// farthest from the set (spread pins rotation); the set with the smallest mean pairwise
+// deviation wins. frames: every frame has the same marker slots; markers
 // present in under half of the frames are not candidates. Returns slot indices (count of
 // them, fewer if fewer markers qualify), and each chosen pair deviation's mean in
 // `mean_deviation` (take units) when given. Not real-time. Throws Error with fewer than
@@ -26,9 +27,9 @@ std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int co
 
 struct StabiliserParams {
   int minimum_markers = 3;             // fewer inliers: hold the last pose
-  double outlier_factor = 3.0;         // residual above factor x median is rejected ...
+  double outlier_factor = 4.0;         // residual above factor x the others' median is rejected ...
   double outlier_floor = 0.2;          // ... if also above this (take units; set from mm by the caller)
-  int iterations = 4;                  // trimmed refits
+  int iterations = 4;                  // at most this many markers rejected per frame
 };
 
 struct HeadPoseResult {
