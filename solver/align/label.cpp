@@ -197,7 +197,9 @@ LabelStats MarkerLabeller::label(std::span<const Eigen::Vector3d> points, Marker
   }
   if (!tracking_ || assigned < int(std::ceil(params_.reacquire_fraction * double(K)))) {
     acquire(n);
-    assigned = assign(n, no_label_, false, 1.0);
+    // No prediction yet: the face may be far from the reference's expression, so the
+    // widest gate; the optimal assignment keeps neighbours apart.
+    assigned = assign(n, no_label_, false, params_.max_gate / params_.gate);
     stats.initialised = true;
   }
   tracking_ = assigned >= int(std::ceil(params_.reacquire_fraction * double(K)));
