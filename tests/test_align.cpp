@@ -15,6 +15,7 @@
 #include "solver/align/label.hpp"
 #include "solver/align/mapper.hpp"
 #include "solver/align/neutral.hpp"
+#include "solver/align/pipeline.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/align/stabilise.hpp"
 #include "solver/align/surface.hpp"
@@ -35,20 +36,13 @@ Eigen::Matrix3Xd positions_of(const MarkerFrame& f, std::vector<uint8_t>& presen
   return P;
 }
 
-// The calibrate command's pipeline: stable markers, the most neutral stretch, its mean, calibrate.
-Calibration calibrate_take(const Rig& rig, const std::vector<std::string>& labels, const std::vector<MarkerFrame>& frames,
-                           double rate_hz, double mm_per_unit_hint, std::vector<int>* stable_out = nullptr) {
-  const auto stable = find_stable_markers(frames, 6);
-  NeutralSearchOptions search;
-  search.rate_hz = rate_hz;
-  search.take_mm_per_unit = mm_per_unit_hint;
-  const NeutralFrame neutral = find_neutral_frame(frames, stable, search);
-  std::vector<uint8_t> present;
-  const Eigen::Matrix3Xd P = average_positions(frames, neutral.window_start, neutral.window_frames, neutral.frame_index, stable, present);
-  Calibration cal = calibrate(rig, labels, P, present);
-  for (int s : stable) cal.stable_markers.push_back(labels[std::size_t(s)]);
-  if (stable_out) *stable_out = stable;
-  return cal;
+// The calibrate command's pipeline (auto-neutral, stable markers found).
+Calibration calibrate_whole_take(const Rig& rig, const std::vector<std::string>& labels, const std::vector<MarkerFrame>& frames,
+                                 double rate_hz, double mm_per_unit_hint) {
+  TakeCalibrationOptions o;
+  o.neutral.rate_hz = rate_hz;
+  o.neutral.take_mm_per_unit = mm_per_unit_hint;
+  return calibrate_take(rig, labels, frames, o).calibration;
 }
 
 }  // namespace
@@ -142,7 +136,7 @@ TEST_CASE("Synthetic take in any pose and units calibrates back within 1 mm") {
     std::vector<uint8_t> present;
     const auto guess = millimetres_per_unit(guess_face_units(bounding_box(positions_of(take.frames[0], present))));
     REQUIRE(guess);
-    const Calibration cal = calibrate_take(rig, take.labels, take.frames, 60.0, *guess);
+    const Calibration cal = calibrate_whole_take(rig, take.labels, take.frames, 60.0, *guess);
     INFO("seed " << seed << " units " << o.take_mm_per_unit << " start " << cal.start_index);
     CHECK(cal.units_detected);
     CHECK(cal.take_mm_per_unit == o.take_mm_per_unit);
@@ -488,7 +482,7 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   SyntheticTakeOptions o;
   const auto take = make_synthetic_take(o);
   const Rig& rig = BuiltinFace::instance().rig();
-  Calibration cal = calibrate_take(rig, take.labels, take.frames, 60.0, 1.0);
+  Calibration cal = calibrate_whole_take(rig, take.labels, take.frames, 60.0, 1.0);
   cal.source_take = "synthetic \"take\".trc";
   cal.source_frame = 12;
   cal.notes.push_back("a note");

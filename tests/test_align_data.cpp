@@ -11,6 +11,7 @@
 #include "solver/align/label.hpp"
 #include "solver/align/mapper.hpp"
 #include "solver/align/neutral.hpp"
+#include "solver/align/pipeline.hpp"
 #include "solver/align/stabilise.hpp"
 #include "solver/rig.hpp"
 #include "tests/test_support.hpp"
@@ -29,18 +30,16 @@ struct Calibrated {
 };
 
 // The calibrate command's pipeline on a take as it is in the file.
-Calibrated calibrate_take(const Rig& rig, const std::filesystem::path& path) {
+Calibrated calibrate_file(const Rig& rig, const std::filesystem::path& path) {
   Calibrated c;
   c.take = formats::read_take(path);
-  const auto stable = find_stable_markers(c.take.frames, 6);
-  NeutralSearchOptions search;
-  search.rate_hz = c.take.rate_hz;
-  search.take_mm_per_unit = 10.0;
-  const NeutralFrame n = find_neutral_frame(c.take.frames, stable, search);
-  std::vector<uint8_t> present;
-  c.neutral = average_positions(c.take.frames, n.window_start, n.window_frames, n.frame_index, stable, present);
-  c.calibration = calibrate(rig, c.take.labels, c.neutral, present, CalibrationOptions{.rig_mm_per_unit = 10.0});
-  for (int s : stable) c.calibration.stable_markers.push_back(c.take.labels[std::size_t(s)]);
+  TakeCalibrationOptions o;
+  o.neutral.rate_hz = c.take.rate_hz;
+  o.neutral.take_mm_per_unit = 10.0;
+  o.calibration.rig_mm_per_unit = 10.0;
+  const TakeCalibration t = calibrate_take(rig, c.take.labels, c.take.frames, o);
+  c.calibration = t.calibration;
+  c.neutral = t.positions;
   return c;
 }
 
@@ -56,7 +55,7 @@ TEST_CASE("AnimFace takes calibrate to the ICT face from the file as it is with 
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   const Rig& rig = ict_rig(ict);
   for (const char* name : kTakes) {
-    const Calibrated c = calibrate_take(rig, animface / (std::string(name) + ".trc"));
+    const Calibrated c = calibrate_file(rig, animface / (std::string(name) + ".trc"));
     const Calibration& cal = c.calibration;
     std::vector<double> residuals;
     for (const auto& m : cal.markers) residuals.push_back(m.residual_mm);
@@ -74,9 +73,11 @@ TEST_CASE("AnimFace takes calibrate to the ICT face from the file as it is with 
     }
     std::nth_element(stable_mm.begin(), stable_mm.begin() + std::ptrdiff_t(stable_mm.size() / 2), stable_mm.end());
     const double stable_median = stable_mm[stable_mm.size() / 2];
+    std::string stable_names;
+    for (const auto& s : cal.stable_markers) stable_names += " " + s;
     WARN(name << ": units " << unit_name(cal.take_mm_per_unit) << ", scale " << cal.take_to_rig.scale << ", residual median "
-              << residuals[residuals.size() / 2] << " mm, max " << residuals.back() << " mm; stable markers' residual median "
-              << stable_median << " mm");
+              << residuals[residuals.size() / 2] << " mm, max " << residuals.back() << " mm; stable markers" << stable_names
+              << ": residual median " << stable_median << " mm");
     CHECK(cal.units_detected);
     CHECK(cal.take_mm_per_unit == 10.0);  // the files are in cm, and the fit says so
     CHECK(cal.markers.size() == 41);
@@ -96,7 +97,7 @@ TEST_CASE("AnimFace labels are recovered from unlabelled shuffled points in at l
   const Rig& rig = ict_rig(ict);
   std::mt19937 rng(12);
   for (const char* name : kTakes) {
-    const Calibrated c = calibrate_take(rig, animface / (std::string(name) + ".trc"));
+    const Calibrated c = calibrate_file(rig, animface / (std::string(name) + ".trc"));
     LabellerParams p;
     p.gate = 0.6;  // cm
     p.gate_growth = 0.1;
@@ -154,7 +155,7 @@ TEST_CASE("AnimFace swapped labels are corrected by the label check", "[data]") 
   FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   const Rig& rig = ict_rig(ict);
-  const Calibrated c = calibrate_take(rig, animface / "JawMoCap.trc");
+  const Calibrated c = calibrate_file(rig, animface / "JawMoCap.trc");
   LabellerParams p;
   p.gate = 0.6;
   p.max_gate = 2.0;

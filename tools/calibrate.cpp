@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "formats/take.hpp"
 #include "solver/align/neutral.hpp"
+#include "solver/align/pipeline.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/align/stabilise.hpp"
 #include "tools/align_support.hpp"
@@ -81,56 +82,34 @@ void run_calibrate(const Options& o, bool frame_given) {
     if (const auto g = align::millimetres_per_unit(guess_face_units(bounding_box(P)))) search_units = *g;
   }
 
-  // Stable markers: named, or those whose mutual distances vary least over this take.
-  std::vector<int> stable_slots;
+  align::TakeCalibrationOptions topts;
+  topts.calibration.take_mm_per_unit = given_units;
+  topts.calibration.rig_mm_per_unit = rig_mm;
+  topts.neutral.rate_hz = take.rate_hz > 0 ? take.rate_hz : 60.0;
+  topts.neutral.take_mm_per_unit = search_units;
+  topts.average = o.average;
+  topts.stable_count = o.stable_count;
+  // Stable markers: named, or found (mutual distances vary least over this take, among
+  // the markers the rig moves least).
   if (!o.stable.empty()) {
     for (const auto& n : split_list(o.stable)) {
       const auto it = std::find(take.labels.begin(), take.labels.end(), n);
       if (it == take.labels.end()) throw file_error(o.take, fmt::format("--stable names '{}', which the take does not have", n));
-      stable_slots.push_back(int(it - take.labels.begin()));
+      topts.stable_slots.push_back(int(it - take.labels.begin()));
     }
-    if (stable_slots.size() < 3) throw Error("--stable: name at least 3 markers");
-  } else {
-    stable_slots = align::find_stable_markers(take.frames, o.stable_count);
+    if (topts.stable_slots.size() < 3) throw Error("--stable: name at least 3 markers");
   }
-
-  std::size_t index = 0;
-  align::NeutralFrame neutral;
-  if (frame_given) {
-    index = frame_index(take, o.frame, o.take);
-  } else {
-    align::NeutralSearchOptions search;
-    search.rate_hz = take.rate_hz > 0 ? take.rate_hz : 60.0;
-    search.take_mm_per_unit = search_units;
-    neutral = align::find_neutral_frame(take.frames, stable_slots, search);
-    index = neutral.frame_index;
-  }
-  // Average a still stretch (noise / sqrt(n)): the auto-neutral window, or --average frames
-  // centred on --frame.
-  std::size_t first = index, count = 1;
-  if (!frame_given) first = neutral.window_start, count = neutral.window_frames;
-  if (o.average > 0) {
-    count = std::min<std::size_t>(std::size_t(o.average), take.frames.size());
-    first = index >= count / 2 ? index - count / 2 : 0;
-    first = std::min(first, take.frames.size() - count);
-  }
-  std::vector<uint8_t> present;
-  const Eigen::Matrix3Xd P = count > 1 ? align::average_positions(take.frames, first, count, index, stable_slots, present)
-                                       : frame_positions(take.frames[index], present);
-  align::CalibrationOptions copts;
-  copts.take_mm_per_unit = given_units;
-  copts.rig_mm_per_unit = rig_mm;
-  align::Calibration cal = align::calibrate(rig, take.labels, P, present, copts);
+  if (frame_given) topts.frame = frame_index(take, o.frame, o.take);
+  const align::TakeCalibration result = align::calibrate_take(rig, take.labels, take.frames, topts);
+  align::Calibration cal = result.calibration;
+  const bool auto_neutral = result.neutral.has_value();
+  const align::NeutralFrame neutral = result.neutral.value_or(align::NeutralFrame{});
   cal.source_take = std::filesystem::path(o.take).filename().string();
-  cal.source_frame = take.frames[index].frame_no;
-  if (count > 1)
+  cal.source_frame = take.frames[result.frame].frame_no;
+  if (result.count > 1)
     cal.notes.push_back(fmt::format("neutral positions are the mean of frames {} to {} stabilised onto frame {}",
-                                    take.frames[first].frame_no, take.frames[first + count - 1].frame_no, cal.source_frame));
-  for (int s : stable_slots)
-    if (cal.find(take.labels[std::size_t(s)]) >= 0) cal.stable_markers.push_back(take.labels[std::size_t(s)]);
-  if (cal.stable_markers.size() < 3)
-    throw Error(fmt::format("only {} stable markers are present in the calibration frame; 3 are needed",
-                            cal.stable_markers.size()));
+                                    take.frames[result.first].frame_no, take.frames[result.first + result.count - 1].frame_no,
+                                    cal.source_frame));
   if (cal.units_detected && file_units && *file_units != cal.take_mm_per_unit)
     cal.notes.push_back(fmt::format("the take states '{}' but its size says '{}'; used '{}' (override with --units)", take.units,
                                     align::unit_name(cal.take_mm_per_unit), align::unit_name(cal.take_mm_per_unit)));
@@ -159,8 +138,8 @@ void run_calibrate(const Options& o, bool frame_given) {
     j["rig"] = {{"name", cal.rig_name}, {"content_hash", fmt::format("{:016x}", cal.rig_hash)}};
     j["take"] = o.take;
     j["frame"] = cal.source_frame;
-    j["auto_neutral"] = !frame_given;
-    if (!frame_given) j["neutral"] = {{"distance_mm", neutral.distance_mm}, {"speed_mm_s", neutral.speed_mm_s}};
+    j["auto_neutral"] = auto_neutral;
+    if (auto_neutral) j["neutral"] = {{"distance_mm", neutral.distance_mm}, {"speed_mm_s", neutral.speed_mm_s}};
     j["units"] = align::unit_name(cal.take_mm_per_unit);
     j["units_detected"] = cal.units_detected;
     j["scale"] = cal.take_to_rig.scale;
@@ -178,7 +157,7 @@ void run_calibrate(const Options& o, bool frame_given) {
     return;
   }
   fmt::print("calibrated {} on {} frame {}{}\n", o.take, rig.name, cal.source_frame,
-             frame_given ? "" : fmt::format(" (auto-neutral: {:.2f} mm from the median shape, {:.1f} mm/s)",
+             !auto_neutral ? "" : fmt::format(" (auto-neutral: {:.2f} mm from the median shape, {:.1f} mm/s)",
                                             neutral.distance_mm, neutral.speed_mm_s));
   fmt::print("units {} ({}), scale {:.4f} rig units per take unit, hull ICP {:.2f} mm, surface ICP {:.2f} mm (trimmed RMS)\n",
              align::unit_name(cal.take_mm_per_unit), cal.units_detected ? "detected" : "given", cal.take_to_rig.scale,

@@ -10,7 +10,8 @@
 
 namespace facecap::align {
 
-std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int count, double* mean_deviation) {
+std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int count, double* mean_deviation,
+                                     std::span<const double> mobility) {
   if (frames.size() < 2) throw Error(fmt::format("stable markers: {} frames, at least 2 needed", frames.size()));
   const std::size_t K = frames.front().markers.size();
   for (const auto& f : frames)
@@ -21,6 +22,15 @@ std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int co
     std::size_t n = 0;
     for (const auto& f : frames) n += usable(f.markers[k]);
     if (2 * n >= frames.size()) candidates.push_back(int(k));
+  }
+  if (!mobility.empty()) {
+    if (mobility.size() != K) throw Error("stable markers: one mobility per marker needed");
+    std::vector<int> by_mobility = candidates;
+    std::stable_sort(by_mobility.begin(), by_mobility.end(),
+                     [&](int a, int b) { return mobility[std::size_t(a)] < mobility[std::size_t(b)]; });
+    by_mobility.resize(std::max<std::size_t>(std::min<std::size_t>(3, by_mobility.size()), (by_mobility.size() + 1) / 2));
+    std::sort(by_mobility.begin(), by_mobility.end());
+    candidates = by_mobility;
   }
   const std::size_t C = candidates.size();
   if (C < 3) throw Error(fmt::format("stable markers: {} markers are present in at least half of the frames, 3 needed", C));

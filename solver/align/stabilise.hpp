@@ -23,7 +23,10 @@ namespace facecap::align {
 // them, fewer if fewer markers qualify), and each chosen pair deviation's mean in
 // `mean_deviation` (take units) when given. Not real-time. Throws Error with fewer than
 // 3 candidates or 2 frames.
-std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int count, double* mean_deviation = nullptr);
+// mobility (optional, one per slot): how far the rig can move each marker; when given,
+// only the less mobile half of the markers (by rank, at least 3) are candidates.
+std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int count, double* mean_deviation = nullptr,
+                                     std::span<const double> mobility = {});
 
 struct StabiliserParams {
   int minimum_markers = 3;             // fewer inliers: hold the last pose
