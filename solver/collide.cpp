@@ -266,12 +266,6 @@ struct Box {
   float hi[3];
 };
 
-// Non-short-circuit operators: one well-predicted branch instead of six random ones.
-bool boxes_overlap(const Box& a, const Box& b) noexcept {
-  return (a.lo[0] <= b.hi[0]) & (b.lo[0] <= a.hi[0]) & (a.lo[1] <= b.hi[1]) & (b.lo[1] <= a.hi[1]) &
-         (a.lo[2] <= b.hi[2]) & (b.lo[2] <= a.hi[2]);
-}
-
 Box merge(const Box& a, const Box& b) noexcept {
   Box m;
   for (int k = 0; k < 3; ++k) {
@@ -318,22 +312,55 @@ uint32_t slots_overlapping(const LeafBoxes& leaf, const Box& box) noexcept {
   return lane_bits(m);
 }
 
-Box lane_box(const LeafBoxes& leaf, int lane) noexcept {
-  return {{leaf.lo[0][lane], leaf.lo[1][lane], leaf.lo[2][lane]}, {leaf.hi[0][lane], leaf.hi[1][lane], leaf.hi[2][lane]}};
+// Four child boxes of an inner node, one lane each.
+constexpr int kArity = 4;
+using Lanes4 = float __attribute__((vector_size(16)));
+using LaneMask4 = int32_t __attribute__((vector_size(16)));
+
+uint32_t lane_bits4(LaneMask4 m) noexcept {
+#if defined(__SSE__)
+  return uint32_t(_mm_movemask_ps(reinterpret_cast<__m128>(m)));
+#else
+  uint32_t bits = 0;
+  for (int i = 0; i < kArity; ++i) bits |= uint32_t(m[i] != 0) << i;
+  return bits;
+#endif
 }
 
-struct Node {
-  Box box;
-  int32_t first = 0;   // leaf: first slot in leaf order
-  int32_t count = 0;   // leaf: slots; 0 for internal nodes
-  int32_t right = -1;  // internal: right child (the left child is the next node)
-  int32_t leaf = -1;   // leaf: index among the leaves
+// A reference to a tree element: >= 0 an inner node, < 0 the leaf ~ref.
+using Ref = int32_t;
+bool is_leaf(Ref r) noexcept { return r < 0; }
+int32_t leaf_of(Ref r) noexcept { return ~r; }
+
+struct alignas(16) Node4 {
+  Lanes4 lo[3];  // child boxes; unused lanes are empty and overlap nothing
+  Lanes4 hi[3];
+  Ref child[kArity] = {0, 0, 0, 0};
+  int32_t child_count = 0;
 };
 
-// A binary tree of boxes over triangles stored in "slots" (leaf order), up to
-// kMaxLeafSize per leaf. Built top-down on the rest pose with the surface area
-// heuristic (every split of the centroid order on each axis; ties broken by triangle
-// index, so the tree depends only on its input). Refitting keeps the topology.
+// Which children of `node` overlap `box`, as bits.
+uint32_t children_overlapping(const Node4& node, const Box& box) noexcept {
+  const LaneMask4 m = (node.lo[0] <= box.hi[0]) & (node.hi[0] >= box.lo[0]) & (node.lo[1] <= box.hi[1]) &
+                      (node.hi[1] >= box.lo[1]) & (node.lo[2] <= box.hi[2]) & (node.hi[2] >= box.lo[2]);
+  return lane_bits4(m);
+}
+
+Box child_box(const Node4& node, int lane) noexcept {
+  return {{node.lo[0][lane], node.lo[1][lane], node.lo[2][lane]}, {node.hi[0][lane], node.hi[1][lane], node.hi[2][lane]}};
+}
+
+struct Leaf {
+  int32_t first = 0;  // first slot
+  int32_t count = 0;  // slots, 1..kMaxLeafSize
+};
+
+// A tree of boxes over triangles stored in "slots" (leaf order), up to kMaxLeafSize per
+// leaf, four children per inner node. Built once on the rest pose: top-down binary
+// splits by the surface area heuristic (every split of the centroid order on each
+// axis; ties broken by triangle index, so the tree depends only on its input), then
+// collapsed to four-wide nodes so one SIMD compare tests four boxes. Refitting keeps
+// the topology and only recomputes boxes.
 class Bvh {
  public:
   // triangle_indices: the triangles to hold, in any order; positions: where to build.
@@ -341,74 +368,90 @@ class Bvh {
              std::span<const int32_t> triangle_indices) {
     const auto count = triangle_indices.size();
     slot_triangle_.assign(triangle_indices.begin(), triangle_indices.end());
-    std::vector<Vec3> centroid(count);
-    for (std::size_t i = 0; i < count; ++i) {
-      const auto t = slot_triangle_[i];
-      centroid[i] = (positions.col(triangles(0, t)) + positions.col(triangles(1, t)) + positions.col(triangles(2, t))) / 3.0;
-    }
-    tri_lo_.resize(count);
-    tri_hi_.resize(count);
+    BuildInput input;
+    input.centroid.resize(count);
+    input.lo.resize(count);
+    input.hi.resize(count);
     for (std::size_t i = 0; i < count; ++i) {
       const auto t = slot_triangle_[i];
       const Vec3 p0 = positions.col(triangles(0, t)), p1 = positions.col(triangles(1, t)), p2 = positions.col(triangles(2, t));
-      tri_lo_[i] = p0.cwiseMin(p1).cwiseMin(p2);
-      tri_hi_[i] = p0.cwiseMax(p1).cwiseMax(p2);
+      input.centroid[i] = (p0 + p1 + p2) / 3.0;
+      input.lo[i] = p0.cwiseMin(p1).cwiseMin(p2);
+      input.hi[i] = p0.cwiseMax(p1).cwiseMax(p2);
     }
-    std::vector<int32_t> order(count);
-    std::iota(order.begin(), order.end(), 0);
+    input.order.resize(count);
+    std::iota(input.order.begin(), input.order.end(), 0);
+    std::vector<BuildNode> binary;
+    binary.reserve(2 * count + 1);
+    leaves_.clear();
     nodes_.clear();
-    nodes_.reserve(count == 0 ? 1 : 2 * count);
-    leaf_count_ = 0;
     depth_ = 0;
-    if (count > 0) build_node(order, centroid, 0, int32_t(count), 1);
+    if (count > 0) {
+      build_binary(input, binary, 0, int32_t(count));
+      root_ = collapse(binary, 0, 1);
+    }
     // Slots in leaf order, with each triangle's vertices stored beside it.
     std::vector<int32_t> sorted(count);
-    for (std::size_t i = 0; i < count; ++i) sorted[i] = slot_triangle_[std::size_t(order[i])];
+    for (std::size_t i = 0; i < count; ++i) sorted[i] = slot_triangle_[std::size_t(input.order[i])];
     slot_triangle_ = std::move(sorted);
     slot_vertices_.resize(count);
     for (std::size_t i = 0; i < count; ++i)
       for (int k = 0; k < 3; ++k) slot_vertices_[i][std::size_t(k)] = triangles(k, slot_triangle_[i]);
-    leaf_boxes_.resize(std::size_t(leaf_count_));
+    const float inf = std::numeric_limits<float>::infinity();
+    leaf_boxes_.resize(leaves_.size());
     for (LeafBoxes& leaf : leaf_boxes_)
       for (int k = 0; k < 3; ++k)
         for (int lane = 0; lane < kMaxLeafSize; ++lane) {
-          leaf.lo[k][lane] = std::numeric_limits<float>::infinity();
-          leaf.hi[k][lane] = -std::numeric_limits<float>::infinity();
+          leaf.lo[k][lane] = inf;
+          leaf.hi[k][lane] = -inf;
         }
+    leaf_box_.assign(leaves_.size(), Box{{inf, inf, inf}, {-inf, -inf, -inf}});
+    slot_box_.assign(count, Box{{inf, inf, inf}, {-inf, -inf, -inf}});
+    node_box_.assign(nodes_.size(), Box{{inf, inf, inf}, {-inf, -inf, -inf}});
     build_skip_masks({});
-    // The self-traversal leaves at most 3 pending pairs per level of the pair
-    // recursion, whose levels (the sum of both nodes' depths) number below 2 * depth.
-    stack_.resize(std::size_t(6 * depth_ + 8));
+    // A popped pair pushes at most 16; at most 15 stay pending per level of the pair
+    // recursion, whose levels (the sum of both elements' depths) number below 2 * depth.
+    stack_.resize(std::size_t(32 * depth_ + 32));
   }
 
   // New boxes from positions, each grown by `margin` on every side. Real-time safe.
   void refit(const Eigen::Ref<const Eigen::Matrix3Xd>& positions, double margin) noexcept {
-    // Children follow their parent, so a reverse sweep sees children first.
-    for (auto n = int32_t(nodes_.size()) - 1; n >= 0; --n) {
-      Node& node = nodes_[std::size_t(n)];
-      if (node.count == 0) {
-        node.box = merge(nodes_[std::size_t(n + 1)].box, nodes_[std::size_t(node.right)].box);
-        continue;
-      }
-      LeafBoxes& leaf = leaf_boxes_[std::size_t(node.leaf)];
-      for (int32_t lane = 0; lane < node.count; ++lane) {
-        const auto& v = slot_vertices_[std::size_t(node.first + lane)];
+    for (std::size_t l = 0; l < leaves_.size(); ++l) {
+      const Leaf& leaf = leaves_[l];
+      LeafBoxes& lanes = leaf_boxes_[l];
+      for (int32_t lane = 0; lane < leaf.count; ++lane) {
+        const auto& v = slot_vertices_[std::size_t(leaf.first + lane)];
         const double* p0 = &positions.coeffRef(0, v[0]);
         const double* p1 = &positions.coeffRef(0, v[1]);
         const double* p2 = &positions.coeffRef(0, v[2]);
+        Box& slot = slot_box_[std::size_t(leaf.first + lane)];
         for (int k = 0; k < 3; ++k) {
-          leaf.lo[k][lane] = float_below(std::min({p0[k], p1[k], p2[k]}) - margin);
-          leaf.hi[k][lane] = float_above(std::max({p0[k], p1[k], p2[k]}) + margin);
+          slot.lo[k] = lanes.lo[k][lane] = float_below(std::min({p0[k], p1[k], p2[k]}) - margin);
+          slot.hi[k] = lanes.hi[k][lane] = float_above(std::max({p0[k], p1[k], p2[k]}) + margin);
         }
       }
+      Box& box = leaf_box_[l];
       for (int k = 0; k < 3; ++k) {
-        float lo = leaf.lo[k][0], hi = leaf.hi[k][0];
-        for (int32_t lane = 1; lane < node.count; ++lane) {
-          lo = std::min(lo, leaf.lo[k][lane]);
-          hi = std::max(hi, leaf.hi[k][lane]);
+        box.lo[k] = lanes.lo[k][0];
+        box.hi[k] = lanes.hi[k][0];
+        for (int32_t lane = 1; lane < leaf.count; ++lane) {
+          box.lo[k] = std::min(box.lo[k], lanes.lo[k][lane]);
+          box.hi[k] = std::max(box.hi[k], lanes.hi[k][lane]);
         }
-        node.box.lo[k] = lo;
-        node.box.hi[k] = hi;
+      }
+    }
+    // Children follow their parent, so a reverse sweep sees children first.
+    for (auto n = int32_t(nodes_.size()) - 1; n >= 0; --n) {
+      Node4& node = nodes_[std::size_t(n)];
+      Box& total = node_box_[std::size_t(n)];
+      for (int i = 0; i < node.child_count; ++i) {
+        const Ref c = node.child[i];
+        const Box& b = is_leaf(c) ? leaf_box_[std::size_t(leaf_of(c))] : node_box_[std::size_t(c)];
+        for (int k = 0; k < 3; ++k) {
+          node.lo[k][i] = b.lo[k];
+          node.hi[k][i] = b.hi[k];
+        }
+        total = i == 0 ? b : merge(total, b);
       }
     }
   }
@@ -419,39 +462,38 @@ class Bvh {
   // traversal stack ran out, which the bound in build() rules out.
   template <typename Visit>
   bool for_each_overlapping_pair(Visit&& visit) {
-    if (nodes_.empty()) return true;
+    if (leaves_.empty()) return true;
     std::size_t top = 0;
     const std::size_t capacity = stack_.size();
-    stack_[top++] = {0, 0};
+    stack_[top++] = {root_, root_};
     while (top > 0) {
-      const auto [ia, ib] = stack_[--top];
-      if (top + 4 > capacity) return false;  // a pop pushes at most 4
-      const Node& a = nodes_[std::size_t(ia)];
-      const Node& b = nodes_[std::size_t(ib)];
-      const bool a_leaf = a.count > 0, b_leaf = b.count > 0;
-      if (ia == ib) {
-        if (a_leaf) {
-          visit_within_leaf(a, visit);
-        } else {
-          const int32_t l = ia + 1, r = a.right;
-          stack_[top++] = {l, l};
-          stack_[top++] = {r, r};
-          push_if_overlapping(l, r, top);
+      const auto [a, b] = stack_[--top];
+      if (top + 16 > capacity) return false;
+      if (a == b) {
+        if (is_leaf(a)) {
+          visit_within_leaf(leaf_of(a), visit);
+          continue;
         }
-      } else if (a_leaf && b_leaf) {
-        visit_between_leaves(a, b, visit);
-      } else if (!a_leaf && !b_leaf) {
-        // Descending both at once halves the pairs popped.
-        push_if_overlapping(ia + 1, ib + 1, top);
-        push_if_overlapping(ia + 1, b.right, top);
-        push_if_overlapping(a.right, ib + 1, top);
-        push_if_overlapping(a.right, b.right, top);
-      } else if (!a_leaf) {
-        push_if_overlapping(ia + 1, ib, top);
-        push_if_overlapping(a.right, ib, top);
+        const Node4& node = nodes_[std::size_t(a)];
+        for (int i = 0; i < node.child_count; ++i) {
+          stack_[top++] = {node.child[i], node.child[i]};
+          uint32_t later = children_overlapping(node, child_box(node, i)) & ~((2u << i) - 1);
+          for (; later != 0; later &= later - 1) stack_[top++] = {node.child[i], node.child[std::countr_zero(later)]};
+        }
+      } else if (is_leaf(a) && is_leaf(b)) {
+        visit_between_leaves(leaf_of(a), leaf_of(b), visit);
+      } else if (!is_leaf(a) && !is_leaf(b)) {
+        const Node4& na = nodes_[std::size_t(a)];
+        const Node4& nb = nodes_[std::size_t(b)];
+        for (int i = 0; i < na.child_count; ++i) {
+          uint32_t hits = children_overlapping(nb, child_box(na, i));
+          for (; hits != 0; hits &= hits - 1) stack_[top++] = {na.child[i], nb.child[std::countr_zero(hits)]};
+        }
       } else {
-        push_if_overlapping(ia, ib + 1, top);
-        push_if_overlapping(ia, b.right, top);
+        const Ref inner = is_leaf(a) ? b : a, leaf = is_leaf(a) ? a : b;
+        const Node4& node = nodes_[std::size_t(inner)];
+        uint32_t hits = children_overlapping(node, leaf_box_[std::size_t(leaf_of(leaf))]);
+        for (; hits != 0; hits &= hits - 1) stack_[top++] = {node.child[std::countr_zero(hits)], leaf};
       }
     }
     return true;
@@ -472,48 +514,59 @@ class Bvh {
   static_assert(kMaxLeafSize * kMaxLeafSize <= 64);
   static constexpr PairMask kSlotRow = (PairMask(1) << kMaxLeafSize) - 1;
 
-  void build_node(std::vector<int32_t>& order, const std::vector<Vec3>& centroid, int32_t begin, int32_t end,
-                  int depth) {
-    depth_ = std::max(depth_, depth);
-    const auto index = nodes_.size();
-    nodes_.emplace_back();
-    if (end - begin <= kMaxLeafSize) {
-      nodes_[index].first = begin;
-      nodes_[index].count = end - begin;
-      nodes_[index].leaf = leaf_count_++;
-      return;
+  struct BuildInput {
+    std::vector<Vec3> centroid, lo, hi;  // per triangle (index into the input order)
+    std::vector<int32_t> order;          // permutation, leaf order once built
+  };
+  struct BuildNode {
+    int32_t left = -1, right = -1;  // children in the binary tree; -1 for a leaf
+    int32_t first = 0, count = 0;   // range of `order` below this node
+    double area = 0.0;              // half the surface area of its box
+  };
+
+  static double half_area(const Vec3& lo, const Vec3& hi) {
+    const Vec3 d = hi - lo;
+    return d.x() * d.y() + d.y() * d.z() + d.z() * d.x();
+  }
+
+  int32_t build_binary(BuildInput& in, std::vector<BuildNode>& out, int32_t begin, int32_t end) {
+    const auto index = int32_t(out.size());
+    out.emplace_back();
+    out[std::size_t(index)].first = begin;
+    out[std::size_t(index)].count = end - begin;
+    Vec3 lo = in.lo[std::size_t(in.order[std::size_t(begin)])], hi = in.hi[std::size_t(in.order[std::size_t(begin)])];
+    for (int32_t i = begin; i < end; ++i) {
+      lo = lo.cwiseMin(in.lo[std::size_t(in.order[std::size_t(i)])]);
+      hi = hi.cwiseMax(in.hi[std::size_t(in.order[std::size_t(i)])]);
     }
-    // Surface area heuristic over all three axes: sort by centroid, sweep the split.
+    out[std::size_t(index)].area = half_area(lo, hi);
+    if (end - begin <= kMaxLeafSize) return index;
+    // Surface area heuristic: sort by centroid on each axis, sweep every split.
     const int32_t n = end - begin;
-    std::vector<int32_t> sorted(order.begin() + begin, order.begin() + end);
-    std::vector<double> left_area(static_cast<std::size_t>(n)), right_area(static_cast<std::size_t>(n));
+    std::vector<int32_t> sorted(in.order.begin() + begin, in.order.begin() + end);
+    std::vector<double> right_area(static_cast<std::size_t>(n));
     double best_cost = std::numeric_limits<double>::infinity();
     int best_axis = 0;
     int32_t best_split = n / 2;
-    auto area = [](const Vec3& lo, const Vec3& hi) {
-      const Vec3 d = hi - lo;
-      return d.x() * d.y() + d.y() * d.z() + d.z() * d.x();
+    auto by_axis = [&](int axis) {
+      return [&in, this, axis](int32_t x, int32_t y) {
+        const double cx = in.centroid[std::size_t(x)][axis], cy = in.centroid[std::size_t(y)][axis];
+        return cx < cy || (cx == cy && slot_triangle_[std::size_t(x)] < slot_triangle_[std::size_t(y)]);
+      };
     };
     for (int axis = 0; axis < 3; ++axis) {
-      std::sort(sorted.begin(), sorted.end(), [&](int32_t x, int32_t y) {
-        const double cx = centroid[std::size_t(x)][axis], cy = centroid[std::size_t(y)][axis];
-        return cx < cy || (cx == cy && slot_triangle_[std::size_t(x)] < slot_triangle_[std::size_t(y)]);
-      });
-      Vec3 lo = tri_lo_[std::size_t(sorted[0])], hi = tri_hi_[std::size_t(sorted[0])];
-      for (int32_t i = 0; i < n; ++i) {
-        lo = lo.cwiseMin(tri_lo_[std::size_t(sorted[std::size_t(i)])]);
-        hi = hi.cwiseMax(tri_hi_[std::size_t(sorted[std::size_t(i)])]);
-        left_area[std::size_t(i)] = area(lo, hi);
-      }
-      lo = tri_lo_[std::size_t(sorted[std::size_t(n - 1)])];
-      hi = tri_hi_[std::size_t(sorted[std::size_t(n - 1)])];
+      std::sort(sorted.begin(), sorted.end(), by_axis(axis));
+      Vec3 r_lo = in.lo[std::size_t(sorted.back())], r_hi = in.hi[std::size_t(sorted.back())];
       for (int32_t i = n - 1; i >= 0; --i) {
-        lo = lo.cwiseMin(tri_lo_[std::size_t(sorted[std::size_t(i)])]);
-        hi = hi.cwiseMax(tri_hi_[std::size_t(sorted[std::size_t(i)])]);
-        right_area[std::size_t(i)] = area(lo, hi);
+        r_lo = r_lo.cwiseMin(in.lo[std::size_t(sorted[std::size_t(i)])]);
+        r_hi = r_hi.cwiseMax(in.hi[std::size_t(sorted[std::size_t(i)])]);
+        right_area[std::size_t(i)] = half_area(r_lo, r_hi);
       }
+      Vec3 l_lo = in.lo[std::size_t(sorted[0])], l_hi = in.hi[std::size_t(sorted[0])];
       for (int32_t split = 1; split < n; ++split) {
-        const double cost = left_area[std::size_t(split - 1)] * split + right_area[std::size_t(split)] * (n - split);
+        l_lo = l_lo.cwiseMin(in.lo[std::size_t(sorted[std::size_t(split - 1)])]);
+        l_hi = l_hi.cwiseMax(in.hi[std::size_t(sorted[std::size_t(split - 1)])]);
+        const double cost = half_area(l_lo, l_hi) * split + right_area[std::size_t(split)] * (n - split);
         if (cost < best_cost) {
           best_cost = cost;
           best_axis = axis;
@@ -521,16 +574,49 @@ class Bvh {
         }
       }
     }
-    const int axis = best_axis;
-    std::sort(order.begin() + begin, order.begin() + end, [&](int32_t x, int32_t y) {
-      const double cx = centroid[std::size_t(x)][axis], cy = centroid[std::size_t(y)][axis];
-      return cx < cy || (cx == cy && slot_triangle_[std::size_t(x)] < slot_triangle_[std::size_t(y)]);
-    });
-    const int32_t mid = begin + best_split;
-    build_node(order, centroid, begin, mid, depth + 1);
-    const auto right = int32_t(nodes_.size());
-    build_node(order, centroid, mid, end, depth + 1);
-    nodes_[index].right = right;
+    std::sort(in.order.begin() + begin, in.order.begin() + end, by_axis(best_axis));
+    const int32_t left = build_binary(in, out, begin, begin + best_split);
+    const int32_t right = build_binary(in, out, begin + best_split, end);
+    out[std::size_t(index)].left = left;
+    out[std::size_t(index)].right = right;
+    return index;
+  }
+
+  // Turns binary node `index` into a four-wide node (pre-order: children after their
+  // parent) by repeatedly opening the largest inner child; returns its reference.
+  Ref collapse(const std::vector<BuildNode>& binary, int32_t index, int depth) {
+    depth_ = std::max(depth_, depth);
+    const BuildNode& b = binary[std::size_t(index)];
+    if (b.left < 0) {
+      leaves_.push_back({b.first, b.count});
+      return ~int32_t(leaves_.size() - 1);
+    }
+    std::vector<int32_t> children{b.left, b.right};
+    while (children.size() < std::size_t(kArity)) {
+      int best = -1;
+      for (int i = 0; i < int(children.size()); ++i) {
+        const BuildNode& c = binary[std::size_t(children[std::size_t(i)])];
+        if (c.left >= 0 && (best < 0 || c.area > binary[std::size_t(children[std::size_t(best)])].area)) best = i;
+      }
+      if (best < 0) break;
+      const BuildNode& opened = binary[std::size_t(children[std::size_t(best)])];
+      children[std::size_t(best)] = opened.left;
+      children.insert(children.begin() + best + 1, opened.right);
+    }
+    const auto node = int32_t(nodes_.size());
+    nodes_.emplace_back();
+    const float inf = std::numeric_limits<float>::infinity();
+    for (int k = 0; k < 3; ++k)
+      for (int lane = 0; lane < kArity; ++lane) {
+        nodes_[std::size_t(node)].lo[k][lane] = inf;
+        nodes_[std::size_t(node)].hi[k][lane] = -inf;
+      }
+    nodes_[std::size_t(node)].child_count = int32_t(children.size());
+    for (std::size_t i = 0; i < children.size(); ++i) {
+      const Ref ref = collapse(binary, children[i], depth + 1);
+      nodes_[std::size_t(node)].child[i] = ref;
+    }
+    return node;
   }
 
   // For every pair of leaves holding slot pairs to skip (triangles sharing a vertex, a
@@ -538,14 +624,11 @@ class Bvh {
   // are. Most box-overlapping pairs are such neighbours; the masks drop them without
   // looking at their boxes.
   void build_skip_masks(std::span<const TrianglePair> extra_skipped) {
-    std::vector<const Node*> leaves(static_cast<std::size_t>(leaf_count_));
+    const auto leaf_count = int32_t(leaves_.size());
     std::vector<int32_t> slot_leaf(slot_triangle_.size());
-    for (const Node& node : nodes_) {
-      if (node.count == 0) continue;
-      leaves[std::size_t(node.leaf)] = &node;
-      for (int32_t s = node.first; s < node.first + node.count; ++s) slot_leaf[std::size_t(s)] = node.leaf;
-    }
-    std::vector<std::pair<int32_t, int32_t>> leaf_pairs;  // (leaf, neighbouring leaf), both ways
+    for (int32_t l = 0; l < leaf_count; ++l)
+      for (int32_t s = 0; s < leaves_[std::size_t(l)].count; ++s) slot_leaf[std::size_t(leaves_[std::size_t(l)].first + s)] = l;
+    std::vector<std::pair<int32_t, int32_t>> leaf_pairs;   // (leaf, leaf with pairs to skip), both ways
     std::vector<std::pair<int32_t, int32_t>> vertex_leaf;  // (vertex, leaf)
     for (std::size_t s = 0; s < slot_vertices_.size(); ++s)
       for (int32_t v : slot_vertices_[s]) vertex_leaf.emplace_back(v, slot_leaf[s]);
@@ -578,12 +661,12 @@ class Bvh {
     std::sort(extra_slots.begin(), extra_slots.end());
     std::sort(leaf_pairs.begin(), leaf_pairs.end());
     leaf_pairs.erase(std::unique(leaf_pairs.begin(), leaf_pairs.end()), leaf_pairs.end());
-    skip_offset_.assign(std::size_t(leaf_count_) + 1, 0);
+    skip_offset_.assign(std::size_t(leaf_count) + 1, 0);
     skip_leaf_.clear();
     skip_mask_.clear();
     for (const auto& [a, b] : leaf_pairs) {
-      const Node& la = *leaves[std::size_t(a)];
-      const Node& lb = *leaves[std::size_t(b)];
+      const Leaf& la = leaves_[std::size_t(a)];
+      const Leaf& lb = leaves_[std::size_t(b)];
       PairMask mask = 0;
       for (int32_t s = 0; s < la.count; ++s)
         for (int32_t t = 0; t < lb.count; ++t) {
@@ -596,58 +679,61 @@ class Bvh {
       skip_mask_.push_back(mask);
       ++skip_offset_[std::size_t(a) + 1];
     }
-    for (std::size_t a = 0; a < std::size_t(leaf_count_); ++a) skip_offset_[a + 1] += skip_offset_[a];
+    for (std::size_t a = 0; a < std::size_t(leaf_count); ++a) skip_offset_[a + 1] += skip_offset_[a];
   }
 
   PairMask skip_mask(int32_t leaf_a, int32_t leaf_b) const noexcept {
-    for (int32_t k = skip_offset_[std::size_t(leaf_a)]; k < skip_offset_[std::size_t(leaf_a) + 1]; ++k)
-      if (skip_leaf_[std::size_t(k)] == leaf_b) return skip_mask_[std::size_t(k)];
-    return 0;
-  }
-
-  void push_if_overlapping(int32_t a, int32_t b, std::size_t& top) noexcept {
-    if (boxes_overlap(nodes_[std::size_t(a)].box, nodes_[std::size_t(b)].box)) stack_[top++] = {a, b};
+    const auto begin = skip_leaf_.begin() + skip_offset_[std::size_t(leaf_a)];
+    const auto end = skip_leaf_.begin() + skip_offset_[std::size_t(leaf_a) + 1];
+    const auto it = std::lower_bound(begin, end, leaf_b);
+    return it != end && *it == leaf_b ? skip_mask_[std::size_t(it - skip_leaf_.begin())] : 0;
   }
 
   template <typename Visit>
-  void visit_between_leaves(const Node& a, const Node& b, Visit& visit) noexcept {
-    const LeafBoxes& boxes_a = leaf_boxes_[std::size_t(a.leaf)];
-    const LeafBoxes& boxes_b = leaf_boxes_[std::size_t(b.leaf)];
+  void visit_between_leaves(int32_t la, int32_t lb, Visit& visit) noexcept {
+    const Leaf& a = leaves_[std::size_t(la)];
+    const Leaf& b = leaves_[std::size_t(lb)];
+    const LeafBoxes& boxes_a = leaf_boxes_[std::size_t(la)];
+    const LeafBoxes& boxes_b = leaf_boxes_[std::size_t(lb)];
     // Only slots reaching into the other leaf's box can pair up.
-    uint32_t a_slots = slots_overlapping(boxes_a, b.box);
-    const uint32_t b_slots = slots_overlapping(boxes_b, a.box);
+    uint32_t a_slots = slots_overlapping(boxes_a, leaf_box_[std::size_t(lb)]);
+    const uint32_t b_slots = slots_overlapping(boxes_b, leaf_box_[std::size_t(la)]);
     if (a_slots == 0 || b_slots == 0) return;
-    const PairMask skipped = skip_mask(a.leaf, b.leaf);
+    const PairMask skipped = skip_mask(la, lb);
     for (; a_slots != 0; a_slots &= a_slots - 1) {
       const int s = std::countr_zero(a_slots);
-      uint32_t row = slots_overlapping(boxes_b, lane_box(boxes_a, s)) & b_slots &
+      uint32_t row = slots_overlapping(boxes_b, slot_box_[std::size_t(a.first + s)]) & b_slots &
                      ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow);
       for (; row != 0; row &= row - 1) visit(a.first + s, b.first + std::countr_zero(row));
     }
   }
 
   template <typename Visit>
-  void visit_within_leaf(const Node& a, Visit& visit) noexcept {
-    const LeafBoxes& boxes = leaf_boxes_[std::size_t(a.leaf)];
-    const PairMask skipped = skip_mask(a.leaf, a.leaf);
+  void visit_within_leaf(int32_t l, Visit& visit) noexcept {
+    const Leaf& a = leaves_[std::size_t(l)];
+    const LeafBoxes& boxes = leaf_boxes_[std::size_t(l)];
+    const PairMask skipped = skip_mask(l, l);
     for (int s = 0; s + 1 < a.count; ++s) {
       // Slots after s (unused lanes never overlap), not skipped.
-      uint32_t row = slots_overlapping(boxes, lane_box(boxes, s)) & ~((2u << s) - 1) &
+      uint32_t row = slots_overlapping(boxes, slot_box_[std::size_t(a.first + s)]) & ~((2u << s) - 1) &
                      ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow);
       for (; row != 0; row &= row - 1) visit(a.first + s, a.first + std::countr_zero(row));
     }
   }
 
-  std::vector<Vec3> tri_lo_, tri_hi_;
-  std::vector<Node> nodes_;                          // pre-order: left child = parent + 1
-  std::vector<int32_t> slot_triangle_;               // triangle index per slot
+  std::vector<Node4> nodes_;                          // pre-order: children after their parent
+  std::vector<Box> node_box_;                         // per inner node: union of its children
+  std::vector<Leaf> leaves_;
+  std::vector<LeafBoxes> leaf_boxes_;                 // per leaf: its slots' boxes, refitted
+  std::vector<Box> leaf_box_;                         // per leaf: union of its slots
+  std::vector<Box> slot_box_;                         // per slot, the same boxes as leaf_boxes_
+  Ref root_ = 0;
+  std::vector<int32_t> slot_triangle_;                // triangle index per slot
   std::vector<std::array<int32_t, 3>> slot_vertices_;
-  std::vector<LeafBoxes> leaf_boxes_;               // per-leaf slot boxes, refitted
-  std::vector<int32_t> skip_offset_;                 // per leaf: range in skip_leaf_/skip_mask_
-  std::vector<int32_t> skip_leaf_;                   // leaves with pairs to skip, ascending per leaf
-  std::vector<PairMask> skip_mask_;                  // slot pairs to skip
-  std::vector<std::pair<int32_t, int32_t>> stack_;   // traversal scratch, sized at build
-  int32_t leaf_count_ = 0;
+  std::vector<int32_t> skip_offset_;                  // per leaf: range in skip_leaf_/skip_mask_
+  std::vector<int32_t> skip_leaf_;                    // leaves with pairs to skip, ascending per leaf
+  std::vector<PairMask> skip_mask_;                   // slot pairs to skip
+  std::vector<std::pair<Ref, Ref>> stack_;            // traversal scratch, sized at build
   int depth_ = 0;
 };
 
