@@ -10,8 +10,8 @@
 #include <numeric>
 #include <string_view>
 
-#if defined(__AVX__)
-#include <immintrin.h>
+#if defined(__SSE__)
+#include <immintrin.h>  // movemask: lane compare results to bits
 #endif
 
 #include <Eigen/Geometry>
@@ -993,6 +993,9 @@ bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& position
   out.pair_count = out.vertex_count = out.pairs_found = out.vertices_found = 0;
   if (!state_ || positions.cols() != state_->vertex_count) return false;
   State& s = *state_;
+  // A NaN would poison the boxes above it and hide other pairs: refuse the frame.
+  for (int32_t v : s.candidate_vertices)
+    if (!positions.col(v).allFinite()) return false;
   const auto pair_capacity = int32_t(std::min<std::size_t>(out.pairs.size(), std::size_t(s.config.max_pairs)));
   const auto vertex_capacity = int32_t(std::min<std::size_t>(out.vertices.size(), std::size_t(s.max_vertices)));
   if (++s.stamp == 0) {  // wrapped: forget every old stamp

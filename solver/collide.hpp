@@ -1,8 +1,10 @@
 #pragma once
 // Triangle-triangle proximity for the face solve (DESIGN.md "Collisions"): a bounding
-// volume hierarchy (axis-aligned boxes) over a candidate set of triangles, built once on
-// the rest mesh and refitted every frame, finds the triangle pairs closer than epsilon
-// that share no vertex. The solver pins those pairs' vertices to the linear blend.
+// volume hierarchy of axis-aligned boxes over a candidate set of triangles (the lip
+// region or the whole face), built once on the rest mesh and refitted every frame with
+// each triangle's box grown by epsilon / 2, finds the triangle pairs closer than
+// epsilon that share no vertex. The solver pins those pairs' vertices to the linear
+// blend.
 //
 // Lifecycle: TriangleCollider::configure() (allocates, not real-time) -> make_result()
 // (allocates the output once) -> detect() per frame (real-time safe).
@@ -12,6 +14,7 @@
 // Everything is double precision with ordinary floating-point predicates (no exact
 // arithmetic): pairs within about 1e-12 of the threshold may be classified either way.
 #include <compare>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -37,7 +40,8 @@ bool triangles_intersect(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1, c
                          const Eigen::Vector3d& b0, const Eigen::Vector3d& b1,
                          const Eigen::Vector3d& b2) noexcept;
 
-// triangle_distance(a, b) < epsilon, with cheap separating-axis rejections first.
+// triangle_distance(a, b) < epsilon (so always false for epsilon <= 0), with cheap
+// separating-axis rejections first.
 bool triangles_closer_than(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1, const Eigen::Vector3d& a2,
                            const Eigen::Vector3d& b0, const Eigen::Vector3d& b1, const Eigen::Vector3d& b2,
                            double epsilon) noexcept;
@@ -115,8 +119,8 @@ struct CollisionResult {
   // True when pairs or vertices exceeded capacity. The vertices always come from every
   // pair found, stored or not, so pinning stays complete while vertex capacity lasts.
   bool overflowed() const noexcept { return pairs_found > pair_count || vertices_found > vertex_count; }
-  std::span<const TrianglePair> valid_pairs() const noexcept { return {pairs.data(), size_t(pair_count)}; }
-  std::span<const int32_t> valid_vertices() const noexcept { return {vertices.data(), size_t(vertex_count)}; }
+  std::span<const TrianglePair> valid_pairs() const noexcept { return {pairs.data(), std::size_t(pair_count)}; }
+  std::span<const int32_t> valid_vertices() const noexcept { return {vertices.data(), std::size_t(vertex_count)}; }
 };
 
 class TriangleCollider {
@@ -141,7 +145,9 @@ class TriangleCollider {
   // every candidate pair closer than epsilon that shares no vertex into `out`.
   // Real-time safe: no allocation, locks, logging or exceptions. Pass a Matrix3Xd or a
   // Map of contiguous 3 x N doubles (another expression type would be copied).
-  // Returns false, with `out` emptied, if not configured or the sizes do not match.
+  // Returns false, with `out` emptied, if not configured, if the sizes do not match or
+  // if a candidate vertex is not finite. It updates the tree in place: one thread at a
+  // time per collider.
   bool detect(const Eigen::Ref<const Eigen::Matrix3Xd>& positions, CollisionResult& out) noexcept;
 
   bool configured() const noexcept;
@@ -149,7 +155,7 @@ class TriangleCollider {
   Eigen::Index vertex_count() const noexcept;          // N the collider expects
   std::span<const int32_t> candidate_triangles() const noexcept;  // ascending, unique
   std::span<const int32_t> candidate_vertices() const noexcept;   // ascending, unique
-  int tree_depth() const noexcept;                     // levels, root = 1
+  int tree_depth() const noexcept;                     // levels of four-wide nodes, root = 1
   // Pairs left out because they touch at rest (ignore_rest_contacts), sorted.
   std::span<const TrianglePair> rest_contacts() const noexcept;
 

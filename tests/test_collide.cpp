@@ -570,6 +570,15 @@ TEST_CASE("configuration errors throw and detection refuses mismatched input") {
   CHECK_FALSE(collider.detect(too_few, result));
   CHECK(result.pair_count == 0);
   CHECK(collider.detect(rig.neutral, result));
+  Eigen::Matrix3Xd broken = rig.neutral;
+  broken(1, rig.triangles(0, 3)) = std::numeric_limits<double>::quiet_NaN();
+  CHECK_FALSE(collider.detect(broken, result));
+  const auto used = collider.candidate_vertices();
+  int outside = 0;
+  while (std::binary_search(used.begin(), used.end(), outside)) ++outside;
+  broken = rig.neutral;
+  broken(1, outside) = std::numeric_limits<double>::quiet_NaN();
+  CHECK(collider.detect(broken, result));  // not a candidate vertex: ignored
 }
 
 TEST_CASE("an empty candidate set finds nothing") {
