@@ -294,7 +294,7 @@ struct alignas(4 * kMaxLeafSize) LeafBoxes {
   Lanes hi[3];
 };
 
-uint32_t lane_bits(LaneMask m) noexcept {
+uint32_t lane_bits(const LaneMask& m) noexcept {
 #if defined(__AVX__)
   static_assert(kMaxLeafSize == 8);
   return uint32_t(_mm256_movemask_ps(reinterpret_cast<__m256>(m)));
