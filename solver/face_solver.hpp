@@ -38,6 +38,10 @@ struct SolverParams {
   CollisionRegion collision_region = CollisionRegion::kLips;
   double collision_epsilon = 0.01;  // rig units: triangle pairs closer than this collide
   double active_weight = 1e-4;      // weights below this are left out of T(w)
+  // Gauss-Newton refinements of Eq. 2 for the nonlinear solver, fitting markers along
+  // the paths the rotations of Eq. 4 move them (a hinge swings, it does not slide);
+  // 0 gives the paper's linear fit.
+  int weight_refinements = 2;
 };
 
 // One frame's result. Sized by FaceSolver::make_result(); solve() only writes into it.

@@ -24,6 +24,15 @@ Eigen::Matrix3d symmetric_from6(const double* s, double diagonal) {
   return S;
 }
 
+// Whether entry e of a shape's triangle range changes its triangle (the range holds
+// zeros for the unchanged triangles inside it).
+bool entry_changes(const ShapeTriangleTerms& terms, int e) {
+  const std::size_t n = std::size_t(terms.count);
+  for (std::size_t c = 0; c < 9; ++c)
+    if (terms.nonlinear[c * n + std::size_t(e)] != 0.0f) return true;
+  return false;
+}
+
 }  // namespace
 
 struct MeshIkSolver::State {
@@ -113,8 +122,9 @@ struct MeshIkSolver::State {
     std::vector<uint8_t> shaped(std::size_t(T), 0);
     std::size_t largest_shape = 0;
     for (const auto& terms : m.shape_terms) {
-      for (int t : terms.triangles) shaped[std::size_t(t)] = 1;
-      largest_shape = std::max(largest_shape, terms.triangles.size());
+      for (int e = 0; e < terms.count; ++e)
+        if (entry_changes(terms, e)) shaped[std::size_t(terms.first_triangle + e)] = 1;
+      largest_shape = std::max(largest_shape, std::size_t(terms.count));
     }
     for (Eigen::Index t = 0; t < T; ++t)
       if (shaped[std::size_t(t)]) shaped_triangles.push_back(int(t));
@@ -188,10 +198,12 @@ struct MeshIkSolver::State {
       const double ws = weights[s];
       if (ws == 0.0) continue;
       const auto& terms = m.shape_terms[std::size_t(s)];
-      for (std::size_t e = 0; e < terms.triangles.size(); ++e) {
-        const int t = terms.triangles[e];
-        for (int k = 0; k < 3; ++k) log_sum(k, t) += ws * terms.log_rotation[3 * e + std::size_t(k)];
-        for (int k = 0; k < 6; ++k) stretch_sum(k, t) += ws * terms.stretch[6 * e + std::size_t(k)];
+      const std::size_t n = std::size_t(terms.count);
+      const float* v = terms.nonlinear.data();
+      for (std::size_t e = 0; e < n; ++e) {
+        const int t = terms.first_triangle + int(e);
+        for (std::size_t k = 0; k < 3; ++k) log_sum(Eigen::Index(k), t) += ws * v[k * n + e];
+        for (std::size_t k = 0; k < 6; ++k) stretch_sum(Eigen::Index(k), t) += ws * v[(3 + k) * n + e];
       }
     }
     for (int t : shaped_triangles) {
@@ -261,17 +273,19 @@ struct MeshIkSolver::State {
     jacobian.setZero();
     for (Eigen::Index i = 0; i < M; ++i) {
       const auto& terms = m.shape_terms[std::size_t(i)];
-      const std::size_t n = terms.triangles.size();
+      const std::size_t n = std::size_t(terms.count);
       if (n == 0) continue;  // the shape deforms no triangle: its column is zero
+      const float* v = terms.nonlinear.data();
       column_rhs.setZero();
       for (std::size_t e = 0; e < n; ++e) {
-        const int t = terms.triangles[e];
+        Eigen::Map<Eigen::Matrix3d> dT(&transform_derivative[9 * e]);
+        if (!entry_changes(terms, int(e))) { dT.setZero(); continue; }
+        const int t = terms.first_triangle + int(e);
         const Eigen::Vector3d L = log_sum.col(t);
-        const Eigen::Vector3d l(terms.log_rotation[3 * e], terms.log_rotation[3 * e + 1], terms.log_rotation[3 * e + 2]);
+        const Eigen::Vector3d l(v[e], v[n + e], v[2 * n + e]);
         const Eigen::Matrix3d dR = (rotation_exp(L + h * l) - rotation_exp(L - h * l)) / (2.0 * h);
         double s[6];
-        for (int k = 0; k < 6; ++k) s[k] = terms.stretch[6 * e + std::size_t(k)];
-        Eigen::Map<Eigen::Matrix3d> dT(&transform_derivative[9 * e]);
+        for (std::size_t k = 0; k < 6; ++k) s[k] = v[(3 + k) * n + e];
         dT = dR * Eigen::Map<const Eigen::Matrix3d>(stretch.col(t).data()) +
              Eigen::Map<const Eigen::Matrix3d>(rotation.col(t).data()) * symmetric_from6(s, 0.0);
         const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
@@ -282,7 +296,8 @@ struct MeshIkSolver::State {
       auto column = jacobian.col(i);
       triangle_residuals(column_rhs, column, /*with_targets=*/false);
       for (std::size_t e = 0; e < n; ++e) {
-        const int t = terms.triangles[e];
+        if (!entry_changes(terms, int(e))) continue;
+        const int t = terms.first_triangle + int(e);
         const Eigen::Map<const Eigen::Matrix3d> dT(&transform_derivative[9 * e]);
         Matrix32 d = dT * Eigen::Map<const Matrix32>(target_projection.col(t).data());
         column.segment<6>(6 * t) -= Eigen::Map<const Eigen::Matrix<double, 6, 1>>(d.data());

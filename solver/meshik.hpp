@@ -25,7 +25,7 @@ namespace facecap {
 
 struct MeshIkOptions {
   int max_iterations = 10;           // Gauss-Newton steps per frame
-  double relative_tolerance = 1e-7;  // stop when a step lowers E by less than this fraction
+  double relative_tolerance = 1e-6;  // stop when a step lowers E by less than this fraction
   double difference_step = 1e-5;     // central-difference step (in weight) for d exp / d w
 };
 

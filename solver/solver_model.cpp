@@ -49,6 +49,7 @@ void build_marker_rows(SolverModel& model) {
       model.marker_neutral.segment<3>(3 * k) += m.barycentric[i] * rig.neutral.col(m.vertices[i]);
     }
   }
+  model.marker_basis_rows = model.marker_basis;
   model.gram_all = model.marker_basis.transpose() * model.marker_basis;
   model.gram_per_marker.resize(M, M * K);
   for (Eigen::Index k = 0; k < K; ++k)
@@ -147,17 +148,59 @@ ShapeTriangleTerms build_shape_terms(const Rig& rig, Eigen::Index shape, const T
     if (!decided[std::size_t(t)]) { decided[std::size_t(t)] = 1; frontier.push(int(t)); propagate(); }
 
   ShapeTriangleTerms terms;
-  for (Eigen::Index t = 0; t < T; ++t) {
-    const std::size_t i = std::size_t(t);
+  Eigen::Index first = T, last = -1;
+  for (Eigen::Index t = 0; t < T; ++t)
+    if (changed[std::size_t(t)]) { first = std::min(first, t); last = t; }
+  if (last < 0) return terms;
+  terms.first_triangle = int(first);
+  terms.count = int(last - first + 1);
+  const std::size_t n = std::size_t(terms.count);
+  terms.nonlinear.assign(9 * n, 0.0f);
+  terms.gradient.assign(9 * n, 0.0f);
+  for (Eigen::Index t = first; t <= last; ++t) {
+    const std::size_t i = std::size_t(t), e = std::size_t(t - first);
     if (!changed[i]) continue;
-    terms.triangles.push_back(int(t));
-    for (int k = 0; k < 3; ++k) terms.log_rotation.push_back(float(logs[i][k]));
     const Eigen::Matrix3d& s = stretch[i];
-    terms.stretch.insert(terms.stretch.end(), {float(s(0, 0)), float(s(1, 1)), float(s(2, 2)), float(s(0, 1)),
-                                               float(s(0, 2)), float(s(1, 2))});
-    for (int k = 0; k < 9; ++k) terms.gradient.push_back(float(gradient[i].data()[k]));
+    const double values[9] = {logs[i][0], logs[i][1], logs[i][2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
+    for (std::size_t c = 0; c < 9; ++c) {
+      terms.nonlinear[c * n + e] = float(values[c]);
+      terms.gradient[c * n + e] = float(gradient[i].data()[c]);
+    }
   }
   return terms;
+}
+
+// Marker paths from the shapes' per-triangle rotations around each marker's vertices.
+void build_marker_paths(SolverModel& model) {
+  const Rig& rig = model.rig;
+  const Eigen::Index K = model.marker_count(), M = rig.shape_count();
+  std::vector<std::vector<int>> incident(std::size_t(rig.vertex_count()));
+  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
+    for (int k = 0; k < 3; ++k) incident[std::size_t(rig.triangles(k, t))].push_back(int(t));
+  constexpr double kTurning = 0.05;  // radians; below this a straight path is as good
+  for (Eigen::Index s = 0; s < M; ++s) {
+    const auto& terms = model.shape_terms[std::size_t(s)];
+    for (Eigen::Index k = 0; k < K; ++k) {
+      const auto& b = model.markers[std::size_t(k)];
+      Eigen::Vector3d r = Eigen::Vector3d::Zero();
+      for (int a = 0; a < 3; ++a) {
+        const auto& tris = incident[std::size_t(b.vertices[a])];
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int t : tris)
+          if (terms.covers(t)) sum += Eigen::Vector3d(terms.nonlinear_at(0, t), terms.nonlinear_at(1, t), terms.nonlinear_at(2, t));
+        if (!tris.empty()) r += b.barycentric[a] * sum / double(tris.size());
+      }
+      const double theta = r.norm();
+      if (theta < kTurning || theta > 3.0) continue;  // near pi the axis is too uncertain to follow
+      const Eigen::Vector3d axis = r / theta;
+      const Eigen::Vector3d delta = model.marker_basis.block(3 * k, s, 3, 1);
+      const Eigen::Vector3d axial = axis.dot(delta) * axis;
+      // (exp(r) - I) arm = delta - axial with arm perpendicular to the axis.
+      const Eigen::Matrix3d turn = (rotation_exp(r) - Eigen::Matrix3d::Identity()) *
+                                       (Eigen::Matrix3d::Identity() - axis * axis.transpose()) + axis * axis.transpose();
+      model.marker_paths.push_back({int(k), int(s), r, turn.inverse() * (delta - axial), axial});
+    }
+  }
 }
 
 // The mouth: the inner border loop (not the outer one) that jawOpen, or failing that
@@ -282,10 +325,11 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
         for (Eigen::Index s = w; s < M; s += threads) model->shape_terms[std::size_t(s)] = build_shape_terms(rig, s, adjacency);
       });
     for (auto& t : pool) t.join();
-    for (const auto& terms : model->shape_terms) model->triangle_terms_kept += terms.triangles.size();
+    for (const auto& terms : model->shape_terms) model->triangle_terms_kept += std::size_t(terms.count);
     model->setup.gradients_s = seconds_since(t0);
   }
 
+  build_marker_paths(*model);
   const Eigen::Index N = rig.vertex_count(), K = model->marker_count();
   {
     const auto t0 = Clock::now();
