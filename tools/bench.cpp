@@ -76,7 +76,8 @@ void run_bench(const Options& o) {
   // Markers from the pose the weights really produce (articulated for the built-in face).
   std::vector<Eigen::Matrix3Xd> targets;
   targets.reserve(F);
-  for (const auto& w : curves.frames) targets.push_back(marker_positions(truth_pose(rig, w), layout));
+  const bool builtin = is_builtin_face(rig);
+  for (const auto& w : curves.frames) targets.push_back(marker_positions(truth_pose(rig, builtin, w), layout));
   const std::vector<uint8_t> present(std::size_t(K), 1);
 
   const bool counting = allocation_counter_works();

@@ -140,7 +140,7 @@ void run_synth(const Options& o) {
   for (std::size_t f = 0; f < F; ++f) {
     const double t = double(f) / curves.rate_hz;
     const Eigen::VectorXd& w = curves.frames[f];
-    const Eigen::Matrix3Xd pose = truth_pose(rig, w);
+    const Eigen::Matrix3Xd pose = truth_pose(rig, builtin, w);
     if (vertices_out) vertices_out->append(pose);
     Eigen::Vector3d rotation = Eigen::Vector3d::Zero(), translation = Eigen::Vector3d::Zero();
     if (o.head_motion) {

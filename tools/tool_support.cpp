@@ -119,8 +119,8 @@ bool is_builtin_face(const Rig& rig) {
          rig.content_hash() == builtin.content_hash();
 }
 
-Eigen::Matrix3Xd truth_pose(const Rig& rig, const Eigen::VectorXd& weights) {
-  if (is_builtin_face(rig)) return BuiltinFace::instance().articulated_pose(weights);
+Eigen::Matrix3Xd truth_pose(const Rig& rig, bool builtin, const Eigen::VectorXd& weights) {
+  if (builtin) return BuiltinFace::instance().articulated_pose(weights);
   return rig.linear_blend(weights);
 }
 

@@ -44,12 +44,13 @@ std::optional<double> millimetres_per_unit(std::string_view units);
 // Error when neither names mm, cm or m.
 std::string rig_units(const Rig& rig, const std::string& override_units);
 
-// Whether this is the built-in face (by content), whose articulated pose is known.
+// Whether this is the built-in face (by content: hashes the rig, so ask once).
 bool is_builtin_face(const Rig& rig);
 
 // The pose a weight vector really produces: BuiltinFace::articulated_pose for the
-// built-in face, the linear blend x0 + B w for any other rig. 3 x N.
-Eigen::Matrix3Xd truth_pose(const Rig& rig, const Eigen::VectorXd& weights);
+// built-in face (builtin = is_builtin_face(rig)), the linear blend x0 + B w for any
+// other rig. 3 x N.
+Eigen::Matrix3Xd truth_pose(const Rig& rig, bool builtin, const Eigen::VectorXd& weights);
 
 // Marker points (3 x K) of a pose (3 x N).
 Eigen::Matrix3Xd marker_positions(const Eigen::Matrix3Xd& pose, const std::vector<MarkerBinding>& markers);
