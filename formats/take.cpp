@@ -14,6 +14,7 @@
 #include "core/io.hpp"
 #include "formats/c3d.hpp"
 #include "formats/recording.hpp"
+#include "formats/text.hpp"
 #include "formats/trc.hpp"
 
 namespace facecap::formats {
@@ -29,23 +30,18 @@ std::string_view format_name(TakeFormat format) noexcept {
 }
 
 std::optional<TakeFormat> format_from_extension(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  if (ext == ".c3d") return TakeFormat::kC3d;
-  if (ext == ".trc") return TakeFormat::kTrc;
-  if (ext == ".fcrec") return TakeFormat::kRecording;
-  if (ext == ".csv") return TakeFormat::kLiveLinkFace;
+  const std::string ext = path.extension().string();
+  if (equals_ignore_case(ext, ".c3d")) return TakeFormat::kC3d;
+  if (equals_ignore_case(ext, ".trc")) return TakeFormat::kTrc;
+  if (equals_ignore_case(ext, ".fcrec")) return TakeFormat::kRecording;
+  if (equals_ignore_case(ext, ".csv")) return TakeFormat::kLiveLinkFace;
   return std::nullopt;
 }
 
 namespace {
 
 bool starts_with_nocase(std::span<const char> head, std::string_view prefix) {
-  if (head.size() < prefix.size()) return false;
-  for (std::size_t i = 0; i < prefix.size(); ++i) {
-    if (std::tolower(uint8_t(head[i])) != std::tolower(uint8_t(prefix[i]))) return false;
-  }
-  return true;
+  return head.size() >= prefix.size() && equals_ignore_case(std::string_view(head.data(), prefix.size()), prefix);
 }
 
 }  // namespace
@@ -57,8 +53,9 @@ TakeFormat detect_format(std::span<const char> head, const std::filesystem::path
   if (auto by_extension = format_from_extension(path)) return *by_extension;
   // C3D has no magic string, only 0x50 as its second byte.
   if (head.size() >= 2 && uint8_t(head[1]) == 0x50) return TakeFormat::kC3d;
-  throw file_error(path.string(), "unknown format: not C3D, TRC, Live Link Face CSV or a facecap recording "
-                                  "(by content or extension)");
+  throw file_error(path.string(),
+                   "unknown format: not C3D, TRC, Live Link Face CSV or a facecap recording "
+                   "(by content or extension)");
 }
 
 std::string_view MarkerTake::metadata_value(std::string_view key) const noexcept {
@@ -87,6 +84,10 @@ MarkerFrame& append_empty_frame(MarkerTake& take, int64_t frame_no, int64_t sour
   return frame;
 }
 
+void report_progress(const ProgressFn& progress, std::size_t done, std::size_t total) {
+  if (progress && (done % 256 == 0 || done == total)) progress(done, total);
+}
+
 GapStats count_gaps(const MarkerTake& take) {
   GapStats stats;
   std::vector<bool> in_gap(take.labels.size(), false);
@@ -105,7 +106,8 @@ void check_take_shape(const MarkerTake& take, const std::string& name) {
   for (std::size_t f = 0; f < take.frames.size(); ++f) {
     const auto& markers = take.frames[f].markers;
     if (markers.size() != take.labels.size()) {
-      throw Error(fmt::format("{}: frame {} has {} markers, the take has {} labels", name, f, markers.size(), take.labels.size()));
+      throw Error(fmt::format("{}: frame {} has {} markers, the take has {} labels", name, f, markers.size(),
+                              take.labels.size()));
     }
   }
 }
@@ -160,7 +162,9 @@ void write_take(const std::filesystem::path& path, const MarkerTake& take, const
         write_recording(tmp, take, fmt::format("converted from a {} take", format_name(take.format)), progress);
         std::error_code ec;
         std::filesystem::rename(tmp, path, ec);
-        if (ec) throw file_error(path.string(), fmt::format("cannot rename the finished recording into place: {}", ec.message()));
+        if (ec)
+          throw file_error(path.string(),
+                           fmt::format("cannot rename the finished recording into place: {}", ec.message()));
       } catch (...) {
         std::error_code ec;
         std::filesystem::remove(tmp, ec);

@@ -66,6 +66,8 @@ void check_take_shape(const MarkerTake& take, const std::string& name);
 
 // Called as frames are written: done of total.
 using ProgressFn = std::function<void(std::size_t done, std::size_t total)>;
+// Calls progress (when set) every 256 frames and at the last one.
+void report_progress(const ProgressFn& progress, std::size_t done, std::size_t total);
 
 // Reads a marker take in any supported format (chosen by content, then extension).
 // Live Link Face CSV holds blendshape weights, not markers, and is refused here (read it

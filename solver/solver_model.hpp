@@ -18,12 +18,19 @@ struct SparseShapeDeltas {
   std::vector<float> deltas;  // 3 per vertex
 };
 
-// One shape's per-triangle deformation, only where the triangle changes (Eq. 3).
+// One shape's per-triangle deformation (Eq. 3) over the contiguous range of triangles it
+// changes, as structure-of-arrays so the per-frame sums stream through vector units.
+// Component c of triangle first_triangle + i is at [c * count + i]; unchanged triangles
+// inside the range hold zeros.
 struct ShapeTriangleTerms {
-  std::vector<int> triangles;
-  std::vector<float> log_rotation;  // 3 per entry: axis * angle, branch chosen consistently
-  std::vector<float> stretch;       // 6 per entry: S - I as xx, yy, zz, xy, xz, yz
-  std::vector<float> gradient;      // 9 per entry: F - I column-major (deformation transfer)
+  int first_triangle = 0;
+  int count = 0;
+  std::vector<float> nonlinear;  // 9 x count: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
+  std::vector<float> gradient;   // 9 x count: F - I, column-major (deformation transfer)
+  bool covers(int triangle) const { return triangle >= first_triangle && triangle < first_triangle + count; }
+  float nonlinear_at(int component, int triangle) const {
+    return nonlinear[std::size_t(component) * std::size_t(count) + std::size_t(triangle - first_triangle)];
+  }
 };
 
 // How a marker moves with one shape's weight t under Eq. 4 where the shape turns the
@@ -49,6 +56,7 @@ class SolverModel {
 
   // Eq. 2 on marker rows: marker k's rows 3k..3k+2 of B~ and x0~.
   Eigen::MatrixXd marker_basis;     // 3K x M
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> marker_basis_rows;  // the same, row-major
   Eigen::VectorXd marker_neutral;   // 3K
   Eigen::MatrixXd gram_all;         // M x M: B~^T B~ over all markers
   Eigen::MatrixXd gram_per_marker;  // M x (M K): marker k's B_k^T B_k in columns kM..kM+M-1
@@ -64,13 +72,17 @@ class SolverModel {
   std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
 
   // Low-rank modifications of A0 without refactoring: a marker dropping out removes
-  // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Columns 0..K-1 are the markers,
-  // K + i is candidate vertex collision_vertices[i].
-  std::vector<int> collision_vertices;   // vertices the collision stage may pin
-  std::vector<int> collision_triangles;  // triangles it checks
+  // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Columns 0..K-1 of
+  // modification_solution are A0^-1 c_k; column K + i is A0^-1 e_v for
+  // v = collision_vertices[i] when the region is small enough to precompute (the lips),
+  // otherwise pins are solved for as they occur.
+  std::vector<int> collision_triangles;  // triangles the collision stage checks
+  std::vector<int> collision_vertices;   // their vertices: the ones it may pin
   std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
-  Eigen::MatrixXd modification_solution;  // N x (K + C): A0^-1 u_i
-  Eigen::MatrixXd modification_gram;      // (K + C) x (K + C): u_i^T A0^-1 u_j
+  Eigen::MatrixXd modification_solution;  // N x (K + C) or N x K
+  bool collision_columns_precomputed() const {
+    return modification_solution.cols() == marker_count() + Eigen::Index(collision_vertices.size());
+  }
 
   SolverSetupTimes setup;
   std::size_t triangle_terms_kept = 0;  // (shape, triangle) entries stored

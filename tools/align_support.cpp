@@ -46,32 +46,6 @@ std::size_t frame_index(const formats::MarkerTake& take, int64_t frame_no, const
                                           take.frames.front().frame_no, take.frames.back().frame_no));
 }
 
-std::vector<std::string> select_solvers(const std::string& spec) {
-  std::vector<std::string> out;
-  if (spec == "all") {
-    for (auto name : solver_names()) out.emplace_back(name);
-    return out;
-  }
-  out = split_list(spec);
-  if (out.empty()) throw Error("no solver named");
-  return out;
-}
-
-std::vector<NamedSolver> create_solvers(const std::vector<std::string>& names, const std::shared_ptr<const SolverModel>& model,
-                                        bool all, std::vector<std::string>& unavailable) {
-  std::vector<NamedSolver> out;
-  for (const auto& name : names) {
-    try {
-      out.push_back({name, make_solver(name, model)});
-    } catch (const Error& e) {
-      if (!all) throw;
-      unavailable.push_back(fmt::format("{}: {}", name, e.what()));
-    }
-  }
-  if (out.empty()) throw Error("none of the selected solvers is available in this build");
-  return out;
-}
-
 CalibratedSetup make_calibrated_setup(const Rig& rig, const align::Calibration& calibration,
                                       const std::vector<std::string>& take_labels, const SolverParams& params) {
   CalibratedSetup s;

@@ -30,18 +30,6 @@ Eigen::Matrix3Xd frame_positions(const MarkerFrame& frame, std::vector<uint8_t>&
 // Index into take.frames of the frame whose number (as in the file) is frame_no.
 std::size_t frame_index(const formats::MarkerTake& take, int64_t frame_no, const std::string& take_name);
 
-// "all" -> every name solver_names() lists; else the comma list.
-std::vector<std::string> select_solvers(const std::string& spec);
-
-// Builds each solver. With all = true a solver this build cannot make (a baseline still
-// being written) is skipped and its reason added to unavailable; else it is an error.
-struct NamedSolver {
-  std::string name;
-  std::unique_ptr<FaceSolver> solver;
-};
-std::vector<NamedSolver> create_solvers(const std::vector<std::string>& names, const std::shared_ptr<const SolverModel>& model,
-                                        bool all, std::vector<std::string>& unavailable);
-
 // A calibration ready to solve a take: the solver model on its bindings, and the mapper
 // from the take's marker slots.
 struct CalibratedSetup {

@@ -6,9 +6,12 @@
 namespace facecap::tools {
 
 // Each adds its subcommand to app; the callback runs it and sets exit_code.
+void add_demo_command(CLI::App& app, int& exit_code);
 void add_inspect_rig_command(CLI::App& app, int& exit_code);
 void add_inspect_command(CLI::App& app, int& exit_code);
 void add_convert_command(CLI::App& app, int& exit_code);
+void add_synth_command(CLI::App& app, int& exit_code);
+void add_bench_command(CLI::App& app, int& exit_code);
 void add_calibrate_command(CLI::App& app, int& exit_code);
 void add_solve_command(CLI::App& app, int& exit_code);
 void add_eval_command(CLI::App& app, int& exit_code);

@@ -12,8 +12,9 @@
 #include "solver/align/profile.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/align_support.hpp"
-#include "tools/face_checks.hpp"
+#include "tools/mesh_checks.hpp"
 #include "tools/progress.hpp"
+#include "tools/tool_support.hpp"
 
 namespace facecap::tools {
 namespace {
@@ -63,8 +64,6 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
 
   auto setup = make_calibrated_setup(rig, cal, take.labels);
   const auto names = select_solvers(o.solvers);
-  std::vector<std::string> unavailable;
-  auto solvers = create_solvers(names, setup.model, o.solvers == "all", unavailable);
 
   const Eigen::Index K = setup.mapper->marker_count();
   std::vector<int> face_markers;  // held-out candidates: calibrated, in the take, not stable
@@ -72,18 +71,17 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     if (setup.mapper->slots()[std::size_t(k)] >= 0 && !setup.mapper->is_stable()[std::size_t(k)]) face_markers.push_back(int(k));
 
   std::vector<SolverRun> runs;
-  for (auto& s : solvers) {
+  for (const auto& name : names) {
     SolverRun run;
-    run.name = s.name;
-    run.full = std::move(s.solver);
+    run.name = name;
+    run.full = create_solver(name, setup.model);
     run.result = run.full->make_result();
-    for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(run.name, setup.model));
+    for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(create_solver(name, setup.model));
     run.held_result = run.full->make_result();
     runs.push_back(std::move(run));
   }
 
-  IntersectionCounter intersections(rig.triangles);
-  const int64_t neutral_intersections = intersections.count(rig.neutral);
+  const int64_t neutral_intersections = count_intersecting_triangle_pairs(rig.triangles, rig.neutral);
   auto mapped = setup.mapper->make_output();
   Summary stable_mm;
   int head_held = 0;
@@ -115,10 +113,10 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       run.previous = run.result.vertices;
       ++run.frames_solved;
       if (!sample) continue;
-      const int64_t hits = intersections.count(run.result.vertices);
+      const int64_t hits = count_intersecting_triangle_pairs(rig.triangles, run.result.vertices);
       run.intersections += hits;
       run.intersection_frames += hits > neutral_intersections;
-      const int64_t flips = count_flipped_triangles(rig.triangles, rig.neutral, run.result.vertices);
+      const int64_t flips = count_flipped_triangles_against_rest(rig.triangles, rig.neutral, run.result.vertices);
       run.flipped += flips;
       run.flipped_frames += flips > 0;
       ++run.checked_frames;
@@ -167,7 +165,6 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
                      {"held_frames", run.held}};
   }
   j["solvers"] = per;
-  j["unavailable"] = unavailable;
   return j;
 }
 
@@ -189,7 +186,6 @@ void print_take_evaluation(const nlohmann::json& j) {
                s["intersections"]["pairs_per_checked_frame"].get<double>(), s["flipped"]["triangles_per_checked_frame"].get<double>(),
                s["solve_ms"]["mean"].get<double>());
   }
-  for (const auto& u : j["unavailable"]) fmt::print("unavailable: {}\n", u.get<std::string>());
 }
 
 }  // namespace facecap::tools

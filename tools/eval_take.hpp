@@ -10,7 +10,7 @@ namespace facecap::tools {
 
 struct TakeEvalOptions {
   std::string rig, take, calib, solvers = "all", rig_units;
-  int every = 5;           // held-out and mesh checks on every Nth frame (all frames solved)
+  int every = 10;          // held-out and mesh checks on every Nth frame (all frames solved)
   int max_frames = 0;      // 0: the whole take
   bool progress = false;
 };

@@ -15,9 +15,12 @@ int main(int argc, char** argv) {
 
   int exit_code = 0;
   // The ordered command table.
+  facecap::tools::add_demo_command(app, exit_code);
   facecap::tools::add_inspect_rig_command(app, exit_code);
   facecap::tools::add_inspect_command(app, exit_code);
   facecap::tools::add_convert_command(app, exit_code);
+  facecap::tools::add_synth_command(app, exit_code);
+  facecap::tools::add_bench_command(app, exit_code);
   facecap::tools::add_calibrate_command(app, exit_code);
   facecap::tools::add_solve_command(app, exit_code);
   facecap::tools::add_eval_command(app, exit_code);

@@ -20,6 +20,7 @@
 #include "tools/align_support.hpp"
 #include "tools/commands.hpp"
 #include "tools/progress.hpp"
+#include "tools/tool_support.hpp"
 
 namespace facecap::tools {
 namespace {
@@ -60,9 +61,8 @@ void run_solve(const Options& o) {
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
 
   auto setup = make_calibrated_setup(rig, cal, take.labels);
-  std::vector<std::string> unavailable;
-  auto solvers = create_solvers({o.solver}, setup.model, false, unavailable);
-  FaceSolver& solver = *solvers.front().solver;
+  const auto solver_ptr = create_solver(o.solver, setup.model);
+  FaceSolver& solver = *solver_ptr;
   SolveResult result = solver.make_result();
   auto mapped = setup.mapper->make_output();
 
@@ -166,7 +166,7 @@ void add_solve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--calib", opts->calib, "Calibration profile from facecap calibrate")->required()->check(CLI::ExistingFile);
   cmd->add_option("--take", opts->take, "Marker take (.trc, .c3d, .fcrec)")->required()->check(CLI::ExistingFile);
   cmd->add_option("-o,--output", opts->output, "out.csv (Live Link Face) or out.fcrec (recording)")->required();
-  cmd->add_option("--solver", opts->solver, "nonlinear, linear, dt or meshik")->capture_default_str();
+  cmd->add_option("--solver", opts->solver, "nonlinear, linear, dt or meshik (offline only: slow)")->capture_default_str();
   cmd->add_option("--rig-units", opts->rig_units, "Rig units mm|cm|m (default: guessed from the face's size)");
   cmd->add_flag("--check-labels", opts->check_labels, "Check the take's labels each frame and correct swaps");
   cmd->add_flag("--vertices", opts->vertices, "Store solved meshes in a .fcrec (large)");
