@@ -648,6 +648,31 @@ TEST_CASE("flipped triangles are counted against the rest normals") {
   CHECK(count_flipped_triangles(rig.triangles, rig.neutral, mirrored) == expected);
 }
 
+TEST_CASE("the intersection counter is reusable frame after frame") {
+  const Rig& rig = face().rig();
+  IntersectionCounter counter;
+  counter.configure(rig.triangles, rig.neutral);
+  const Eigen::Matrix3Xd shrugged = pose(rig, {{"mouthClose", 1.0}, {"mouthShrugLower", 1.0}});
+  const Eigen::Matrix3Xd overclosed = pose(rig, {{"mouthClose", 2.0}});
+  const auto expected = intersecting_pairs(rig.triangles, shrugged);  // a tree built on that pose
+  CHECK(expected.size() == 78);
+  CHECK(counter.pairs(shrugged) == expected);
+  CHECK(counter.count(overclosed) == count_intersecting_pairs(rig.triangles, overclosed));
+  long allocations = 0;
+  int64_t total = 0;
+  {
+    AllocationCounter allocation_counter;
+    for (const Eigen::Matrix3Xd* x : {&rig.neutral, &shrugged, &overclosed}) total += counter.count(*x);
+    allocations = allocation_counter.count();
+  }
+  CHECK(allocations == 0);
+  CHECK(total == int64_t(expected.size()) + count_intersecting_pairs(rig.triangles, overclosed));
+  IntersectionCounter unconfigured;
+  CHECK_THROWS_AS(unconfigured.count(rig.neutral), Error);
+  const Eigen::Matrix3Xd too_few = rig.neutral.leftCols(3);
+  CHECK_THROWS_AS(counter.count(too_few), Error);
+}
+
 // ---- ICT FaceKit, when ../shared/data is present ------------------------------------------
 
 TEST_CASE("ICT FaceKit: intersecting lip pairs of the linear blend, and the lip collider") {
