@@ -56,7 +56,7 @@ double face_depth(double x, double y) {
 // none of the upper lip, blending across the cheeks beside the mouth corners.
 double jaw_amount(double x, double y) {
   if (std::abs(x) < kMouthHalfWidth) return y < kMouthY ? 1.0 : 0.0;
-  const double spread = 0.1 + 0.8 * (std::abs(x) - kMouthHalfWidth);
+  const double spread = 0.4 + 0.8 * (std::abs(x) - kMouthHalfWidth);
   return 1.0 - smoothstep(kMouthY - spread, kMouthY + spread, y);
 }
 
@@ -112,9 +112,10 @@ const Translation kCentred[] = {
 Eigen::Vector3d translation_at(const Translation& t, double cx, double mirror, const Eigen::Vector3d& p,
                                double jaw) {
   const double x = p.x(), y = p.y();
-  if (t.lip_side > 0 && y < kMouthY && std::abs(x) < kMouthHalfWidth + 0.5) return Eigen::Vector3d::Zero();
-  if (t.lip_side < 0 && y > kMouthY && std::abs(x) < kMouthHalfWidth + 0.5) return Eigen::Vector3d::Zero();
   double amount = gauss(x - cx, y - t.cy, t.sx, t.sy);
+  // One lip only: split like the jaw, sharply inside the slit, smoothly past the corners.
+  if (t.lip_side > 0) amount *= 1.0 - jaw;
+  if (t.lip_side < 0) amount *= jaw;
   if (t.follows_jaw) amount = jaw;
   Eigen::Vector3d d = t.d;
   d.x() *= mirror;

@@ -38,6 +38,10 @@ struct SolverParams {
   CollisionRegion collision_region = CollisionRegion::kLips;
   double collision_epsilon = 0.01;  // rig units: triangle pairs closer than this collide
   double active_weight = 1e-4;      // weights below this are left out of T(w)
+  // Gauss-Newton refinements of Eq. 2 for the nonlinear solver, fitting markers along
+  // the paths the rotations of Eq. 4 move them (a hinge swings, it does not slide);
+  // 0 gives the paper's linear fit.
+  int weight_refinements = 2;
 };
 
 // One frame's result. Sized by FaceSolver::make_result(); solve() only writes into it.
@@ -62,6 +66,11 @@ class FaceSolver {
   // targets: 3 x K marker positions in rig space; present: K flags (0 = missing).
   // Real-time safe for nonlinear, linear and dt; meshik is an offline baseline.
   virtual void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept = 0;
+
+  // The mesh for given weights (M) and pins, skipping Eq. 2: for editing, for solving
+  // from captured weight curves, and for tests. Real-time safe like solve().
+  virtual void solve_with_weights(const Eigen::VectorXd& weights, const Eigen::Matrix3Xd& targets,
+                                  std::span<const uint8_t> present, SolveResult& out) noexcept = 0;
 
   // Forgets the warm start (previous weights). Real-time safe.
   virtual void reset() noexcept = 0;

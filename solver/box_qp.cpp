@@ -1,0 +1,146 @@
+#include "solver/box_qp.hpp"
+
+#include <cmath>
+
+namespace facecap {
+
+BoxQpSolver::BoxQpSolver(Eigen::Index size)
+    : n_(size), state_(size), free_(size), chol_(size, size), rhs_(size), candidate_(size), gradient_(size) {}
+
+// Solves H_FF w_F = g_F - H_FA w_A for the free set into candidate_. False if H_FF is
+// not positive definite (cannot happen for the ridge-regularised weights problem).
+bool BoxQpSolver::solve_free_subproblem(const Eigen::MatrixXd& H, const Eigen::VectorXd& g,
+                                        const Eigen::VectorXd& w) noexcept {
+  free_count_ = 0;
+  for (Eigen::Index i = 0; i < n_; ++i)
+    if (state_[i] == 0) free_[free_count_++] = int(i);
+  candidate_ = w;
+  const Eigen::Index f = free_count_;
+  if (f == 0) return true;
+  for (Eigen::Index a = 0; a < f; ++a) {
+    const Eigen::Index i = free_[a];
+    double r = g[i];
+    for (Eigen::Index j = 0; j < n_; ++j)
+      if (state_[j] != 0) r -= H(i, j) * w[j];
+    rhs_[a] = r;
+    for (Eigen::Index b = 0; b <= a; ++b) chol_(a, b) = H(i, free_[b]);
+  }
+  // In-place Cholesky (lower), then forward and back substitution.
+  for (Eigen::Index j = 0; j < f; ++j) {
+    double d = chol_(j, j);
+    for (Eigen::Index k = 0; k < j; ++k) d -= chol_(j, k) * chol_(j, k);
+    if (!(d > 0.0)) return false;
+    d = std::sqrt(d);
+    chol_(j, j) = d;
+    for (Eigen::Index i = j + 1; i < f; ++i) {
+      double s = chol_(i, j);
+      for (Eigen::Index k = 0; k < j; ++k) s -= chol_(i, k) * chol_(j, k);
+      chol_(i, j) = s / d;
+    }
+  }
+  for (Eigen::Index i = 0; i < f; ++i) {
+    double s = rhs_[i];
+    for (Eigen::Index k = 0; k < i; ++k) s -= chol_(i, k) * rhs_[k];
+    rhs_[i] = s / chol_(i, i);
+  }
+  for (Eigen::Index i = f - 1; i >= 0; --i) {
+    double s = rhs_[i];
+    for (Eigen::Index k = i + 1; k < f; ++k) s -= chol_(k, i) * rhs_[k];
+    rhs_[i] = s / chol_(i, i);
+  }
+  for (Eigen::Index a = 0; a < f; ++a) candidate_[free_[a]] = rhs_[a];
+  return true;
+}
+
+BoxQpSolver::Result BoxQpSolver::solve(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, double lower,
+                                       double upper, Eigen::VectorXd& w) noexcept {
+  Result result;
+  constexpr double kBoundTolerance = 1e-12;
+  for (Eigen::Index i = 0; i < n_; ++i) w[i] = std::fmin(std::fmax(w[i], lower), upper);
+  // Phase 1, primal-dual active set (Hintermueller, Ito, Kunisch): moves many bounds per
+  // iteration and usually ends in two or three. Its answer is accepted only if it meets
+  // the KKT conditions; otherwise phase 2 (primal active set, finite) finishes from it.
+  constexpr int kPrimalDualIterations = 8;
+  gradient_.noalias() = H * w;
+  gradient_ -= g;
+  for (int it = 0; it < kPrimalDualIterations; ++it) {
+    bool changed = false;
+    for (Eigen::Index i = 0; i < n_; ++i) {
+      const double trial = w[i] - gradient_[i] / H(i, i);
+      const int state = trial <= lower ? -1 : (trial >= upper ? 1 : 0);
+      changed |= state != state_[i] || it == 0;
+      state_[i] = state;
+      if (state < 0) w[i] = lower;
+      if (state > 0) w[i] = upper;
+    }
+    if (!changed) break;
+    ++result.iterations;
+    if (!solve_free_subproblem(H, g, w)) break;
+    w = candidate_;
+    gradient_.noalias() = H * w;
+    gradient_ -= g;
+  }
+  bool optimal = true;
+  for (Eigen::Index i = 0; i < n_ && optimal; ++i) {
+    if (w[i] < lower - kBoundTolerance || w[i] > upper + kBoundTolerance) optimal = false;
+    else if (state_[i] < 0) optimal = gradient_[i] >= -1e-12;
+    else if (state_[i] > 0) optimal = gradient_[i] <= 1e-12;
+  }
+  if (optimal) {
+    result.converged = true;
+    return result;
+  }
+  for (Eigen::Index i = 0; i < n_; ++i) {
+    w[i] = std::fmin(std::fmax(w[i], lower), upper);
+    state_[i] = w[i] <= lower ? -1 : (w[i] >= upper ? 1 : 0);
+  }
+  const int max_iterations = int(10 * n_ + 10);
+  while (result.iterations < max_iterations) {
+    ++result.iterations;
+    if (!solve_free_subproblem(H, g, w)) return result;
+    // Step from the feasible w towards the candidate, stopping at the first bound hit.
+    double step = 1.0;
+    Eigen::Index blocking = -1;
+    for (Eigen::Index a = 0; a < free_count_; ++a) {
+      const Eigen::Index i = free_[a];
+      const double target = candidate_[i], from = w[i];
+      if (target < lower - kBoundTolerance) {
+        const double t = (from - lower) / (from - target);
+        if (t < step) { step = t; blocking = i; }
+      } else if (target > upper + kBoundTolerance) {
+        const double t = (upper - from) / (target - from);
+        if (t < step) { step = t; blocking = i; }
+      }
+    }
+    if (blocking >= 0) {
+      for (Eigen::Index a = 0; a < free_count_; ++a) {
+        const Eigen::Index i = free_[a];
+        w[i] += step * (candidate_[i] - w[i]);
+      }
+      w[blocking] = candidate_[blocking] < lower ? lower : upper;
+      state_[blocking] = candidate_[blocking] < lower ? -1 : 1;
+      continue;
+    }
+    for (Eigen::Index a = 0; a < free_count_; ++a) {
+      const Eigen::Index i = free_[a];
+      w[i] = std::fmin(std::fmax(candidate_[i], lower), upper);
+    }
+    // Optimal on this face: check the multipliers of the bound variables.
+    gradient_.noalias() = H * w;
+    gradient_ -= g;
+    Eigen::Index worst = -1;
+    double worst_violation = 1e-12;
+    for (Eigen::Index i = 0; i < n_; ++i) {
+      const double violation = state_[i] < 0 ? -gradient_[i] : (state_[i] > 0 ? gradient_[i] : 0.0);
+      if (violation > worst_violation) { worst_violation = violation; worst = i; }
+    }
+    if (worst < 0) {
+      result.converged = true;
+      return result;
+    }
+    state_[worst] = 0;
+  }
+  return result;
+}
+
+}  // namespace facecap

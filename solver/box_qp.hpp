@@ -1,0 +1,40 @@
+#pragma once
+// Exact solver for small bound-constrained convex quadratic programs
+//   min_w 1/2 w^T H w - g^T w   subject to  lower <= w <= upper
+// by a primal active-set method, warm-started from the previous solution (the
+// weights of Eq. 2, M up to a few hundred). Workspace is allocated once; solve() is
+// real-time safe.
+#include <Eigen/Core>
+
+namespace facecap {
+
+class BoxQpSolver {
+ public:
+  explicit BoxQpSolver(Eigen::Index size);  // allocates workspace (not real-time)
+
+  struct Result {
+    int iterations = 0;
+    bool converged = false;
+  };
+
+  // H: n x n symmetric positive definite; g: n. w: warm start in (clamped to the box
+  // first), solution out. Real-time safe: no allocation.
+  Result solve(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, double lower, double upper,
+               Eigen::VectorXd& w) noexcept;
+
+  Eigen::Index size() const { return n_; }
+
+ private:
+  bool solve_free_subproblem(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, const Eigen::VectorXd& w) noexcept;
+
+  Eigen::Index n_;
+  Eigen::VectorXi state_;      // 0 free, -1 at lower, +1 at upper
+  Eigen::VectorXi free_;       // indices of free variables
+  Eigen::Index free_count_ = 0;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> chol_;  // lower Cholesky factor of H on the free set
+  Eigen::VectorXd rhs_;        // free-set right-hand side, then solution
+  Eigen::VectorXd candidate_;  // full-size candidate point
+  Eigen::VectorXd gradient_;
+};
+
+}  // namespace facecap

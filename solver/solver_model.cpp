@@ -1,0 +1,338 @@
+#include "solver/solver_model.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <queue>
+#include <thread>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+#include <Eigen/SparseCore>
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+#include "solver/collide.hpp"
+#include "solver/mesh_topology.hpp"
+
+namespace facecap {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const SolverParams& params) {
+  if (rig.vertex_count() == 0 || rig.triangle_count() == 0) throw Error("solver: the rig has no mesh");
+  if (markers.empty()) throw Error("solver: no markers to solve from");
+  if (!(params.beta > 0) || !(params.alpha >= 0) || !(params.mu >= 0))
+    throw Error(fmt::format("solver: beta must be > 0 and alpha, mu >= 0 (beta {}, alpha {}, mu {})", params.beta,
+                            params.alpha, params.mu));
+  for (const auto& m : markers) {
+    for (int v : m.vertices)
+      if (v < 0 || v >= rig.vertex_count())
+        throw Error(fmt::format("solver: marker '{}' is bound to vertex {}, the rig has {}", m.label, v, rig.vertex_count()));
+    if (!m.barycentric.allFinite() || std::abs(m.barycentric.sum() - 1.0) > 1e-6)
+      throw Error(fmt::format("solver: marker '{}' has barycentric coordinates that do not sum to 1", m.label));
+  }
+}
+
+// Marker rows of x0 and B (Eq. 2) and the Gram matrices of the weights problem.
+void build_marker_rows(SolverModel& model) {
+  const Rig& rig = model.rig;
+  const Eigen::Index K = model.marker_count(), M = rig.shape_count();
+  model.marker_basis.setZero(3 * K, M);
+  model.marker_neutral.setZero(3 * K);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    const auto& m = model.markers[std::size_t(k)];
+    for (int i = 0; i < 3; ++i) {
+      model.marker_basis.middleRows(3 * k, 3) += m.barycentric[i] * rig.deltas.middleRows(3 * m.vertices[i], 3);
+      model.marker_neutral.segment<3>(3 * k) += m.barycentric[i] * rig.neutral.col(m.vertices[i]);
+    }
+  }
+  model.marker_basis_rows = model.marker_basis;
+  model.gram_all = model.marker_basis.transpose() * model.marker_basis;
+  model.gram_per_marker.resize(M, M * K);
+  for (Eigen::Index k = 0; k < K; ++k)
+    model.gram_per_marker.middleCols(k * M, M) =
+        model.marker_basis.middleRows(3 * k, 3).transpose() * model.marker_basis.middleRows(3 * k, 3);
+}
+
+void build_shape_deltas(SolverModel& model) {
+  const Rig& rig = model.rig;
+  model.shape_deltas.resize(std::size_t(rig.shape_count()));
+  for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
+    auto& out = model.shape_deltas[std::size_t(s)];
+    for (Eigen::Index v = 0; v < rig.vertex_count(); ++v) {
+      const Eigen::Vector3d d = rig.deltas.col(s).segment<3>(3 * v);
+      if (d.isZero(0.0)) continue;
+      out.vertices.push_back(int(v));
+      out.deltas.insert(out.deltas.end(), {float(d.x()), float(d.y()), float(d.z())});
+    }
+  }
+}
+
+// Q_j and the Laplacian-like G^T W G.
+Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
+  const Rig& rig = model.rig;
+  const Eigen::Index T = rig.triangle_count();
+  model.triangle_operator.setZero(9, T);
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(std::size_t(T) * 9);
+  const double scale = bounding_box(rig.neutral).size().squaredNorm();
+  for (Eigen::Index t = 0; t < T; ++t) {
+    const Eigen::Vector3i tri = rig.triangles.col(t);
+    const Eigen::Vector3d x0 = rig.neutral.col(tri[0]), x1 = rig.neutral.col(tri[1]), x2 = rig.neutral.col(tri[2]);
+    const Eigen::Vector3d n = (x1 - x0).cross(x2 - x0);
+    const double twice_area = n.norm();
+    if (twice_area <= 1e-14 * scale) continue;  // degenerate: constrains nothing
+    const Eigen::Vector3d unit = n / twice_area;
+    Eigen::Matrix3d grad;  // columns: gradients of the hat functions of x0, x1, x2
+    grad.col(0) = unit.cross(x2 - x1) / twice_area;
+    grad.col(1) = unit.cross(x0 - x2) / twice_area;
+    grad.col(2) = unit.cross(x1 - x0) / twice_area;
+    const double area = 0.5 * twice_area;
+    Eigen::Map<Eigen::Matrix3d>(model.triangle_operator.col(t).data()) = area * grad;
+    const Eigen::Matrix3d local = area * grad.transpose() * grad;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) entries.emplace_back(tri[a], tri[b], local(a, b));
+  }
+  Eigen::SparseMatrix<double> L(rig.vertex_count(), rig.vertex_count());
+  L.setFromTriplets(entries.begin(), entries.end());
+  return L;
+}
+
+// Deformation of every (shape, triangle) that changes, with rotation logs kept on one
+// branch across the mesh: triangles turning less than pi/2 fix the branch, and the rest
+// take the branch nearest their already-decided neighbours, breadth first.
+ShapeTriangleTerms build_shape_terms(const Rig& rig, Eigen::Index shape, const TriangleAdjacency& adjacency) {
+  const Eigen::Index T = rig.triangle_count();
+  const Eigen::Matrix3Xd posed = rig.shape_positions(shape);
+  std::vector<Eigen::Vector3d> logs(std::size_t(T), Eigen::Vector3d::Zero());
+  const std::size_t triangle_count = std::size_t(T);
+  std::vector<Eigen::Matrix3d> stretch(triangle_count), gradient(triangle_count);
+  std::vector<uint8_t> changed(std::size_t(T), 0), decided(std::size_t(T), 1);
+  const auto& d = rig.deltas.col(shape);
+  for (Eigen::Index t = 0; t < T; ++t) {
+    const Eigen::Vector3i tri = rig.triangles.col(t);
+    if (d.segment<3>(3 * tri[0]).isZero(0.0) && d.segment<3>(3 * tri[1]).isZero(0.0) && d.segment<3>(3 * tri[2]).isZero(0.0))
+      continue;
+    const Eigen::Matrix3d F = deformation_gradient(rig.neutral.col(tri[0]), rig.neutral.col(tri[1]), rig.neutral.col(tri[2]),
+                                                   posed.col(tri[0]), posed.col(tri[1]), posed.col(tri[2]));
+    if (!F.allFinite() || (F - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() < 1e-9) continue;
+    Eigen::Matrix3d R, S;
+    polar_decomposition(F, R, S);
+    const std::size_t i = std::size_t(t);
+    changed[i] = 1;
+    logs[i] = rotation_log(R);
+    stretch[i] = S - Eigen::Matrix3d::Identity();
+    gradient[i] = F - Eigen::Matrix3d::Identity();
+    if (logs[i].norm() > 0.5 * std::numbers::pi) decided[i] = 0;
+  }
+  std::queue<int> frontier;
+  for (Eigen::Index t = 0; t < T; ++t)
+    if (decided[std::size_t(t)]) frontier.push(int(t));
+  auto propagate = [&] {
+    while (!frontier.empty()) {
+      const int t = frontier.front();
+      frontier.pop();
+      for (int n : adjacency.neighbours(t)) {
+        if (decided[std::size_t(n)]) continue;
+        logs[std::size_t(n)] = nearest_log_branch(logs[std::size_t(n)], logs[std::size_t(t)]);
+        decided[std::size_t(n)] = 1;
+        frontier.push(n);
+      }
+    }
+  };
+  propagate();
+  for (Eigen::Index t = 0; t < T; ++t)  // islands rotating more than pi/2 everywhere
+    if (!decided[std::size_t(t)]) { decided[std::size_t(t)] = 1; frontier.push(int(t)); propagate(); }
+
+  ShapeTriangleTerms terms;
+  Eigen::Index first = T, last = -1;
+  for (Eigen::Index t = 0; t < T; ++t)
+    if (changed[std::size_t(t)]) { first = std::min(first, t); last = t; }
+  if (last < 0) return terms;
+  terms.first_triangle = int(first);
+  terms.count = int(last - first + 1);
+  const std::size_t n = std::size_t(terms.count);
+  terms.nonlinear.assign(9 * n, 0.0f);
+  terms.gradient.assign(9 * n, 0.0f);
+  for (Eigen::Index t = first; t <= last; ++t) {
+    const std::size_t i = std::size_t(t), e = std::size_t(t - first);
+    if (!changed[i]) continue;
+    const Eigen::Matrix3d& s = stretch[i];
+    const double values[9] = {logs[i][0], logs[i][1], logs[i][2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
+    for (std::size_t c = 0; c < 9; ++c) {
+      terms.nonlinear[c * n + e] = float(values[c]);
+      terms.gradient[c * n + e] = float(gradient[i].data()[c]);
+    }
+  }
+  return terms;
+}
+
+// Marker paths from the shapes' per-triangle rotations around each marker's vertices.
+void build_marker_paths(SolverModel& model) {
+  const Rig& rig = model.rig;
+  const Eigen::Index K = model.marker_count(), M = rig.shape_count();
+  std::vector<std::vector<int>> incident(std::size_t(rig.vertex_count()));
+  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
+    for (int k = 0; k < 3; ++k) incident[std::size_t(rig.triangles(k, t))].push_back(int(t));
+  constexpr double kTurning = 0.05;  // radians; below this a straight path is as good
+  for (Eigen::Index s = 0; s < M; ++s) {
+    const auto& terms = model.shape_terms[std::size_t(s)];
+    for (Eigen::Index k = 0; k < K; ++k) {
+      const auto& b = model.markers[std::size_t(k)];
+      Eigen::Vector3d r = Eigen::Vector3d::Zero();
+      for (int a = 0; a < 3; ++a) {
+        const auto& tris = incident[std::size_t(b.vertices[a])];
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int t : tris)
+          if (terms.covers(t)) sum += Eigen::Vector3d(terms.nonlinear_at(0, t), terms.nonlinear_at(1, t), terms.nonlinear_at(2, t));
+        if (!tris.empty()) r += b.barycentric[a] * sum / double(tris.size());
+      }
+      const double theta = r.norm();
+      if (theta < kTurning || theta > 3.0) continue;  // near pi the axis is too uncertain to follow
+      const Eigen::Vector3d axis = r / theta;
+      const Eigen::Vector3d delta = model.marker_basis.block(3 * k, s, 3, 1);
+      const Eigen::Vector3d axial = axis.dot(delta) * axis;
+      // (exp(r) - I) arm = delta - axial with arm perpendicular to the axis.
+      const Eigen::Matrix3d turn = (rotation_exp(r) - Eigen::Matrix3d::Identity()) *
+                                       (Eigen::Matrix3d::Identity() - axis * axis.transpose()) + axis * axis.transpose();
+      model.marker_paths.push_back({int(k), int(s), r, turn.inverse() * (delta - axial), axial});
+    }
+  }
+}
+
+// Candidate triangles for the collision stage and the vertices it may pin.
+void choose_collision_region(SolverModel& model) {
+  const Rig& rig = model.rig;
+  model.vertex_to_collision.assign(std::size_t(rig.vertex_count()), -1);
+  switch (model.params.collision_region) {
+    case CollisionRegion::kNone: return;
+    case CollisionRegion::kFace: model.collision_triangles = all_triangles(rig.triangle_count()); break;
+    case CollisionRegion::kLips: model.collision_triangles = lip_region_triangles(rig); break;
+  }
+  for (int t : model.collision_triangles)
+    for (int k = 0; k < 3; ++k) {
+      const int v = rig.triangles(k, t);
+      if (model.vertex_to_collision[std::size_t(v)] >= 0) continue;
+      model.vertex_to_collision[std::size_t(v)] = int(model.collision_vertices.size());
+      model.collision_vertices.push_back(v);
+    }
+}
+
+}  // namespace
+
+Eigen::Matrix3d deformation_gradient(const Eigen::Vector3d& a0, const Eigen::Vector3d& b0, const Eigen::Vector3d& c0,
+                                     const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  auto frame = [](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
+    Eigen::Matrix3d V;
+    V.col(0) = q - p;
+    V.col(1) = r - p;
+    const Eigen::Vector3d n = V.col(0).cross(V.col(1));
+    V.col(2) = n / std::sqrt(n.norm());
+    return V;
+  };
+  return frame(a, b, c) * frame(a0, b0, c0).inverse();
+}
+
+void polar_decomposition(const Eigen::Matrix3d& F, Eigen::Matrix3d& R, Eigen::Matrix3d& S) {
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d U = svd.matrixU();
+  const Eigen::Matrix3d V = svd.matrixV();
+  Eigen::Vector3d sigma = svd.singularValues();
+  if ((U * V.transpose()).determinant() < 0) {  // reflection: flip the weakest direction
+    U.col(2) = -U.col(2);
+    sigma[2] = -sigma[2];
+  }
+  R = U * V.transpose();
+  S = V * sigma.asDiagonal() * V.transpose();
+}
+
+Eigen::Vector3d rotation_log(const Eigen::Matrix3d& R) {
+  const Eigen::AngleAxisd aa(R);
+  return aa.axis() * aa.angle();
+}
+
+Eigen::Matrix3d rotation_exp(const Eigen::Vector3d& r) noexcept {
+  const double theta2 = r.squaredNorm();
+  Eigen::Matrix3d K;
+  K << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
+  if (theta2 < 1e-16) return Eigen::Matrix3d::Identity() + K + 0.5 * K * K;
+  const double theta = std::sqrt(theta2);
+  return Eigen::Matrix3d::Identity() + (std::sin(theta) / theta) * K + ((1.0 - std::cos(theta)) / theta2) * K * K;
+}
+
+Eigen::Vector3d nearest_log_branch(const Eigen::Vector3d& r, const Eigen::Vector3d& reference) {
+  const double theta = r.norm();
+  if (theta < 1e-12) return r;
+  const Eigen::Vector3d other = r * ((theta - 2.0 * std::numbers::pi) / theta);
+  return (other - reference).squaredNorm() < (r - reference).squaredNorm() ? other : r;
+}
+
+std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vector<MarkerBinding> markers,
+                                                      const SolverParams& params) {
+  validate(rig, markers, params);
+  const auto start = Clock::now();
+  auto model = std::make_shared<SolverModel>();
+  model->rig = rig;
+  model->params = params;
+  model->markers = std::move(markers);
+  build_marker_rows(*model);
+  build_shape_deltas(*model);
+
+  const TriangleAdjacency adjacency(rig.triangles);
+  {
+    const auto t0 = Clock::now();
+    const Eigen::Index M = rig.shape_count();
+    model->shape_terms.resize(std::size_t(M));
+    const unsigned threads = std::max(1u, std::min(std::thread::hardware_concurrency(), unsigned(M)));
+    std::vector<std::thread> pool;
+    for (unsigned w = 0; w < threads; ++w)
+      pool.emplace_back([&, w] {
+        for (Eigen::Index s = w; s < M; s += threads) model->shape_terms[std::size_t(s)] = build_shape_terms(rig, s, adjacency);
+      });
+    for (auto& t : pool) t.join();
+    for (const auto& terms : model->shape_terms) model->triangle_terms_kept += std::size_t(terms.count);
+    model->setup.gradients_s = seconds_since(t0);
+  }
+
+  build_marker_paths(*model);
+  const Eigen::Index N = rig.vertex_count(), K = model->marker_count();
+  {
+    const auto t0 = Clock::now();
+    Eigen::SparseMatrix<double> A = build_triangle_operators(*model);
+    std::vector<Eigen::Triplet<double>> pins;
+    for (const auto& m : model->markers)
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b)
+          pins.emplace_back(m.vertices[a], m.vertices[b], params.beta * m.barycentric[a] * m.barycentric[b]);
+    Eigen::SparseMatrix<double> P(N, N);
+    P.setFromTriplets(pins.begin(), pins.end());
+    A += P;
+    model->factor = std::make_unique<SparseLdlt>(A);
+    model->setup.factor_s = seconds_since(t0);
+  }
+  {
+    const auto t0 = Clock::now();
+    choose_collision_region(*model);
+    // Beyond this many candidate vertices (a whole-face region) the columns would take
+    // too much memory; pins are then solved for per frame.
+    constexpr std::size_t kMaxPrecomputedPins = 3000;
+    const Eigen::Index C = model->collision_vertices.size() <= kMaxPrecomputedPins
+                               ? Eigen::Index(model->collision_vertices.size()) : 0;
+    Eigen::MatrixXd& Z = model->modification_solution;
+    Z.setZero(N, K + C);
+    for (Eigen::Index k = 0; k < K; ++k)
+      for (int a = 0; a < 3; ++a) Z(model->markers[std::size_t(k)].vertices[a], k) += model->markers[std::size_t(k)].barycentric[a];
+    for (Eigen::Index c = 0; c < C; ++c) Z(model->collision_vertices[std::size_t(c)], K + c) = 1.0;
+    Eigen::VectorXd work(N);
+    for (Eigen::Index i = 0; i < K + C; ++i) model->factor->solve_in_place(Z.col(i), work);
+    model->setup.modifications_s = seconds_since(t0);
+  }
+  model->setup.total_s = seconds_since(start);
+  return model;
+}
+
+}  // namespace facecap

@@ -1,0 +1,111 @@
+#pragma once
+// Everything the per-frame solvers share, precomputed once per rig and marker layout
+// (see build_solver_model). Read-only after construction; safe to share across threads.
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "solver/face_solver.hpp"
+#include "solver/rig.hpp"
+#include "solver/sparse_ldlt.hpp"
+
+namespace facecap {
+
+// One shape's non-zero vertex deltas (float: blendshape deltas are stored data).
+struct SparseShapeDeltas {
+  std::vector<int> vertices;
+  std::vector<float> deltas;  // 3 per vertex
+};
+
+// One shape's per-triangle deformation (Eq. 3) over the contiguous range of triangles it
+// changes, as structure-of-arrays so the per-frame sums stream through vector units.
+// Component c of triangle first_triangle + i is at [c * count + i]; unchanged triangles
+// inside the range hold zeros.
+struct ShapeTriangleTerms {
+  int first_triangle = 0;
+  int count = 0;
+  std::vector<float> nonlinear;  // 9 x count: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
+  std::vector<float> gradient;   // 9 x count: F - I, column-major (deformation transfer)
+  bool covers(int triangle) const { return triangle >= first_triangle && triangle < first_triangle + count; }
+  float nonlinear_at(int component, int triangle) const {
+    return nonlinear[std::size_t(component) * std::size_t(count) + std::size_t(triangle - first_triangle)];
+  }
+};
+
+// How a marker moves with one shape's weight t under Eq. 4 where the shape turns the
+// surface under it: f(t) = (exp(t r) - I) arm + t axial, a screw motion that reaches the
+// shape's delta at t = 1. Markers on shapes that do not turn move linearly (t delta).
+struct MarkerPath {
+  int marker = 0;
+  int shape = 0;
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero();  // r: the surface's rotation vector at the marker
+  Eigen::Vector3d arm = Eigen::Vector3d::Zero();       // from the rotation axis, perpendicular to it
+  Eigen::Vector3d axial = Eigen::Vector3d::Zero();     // slide along the axis at t = 1
+};
+
+struct SolverSetupTimes {
+  double gradients_s = 0, factor_s = 0, modifications_s = 0, total_s = 0;
+};
+
+class SolverModel {
+ public:
+  Rig rig;
+  SolverParams params;
+  std::vector<MarkerBinding> markers;
+
+  // Eq. 2 on marker rows: marker k's rows 3k..3k+2 of B~ and x0~.
+  Eigen::MatrixXd marker_basis;     // 3K x M
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> marker_basis_rows;  // the same, row-major
+  Eigen::VectorXd marker_neutral;   // 3K
+  Eigen::MatrixXd gram_all;         // M x M: B~^T B~ over all markers
+  Eigen::MatrixXd gram_per_marker;  // M x (M K): marker k's B_k^T B_k in columns kM..kM+M-1
+
+  std::vector<MarkerPath> marker_paths;         // (marker, shape) pairs that turn
+
+  std::vector<SparseShapeDeltas> shape_deltas;  // M, for x0 + B w
+
+  // Eq. 3-5: per triangle j, Q_j = area_j [grad phi_1, grad phi_2, grad phi_3] so the
+  // right-hand side gains T_j Q_j on the triangle's three vertices.
+  Eigen::Matrix<double, 9, Eigen::Dynamic> triangle_operator;  // 9 x T, column-major 3x3
+  std::vector<ShapeTriangleTerms> shape_terms;                 // M
+  std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
+
+  // Low-rank modifications of A0 without refactoring: a marker dropping out removes
+  // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Columns 0..K-1 of
+  // modification_solution are A0^-1 c_k; column K + i is A0^-1 e_v for
+  // v = collision_vertices[i] when the region is small enough to precompute (the lips),
+  // otherwise pins are solved for as they occur.
+  std::vector<int> collision_triangles;  // triangles the collision stage checks
+  std::vector<int> collision_vertices;   // their vertices: the ones it may pin
+  std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
+  Eigen::MatrixXd modification_solution;  // N x (K + C) or N x K
+  bool collision_columns_precomputed() const {
+    return modification_solution.cols() == marker_count() + Eigen::Index(collision_vertices.size());
+  }
+
+  SolverSetupTimes setup;
+  std::size_t triangle_terms_kept = 0;  // (shape, triangle) entries stored
+
+  Eigen::Index marker_count() const { return Eigen::Index(markers.size()); }
+  Eigen::Index shape_count() const { return rig.shape_count(); }
+  Eigen::Index vertex_count() const { return rig.vertex_count(); }
+};
+
+// Deformation gradient (Sumner & Popovic 2004, fourth vertex along the normal) of one
+// triangle from rest (a0, b0, c0) to deformed (a, b, c).
+Eigen::Matrix3d deformation_gradient(const Eigen::Vector3d& a0, const Eigen::Vector3d& b0, const Eigen::Vector3d& c0,
+                                     const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+
+// F = R S with R a proper rotation and S symmetric.
+void polar_decomposition(const Eigen::Matrix3d& F, Eigen::Matrix3d& R, Eigen::Matrix3d& S);
+
+// Rotation vector (axis * angle, angle in [0, pi]) of R, and its exponential.
+Eigen::Vector3d rotation_log(const Eigen::Matrix3d& R);
+Eigen::Matrix3d rotation_exp(const Eigen::Vector3d& r) noexcept;
+
+// Of the rotation vectors equivalent to r (r and r - 2 pi r/|r|), the one nearest to
+// `reference`: keeps a field of rotations near pi on one branch.
+Eigen::Vector3d nearest_log_branch(const Eigen::Vector3d& r, const Eigen::Vector3d& reference);
+
+}  // namespace facecap

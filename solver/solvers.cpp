@@ -1,0 +1,496 @@
+// The per-frame solvers: nonlinear (the paper), linear, dt and meshik baselines.
+// Everything here after construction is real-time safe unless said otherwise.
+#include <array>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+#include "core/time.hpp"
+#include "solver/box_qp.hpp"
+#include "solver/collide.hpp"
+#include "solver/face_solver.hpp"
+#include "solver/solver_model.hpp"
+
+namespace facecap {
+namespace {
+
+constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear", "dt", "meshik"};
+constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
+constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds the stage to about a millisecond
+
+class StageClock {
+ public:
+  explicit StageClock(SolveResult& out) : out_(out), start_(monotonic_now_ns()), last_(start_) { out.stage_ns.fill(0); }
+  void lap(SolveStage stage) noexcept {
+    const int64_t now = monotonic_now_ns();
+    out_.stage_ns[std::size_t(stage)] += now - last_;
+    last_ = now;
+  }
+  void finish() noexcept { out_.total_ns = monotonic_now_ns() - start_; }
+
+ private:
+  SolveResult& out_;
+  int64_t start_, last_;
+};
+
+// Eq. 2: w = argmin |B~ w - (m - x0~)|^2 + alpha |w - w_prev|^2 + mu |w|^2, 0 <= w <= 1,
+// on the rows of the present markers. H starts from the all-markers Gram matrix and
+// loses the missing markers' blocks, so its cost follows the dropouts, not K.
+class WeightsStage {
+ public:
+  // follow_paths: refine along the marker paths of the nonlinear blend (params.weight_refinements).
+  WeightsStage(const SolverModel& model, bool follow_paths)
+      : model_(model), refinements_(follow_paths && !model.marker_paths.empty() ? model.params.weight_refinements : 0),
+        qp_(model.shape_count()), H_(model.shape_count(), model.shape_count()), g_(model.shape_count()),
+        previous_(Eigen::VectorXd::Zero(model.shape_count())), residual_(3 * model.marker_count()),
+        present_(model.marker_count()) {
+    if (refinements_ > 0) {
+      gram_present_.resize(model.shape_count(), model.shape_count());
+      cross_.resize(model.shape_count(), model.shape_count());
+      path_difference_.resize(3, Eigen::Index(model.marker_paths.size()));
+      path_start_.assign(std::size_t(model.marker_count()) + 1, 0);
+      for (const auto& path : model.marker_paths) ++path_start_[std::size_t(path.marker) + 1];
+      for (std::size_t k = 0; k < std::size_t(model.marker_count()); ++k) path_start_[k + 1] += path_start_[k];
+      path_of_marker_.resize(model.marker_paths.size());
+      std::vector<int> fill(path_start_.begin(), path_start_.end() - 1);
+      for (std::size_t i = 0; i < model.marker_paths.size(); ++i)
+        path_of_marker_[std::size_t(fill[std::size_t(model.marker_paths[i].marker)]++)] = int(i);
+    }
+  }
+
+  // Returns the number of markers used. Real-time safe.
+  uint32_t solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, Eigen::VectorXd& weights) noexcept {
+    const SolverModel& m = model_;
+    const Eigen::Index K = m.marker_count(), M = m.shape_count();
+    const SolverParams& p = m.params;
+    H_ = m.gram_all;
+    uint32_t used = 0;
+    for (Eigen::Index k = 0; k < K; ++k) {
+      present_[k] = present[std::size_t(k)] != 0 && targets.col(k).allFinite();
+      if (present_[k]) {
+        residual_.segment<3>(3 * k) = targets.col(k) - m.marker_neutral.segment<3>(3 * k);
+        ++used;
+      } else {
+        residual_.segment<3>(3 * k).setZero();
+        H_ -= m.gram_per_marker.middleCols(k * M, M);
+      }
+    }
+    if (refinements_ > 0) gram_present_ = H_;
+    H_.diagonal().array() += p.alpha + p.mu;
+    g_.noalias() = m.marker_basis.transpose() * residual_;
+    g_ += p.alpha * previous_;
+    weights = previous_;
+    qp_.solve(H_, g_, 0.0, 1.0, weights);
+    for (int i = 0; i < refinements_; ++i) refine(targets, weights);
+    previous_ = weights;
+    return used;
+  }
+  void reset() noexcept { previous_.setZero(); }
+  bool usable(std::span<const uint8_t> present, const Eigen::Matrix3Xd& targets) const noexcept {
+    uint32_t n = 0;
+    for (Eigen::Index k = 0; k < model_.marker_count(); ++k) n += present[std::size_t(k)] && targets.col(k).allFinite();
+    return n >= kMinimumMarkers;
+  }
+
+ private:
+  // One Gauss-Newton step: linearise the marker model x0 + sum_i f_i(w_i) at w and solve
+  // the same box-constrained ridge problem for the new w. The Jacobian is B~ plus a
+  // 3-vector D_p per marker path, so J^T J is the Gram matrix already built plus sparse
+  // corrections rather than a dense product.
+  void refine(const Eigen::Matrix3Xd& targets, Eigen::VectorXd& w) noexcept {
+    const SolverModel& m = model_;
+    const Eigen::Index K = m.marker_count();
+    const SolverParams& p = m.params;
+    // c = m - x0 - f(w) + J w; start with the linear part, c = m - x0.
+    for (Eigen::Index k = 0; k < K; ++k)
+      residual_.segment<3>(3 * k) = present_[k] ? Eigen::Vector3d(targets.col(k) - m.marker_neutral.segment<3>(3 * k))
+                                                : Eigen::Vector3d::Zero();
+    H_ = gram_present_;
+    cross_.setZero();
+    const auto& paths = m.marker_paths;
+    for (std::size_t i = 0; i < paths.size(); ++i) {
+      const MarkerPath& path = paths[i];
+      if (!present_[path.marker]) { path_difference_.col(Eigen::Index(i)).setZero(); continue; }
+      const double t = w[path.shape];
+      const Eigen::Vector3d turned = rotation_exp(t * path.rotation) * path.arm;
+      const Eigen::Vector3d linear_delta = m.marker_basis.block<3, 1>(3 * path.marker, path.shape);
+      const Eigen::Vector3d slope = path.rotation.cross(turned) + path.axial;
+      const Eigen::Vector3d difference = slope - linear_delta;  // D_p
+      path_difference_.col(Eigen::Index(i)) = difference;
+      // f(t) - t B~ replaced by its tangent: - (f(t) - t B~) + t D_p.
+      residual_.segment<3>(3 * path.marker) -= turned - path.arm + t * path.axial - t * linear_delta - t * difference;
+      // B~^T D_p into column `shape` of cross_ (mirrored into the row below).
+      cross_.col(path.shape).noalias() += m.marker_basis_rows.middleRows<3>(3 * path.marker).transpose() * difference;
+    }
+    H_ += cross_;
+    H_ += cross_.transpose();
+    // D_p^T D_q for the paths on each marker.
+    for (Eigen::Index k = 0; k < K; ++k)
+      for (int a = path_start_[std::size_t(k)]; a < path_start_[std::size_t(k) + 1]; ++a)
+        for (int b = path_start_[std::size_t(k)]; b < path_start_[std::size_t(k) + 1]; ++b) {
+          const int i = path_of_marker_[std::size_t(a)], j = path_of_marker_[std::size_t(b)];
+          H_(paths[std::size_t(i)].shape, paths[std::size_t(j)].shape) += path_difference_.col(i).dot(path_difference_.col(j));
+        }
+    H_.diagonal().array() += p.alpha + p.mu;
+    g_.noalias() = m.marker_basis.transpose() * residual_;
+    for (std::size_t i = 0; i < paths.size(); ++i)
+      g_[paths[i].shape] += path_difference_.col(Eigen::Index(i)).dot(residual_.segment<3>(3 * paths[i].marker));
+    g_ += p.alpha * previous_;
+    qp_.solve(H_, g_, 0.0, 1.0, w);
+  }
+
+  const SolverModel& model_;
+  int refinements_;
+  BoxQpSolver qp_;
+  Eigen::MatrixXd H_, gram_present_, cross_;
+  Eigen::VectorXd g_, previous_, residual_;
+  Eigen::Matrix3Xd path_difference_;
+  std::vector<int> path_start_, path_of_marker_;  // marker paths grouped by marker (CSR)
+  Eigen::Array<bool, Eigen::Dynamic, 1> present_;
+};
+
+// x0 + B w over the active weights and each shape's non-zero vertices.
+void linear_blend(const SolverModel& m, const Eigen::VectorXd& w, Eigen::Matrix3Xd& out) noexcept {
+  out = m.rig.neutral;
+  double* x = out.data();
+  for (Eigen::Index s = 0; s < m.shape_count(); ++s) {
+    const double ws = w[s];
+    if (ws <= m.params.active_weight) continue;
+    const auto& d = m.shape_deltas[std::size_t(s)];
+    const float* delta = d.deltas.data();
+    for (std::size_t i = 0; i < d.vertices.size(); ++i) {
+      double* p = x + 3 * d.vertices[i];
+      p[0] += ws * delta[3 * i];
+      p[1] += ws * delta[3 * i + 1];
+      p[2] += ws * delta[3 * i + 2];
+    }
+  }
+}
+
+class LinearSolver final : public FaceSolver {
+ public:
+  explicit LinearSolver(std::shared_ptr<const SolverModel> model) : FaceSolver(std::move(model)), weights_(*model_, false) {}
+  std::string_view name() const noexcept override { return "linear"; }
+  void reset() noexcept override { weights_.reset(); }
+  void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
+    StageClock clock(out);
+    out.held = !weights_.usable(present, targets);
+    out.collision_pairs = out.collision_constraints = 0;
+    if (out.held) { clock.finish(); return; }
+    out.markers_used = weights_.solve(targets, present, out.weights);
+    clock.lap(SolveStage::kWeights);
+    linear_blend(*model_, out.weights, out.vertices);
+    clock.lap(SolveStage::kBlend);
+    clock.finish();
+  }
+  void solve_with_weights(const Eigen::VectorXd& weights, const Eigen::Matrix3Xd&, std::span<const uint8_t>,
+                          SolveResult& out) noexcept override {
+    StageClock clock(out);
+    out.held = false;
+    out.weights = weights;
+    linear_blend(*model_, out.weights, out.vertices);
+    clock.lap(SolveStage::kBlend);
+    clock.finish();
+  }
+
+ private:
+  WeightsStage weights_;
+};
+
+// Eq. 4-5 with the matrix factored once: the right-hand side G^T W T(w) + beta C^T b is
+// built over the triangles the active shapes touch, back-substituted, then corrected for
+// missing markers and collision pins by a low-rank (Woodbury) update.
+class PoissonSolver : public FaceSolver {
+ public:
+  enum class Blend { kNonlinear, kDeformationTransfer };
+
+  PoissonSolver(std::shared_ptr<const SolverModel> model, Blend blend)
+      : FaceSolver(std::move(model)), blend_(blend), weights_(*model_, blend == Blend::kNonlinear) {
+    const SolverModel& m = *model_;
+    const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
+    sums_.assign(9 * std::size_t(T), 0.0f);
+    contribution_.assign(9 * std::size_t(T), 0.0);
+    operator_.resize(9 * std::size_t(T));
+    // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied component-major.
+    identity_rhs_.setZero(3, N);
+    for (Eigen::Index t = 0; t < T; ++t) {
+      const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
+      for (int k = 0; k < 3; ++k) identity_rhs_.col(m.rig.triangles(k, t)) += Q.col(k);
+      for (int c = 0; c < 9; ++c) operator_[std::size_t(c) * std::size_t(T) + std::size_t(t)] = Q.data()[c];
+    }
+    rhs_.resize(3, N);
+    work_.resize(3, N);
+    if (!m.collision_triangles.empty()) {
+      ColliderConfig config;
+      config.epsilon = m.params.collision_epsilon;
+      config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
+      collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config);
+      collisions_ = collider_.make_result();
+    }
+    // Pins beyond capacity are left out (and counted); markers always fit.
+    pin_capacity_ = std::min<Eigen::Index>(Eigen::Index(m.collision_vertices.size()), kMaxPins);
+    const Eigen::Index capacity = K + pin_capacity_;
+    modifications_.resize(std::size_t(capacity));
+    small_.resize(capacity, capacity);
+    small_rhs_.resize(capacity, 3);
+    if (!m.collision_columns_precomputed()) pin_columns_.resize(N, pin_capacity_);
+    pin_work_.resize(N);
+  }
+
+  std::string_view name() const noexcept override { return blend_ == Blend::kNonlinear ? "nonlinear" : "dt"; }
+  void reset() noexcept override { weights_.reset(); }
+
+  void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
+    StageClock clock(out);
+    out.held = !weights_.usable(present, targets);
+    out.collision_pairs = out.collision_constraints = 0;
+    if (out.held) { clock.finish(); return; }
+    out.markers_used = weights_.solve(targets, present, out.weights);
+    clock.lap(SolveStage::kWeights);
+    solve_mesh(targets, present, out, clock);
+  }
+
+  void solve_with_weights(const Eigen::VectorXd& weights, const Eigen::Matrix3Xd& targets,
+                          std::span<const uint8_t> present, SolveResult& out) noexcept override {
+    StageClock clock(out);
+    out.held = false;
+    out.collision_pairs = out.collision_constraints = 0;
+    out.weights = weights;
+    solve_mesh(targets, present, out, clock);
+  }
+
+ private:
+  // Eq. 4, Eq. 5 and collisions for out.weights.
+  void solve_mesh(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out,
+                  StageClock& clock) noexcept {
+    const SolverModel& m = *model_;
+    blend(out.weights);
+    clock.lap(SolveStage::kBlend);
+
+    rhs_ = identity_rhs_;
+    const Eigen::Index T = m.rig.triangle_count();
+    const double* C = contribution_.data();
+    for (Eigen::Index t = 0; t < T; ++t)
+      for (int k = 0; k < 3; ++k) {
+        double* column = rhs_.col(m.rig.triangles(k, t)).data();
+        for (int r = 0; r < 3; ++r) column[r] += C[(3 * k + r) * T + t];
+      }
+    modification_count_ = 0;
+    const double beta = m.params.beta;
+    for (Eigen::Index k = 0; k < m.marker_count(); ++k) {
+      const auto& b = m.markers[std::size_t(k)];
+      if (present[std::size_t(k)] && targets.col(k).allFinite()) {
+        for (int a = 0; a < 3; ++a) rhs_.col(b.vertices[a]) += beta * b.barycentric[a] * targets.col(k);
+      } else {
+        add_modification({b.vertices, b.barycentric, m.modification_solution.col(k).data(), -beta});
+      }
+    }
+    clock.lap(SolveStage::kRhs);
+
+    m.factor->solve_in_place(rhs_, work_);  // rhs_ now holds y = A0^-1 r
+    apply_modifications(rhs_, out.vertices);
+    clock.lap(SolveStage::kBacksolve);
+    collide(out);
+    clock.lap(SolveStage::kCollide);
+    clock.finish();
+  }
+
+  // Sums the active shapes' per-triangle terms, turns each sum into T_j - I (Eq. 4 for
+  // nonlinear, sum w_i (F_ij - I) for dt) and multiplies by Q_j into contribution_.
+  // Component-major arrays keep both loops in vector registers.
+  void blend(const Eigen::VectorXd& w) noexcept {
+    const SolverModel& m = *model_;
+    const std::size_t T = std::size_t(m.rig.triangle_count());
+    std::fill(sums_.begin(), sums_.end(), 0.0f);
+    for (Eigen::Index s = 0; s < m.shape_count(); ++s) {
+      if (w[s] <= m.params.active_weight) continue;
+      const float ws = float(w[s]);
+      const auto& terms = m.shape_terms[std::size_t(s)];
+      const std::size_t n = std::size_t(terms.count);
+      const float* source = blend_ == Blend::kNonlinear ? terms.nonlinear.data() : terms.gradient.data();
+      for (std::size_t c = 0; c < 9; ++c) {
+        float* __restrict dst = sums_.data() + c * T + std::size_t(terms.first_triangle);
+        const float* __restrict src = source + c * n;
+        for (std::size_t i = 0; i < n; ++i) dst[i] += ws * src[i];
+      }
+    }
+    const float* S = sums_.data();
+    const double* Q = operator_.data();
+    double* out = contribution_.data();
+    if (blend_ == Blend::kDeformationTransfer) {
+      for (std::size_t t = 0; t < T; ++t)
+        for (int r = 0; r < 3; ++r)
+          for (int k = 0; k < 3; ++k)
+            out[(3 * k + r) * T + t] = S[r * T + t] * Q[(3 * k) * T + t] + S[(3 + r) * T + t] * Q[(3 * k + 1) * T + t] +
+                                       S[(6 + r) * T + t] * Q[(3 * k + 2) * T + t];
+      return;
+    }
+    for (std::size_t t = 0; t < T; ++t) {
+      const double rx = S[t], ry = S[T + t], rz = S[2 * T + t];
+      const double x = rx * rx + ry * ry + rz * rz;
+      // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to 1e-10
+      // for theta <= 2.5; larger turns are redone with sin and cos below.
+      double a = 1.0 / 6227020800.0, b = 1.0 / 87178291200.0;  // 1/13!, 1/14!
+      constexpr double kInvFactorial[] = {1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0, 1.0 / 6.0, 1.0};
+      constexpr double kInvFactorialEven[] = {1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5};
+      for (int i = 0; i < 6; ++i) {
+        a = kInvFactorial[i] - x * a;
+        b = kInvFactorialEven[i] - x * b;
+      }
+      finish_triangle(t, T, rx, ry, rz, x, a, b, S, Q, out);
+    }
+    for (std::size_t t = 0; t < T; ++t) {
+      const double rx = S[t], ry = S[T + t], rz = S[2 * T + t];
+      const double x = rx * rx + ry * ry + rz * rz;
+      if (x <= 6.25) continue;
+      const double theta = std::sqrt(x);
+      finish_triangle(t, T, rx, ry, rz, x, std::sin(theta) / theta, (1.0 - std::cos(theta)) / x, S, Q, out);
+    }
+  }
+
+  // out = (R (I + S) - I) Q for one triangle, R = I + a [r]x + b [r]x^2.
+  static void finish_triangle(std::size_t t, std::size_t T, double rx, double ry, double rz, double x, double a,
+                              double b, const float* S, const double* Q, double* out) noexcept {
+    double R[9];  // column-major
+    R[0] = 1 + b * (rx * rx - x); R[3] = -a * rz + b * rx * ry;  R[6] = a * ry + b * rx * rz;
+    R[1] = a * rz + b * rx * ry;  R[4] = 1 + b * (ry * ry - x);  R[7] = -a * rx + b * ry * rz;
+    R[2] = -a * ry + b * rx * rz; R[5] = a * rx + b * ry * rz;   R[8] = 1 + b * (rz * rz - x);
+    const double sxx = 1 + S[3 * T + t], syy = 1 + S[4 * T + t], szz = 1 + S[5 * T + t];
+    const double sxy = S[6 * T + t], sxz = S[7 * T + t], syz = S[8 * T + t];
+    const double Sm[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};
+    double M[9];  // R S - I
+    for (int c = 0; c < 3; ++c)
+      for (int r = 0; r < 3; ++r)
+        M[3 * c + r] = R[r] * Sm[3 * c] + R[3 + r] * Sm[3 * c + 1] + R[6 + r] * Sm[3 * c + 2] - (r == c ? 1.0 : 0.0);
+    for (int k = 0; k < 3; ++k)
+      for (int r = 0; r < 3; ++r)
+        out[(3 * k + r) * T + t] =
+            M[r] * Q[(3 * k) * T + t] + M[3 + r] * Q[(3 * k + 1) * T + t] + M[6 + r] * Q[(3 * k + 2) * T + t];
+  }
+
+  // Triangle pairs closer than epsilon pin their vertices to the linear blend
+  // (x0 + B w)_v: y gains beta A0^-1 e_v p_v^T, A0 gains beta e_v e_v^T, and the mesh is
+  // solved again through the same low-rank update.
+  void collide(SolveResult& out) noexcept {
+    const SolverModel& m = *model_;
+    if (!collider_.configured() || !collider_.detect(out.vertices, collisions_)) return;
+    out.collision_pairs = uint32_t(collisions_.pairs_found);
+    if (collisions_.vertex_count == 0) return;
+    const double beta = m.params.beta;
+    const Eigen::Index K = m.marker_count();
+    Eigen::Index pins = 0;
+    for (const int v : collisions_.valid_vertices()) {
+      if (pins == pin_capacity_) break;
+      const double* column = nullptr;
+      if (m.collision_columns_precomputed()) {
+        column = m.modification_solution.col(K + m.vertex_to_collision[std::size_t(v)]).data();
+      } else {
+        auto z = pin_columns_.col(pins);
+        z.setZero();
+        z[v] = 1.0;
+        m.factor->solve_in_place(z, pin_work_);
+        column = z.data();
+      }
+      Eigen::Vector3d target = m.rig.neutral.col(v);
+      for (Eigen::Index s = 0; s < m.shape_count(); ++s)
+        if (out.weights[s] > m.params.active_weight) target += out.weights[s] * m.rig.deltas.block<3, 1>(3 * v, s);
+      rhs_.noalias() += (beta * target) * Eigen::Map<const Eigen::RowVectorXd>(column, m.vertex_count());
+      add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, beta});
+      ++pins;
+    }
+    out.collision_constraints = uint32_t(pins);
+    apply_modifications(rhs_, out.vertices);
+  }
+
+  // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; column = A0^-1 u.
+  struct Modification {
+    std::array<int, 3> vertices;
+    Eigen::Vector3d weights;
+    const double* column;
+    double scale;
+  };
+
+  void add_modification(const Modification& modification) noexcept { modifications_[std::size_t(modification_count_++)] = modification; }
+
+  // x = y - Z_S (D^-1 + U_S^T Z_S)^-1 U_S^T y: A0 modified by sum d_i u_i u_i^T, solved
+  // without refactoring (Woodbury). y: A0^-1 r, 3 x N.
+  void apply_modifications(const Eigen::Matrix3Xd& y, Eigen::Matrix3Xd& x) noexcept {
+    const SolverModel& m = *model_;
+    x = y;
+    const Eigen::Index s = modification_count_;
+    if (s == 0) return;
+    auto u_dot = [](const Modification& u, const double* z) {
+      return u.weights[0] * z[u.vertices[0]] + u.weights[1] * z[u.vertices[1]] + u.weights[2] * z[u.vertices[2]];
+    };
+    for (Eigen::Index i = 0; i < s; ++i) {
+      const Modification& mi = modifications_[std::size_t(i)];
+      for (Eigen::Index j = 0; j < s; ++j) small_(i, j) = u_dot(mi, modifications_[std::size_t(j)].column);
+      small_(i, i) += 1.0 / mi.scale;
+      Eigen::Vector3d uy = Eigen::Vector3d::Zero();
+      for (int a = 0; a < 3; ++a) uy += mi.weights[a] * y.col(mi.vertices[a]);
+      small_rhs_.row(i) = uy.transpose();
+    }
+    // Gaussian elimination with partial pivoting (the system is symmetric indefinite).
+    for (Eigen::Index c = 0; c < s; ++c) {
+      Eigen::Index p = c;
+      for (Eigen::Index r = c + 1; r < s; ++r)
+        if (std::abs(small_(r, c)) > std::abs(small_(p, c))) p = r;
+      if (p != c) { small_.row(c).head(s).swap(small_.row(p).head(s)); small_rhs_.row(c).swap(small_rhs_.row(p)); }
+      const double d = small_(c, c);
+      if (d == 0.0) return;  // singular: keep the uncorrected solve
+      for (Eigen::Index r = c + 1; r < s; ++r) {
+        const double f = small_(r, c) / d;
+        if (f == 0.0) continue;
+        for (Eigen::Index k = c; k < s; ++k) small_(r, k) -= f * small_(c, k);
+        small_rhs_.row(r) -= f * small_rhs_.row(c);
+      }
+    }
+    for (Eigen::Index c = s - 1; c >= 0; --c) {
+      Eigen::RowVector3d v = small_rhs_.row(c);
+      for (Eigen::Index k = c + 1; k < s; ++k) v -= small_(c, k) * small_rhs_.row(k);
+      small_rhs_.row(c) = v / small_(c, c);
+    }
+    for (Eigen::Index i = 0; i < s; ++i) {
+      const Eigen::Map<const Eigen::RowVectorXd> z(modifications_[std::size_t(i)].column, m.vertex_count());
+      x.noalias() -= small_rhs_.row(i).transpose() * z;
+    }
+  }
+
+  Blend blend_;
+  WeightsStage weights_;
+  std::vector<float> sums_;            // 9 x T component-major: summed shape terms
+  std::vector<double> operator_;       // 9 x T component-major copy of Q_j
+  std::vector<double> contribution_;   // 9 x T component-major: (T_j - I) Q_j
+  Eigen::Matrix3Xd identity_rhs_, rhs_, work_;
+  std::vector<Modification> modifications_;
+  Eigen::Index modification_count_ = 0;
+  Eigen::MatrixXd small_;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> small_rhs_;
+  TriangleCollider collider_;
+  CollisionResult collisions_;
+  Eigen::Index pin_capacity_ = 0;
+  Eigen::MatrixXd pin_columns_;  // A0^-1 e_v solved per frame when not precomputed
+  Eigen::VectorXd pin_work_;
+};
+
+}  // namespace
+
+SolveResult FaceSolver::make_result() const {
+  SolveResult r;
+  r.weights.setZero(model_->shape_count());
+  r.vertices = model_->rig.neutral;
+  return r;
+}
+
+std::span<const std::string_view> solver_names() noexcept { return kSolverNames; }
+
+std::unique_ptr<FaceSolver> make_solver(std::string_view name, std::shared_ptr<const SolverModel> model) {
+  if (!model) throw Error("make_solver: no solver model");
+  if (name == "nonlinear") return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kNonlinear);
+  if (name == "dt") return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kDeformationTransfer);
+  if (name == "linear") return std::make_unique<LinearSolver>(std::move(model));
+  throw Error(fmt::format("unknown solver '{}': choose nonlinear, linear, dt or meshik", name));
+}
+
+}  // namespace facecap

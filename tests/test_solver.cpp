@@ -1,0 +1,239 @@
+#include <numbers>
+#include <random>
+
+#include <catch2/catch.hpp>
+#include <Eigen/Geometry>
+
+#include "solver/box_qp.hpp"
+#include "solver/builtin_face.hpp"
+#include "solver/face_solver.hpp"
+#include "solver/marker_layout.hpp"
+#include "solver/solver_model.hpp"
+#include "tests/test_support.hpp"
+
+using namespace facecap;
+
+namespace {
+
+std::vector<uint8_t> all_present(Eigen::Index k) { return std::vector<uint8_t>(std::size_t(k), 1); }
+
+// Marker positions of a pose (3 x N) for a layout.
+Eigen::Matrix3Xd markers_of(const Eigen::Matrix3Xd& pose, const std::vector<MarkerBinding>& layout) {
+  Eigen::Matrix3Xd out(3, Eigen::Index(layout.size()));
+  for (std::size_t k = 0; k < layout.size(); ++k) {
+    out.col(Eigen::Index(k)).setZero();
+    for (int a = 0; a < 3; ++a) out.col(Eigen::Index(k)) += layout[k].barycentric[a] * pose.col(layout[k].vertices[a]);
+  }
+  return out;
+}
+
+double max_error(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b) { return (a - b).colwise().norm().maxCoeff(); }
+double mean_error(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b) { return (a - b).colwise().norm().mean(); }
+
+}  // namespace
+
+TEST_CASE("box QP results satisfy the KKT conditions on random problems") {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal;
+  for (int trial = 0; trial < 200; ++trial) {
+    const int n = 1 + trial % 60;
+    Eigen::MatrixXd A(n + 5, n);
+    for (int i = 0; i < A.size(); ++i) A.data()[i] = normal(rng);
+    if (trial % 3 == 0) A.col(0).setZero();  // a shape the markers cannot see
+    Eigen::MatrixXd H = A.transpose() * A;
+    H.diagonal().array() += 0.101;
+    Eigen::VectorXd g(n);
+    for (int i = 0; i < n; ++i) g[i] = 3.0 * normal(rng);
+    Eigen::VectorXd w = Eigen::VectorXd::Constant(n, 0.5);
+    BoxQpSolver qp(n);
+    const auto result = qp.solve(H, g, 0.0, 1.0, w);
+    REQUIRE(result.converged);
+    const Eigen::VectorXd gradient = H * w - g;
+    for (int i = 0; i < n; ++i) {
+      INFO("trial " << trial << " variable " << i << " w " << w[i] << " gradient " << gradient[i]);
+      REQUIRE(w[i] >= 0.0);
+      REQUIRE(w[i] <= 1.0);
+      if (w[i] > 1e-12 && w[i] < 1 - 1e-12) REQUIRE(std::abs(gradient[i]) < 1e-8);
+      if (w[i] <= 1e-12) REQUIRE(gradient[i] > -1e-8);   // multiplier of w >= 0
+      if (w[i] >= 1 - 1e-12) REQUIRE(gradient[i] < 1e-8);  // multiplier of w <= 1
+    }
+  }
+}
+
+TEST_CASE("rotation logs near pi stay on one branch") {
+  const Eigen::Vector3d axis = Eigen::Vector3d(1, 2, 0.5).normalized();
+  Eigen::Vector3d previous = Eigen::Vector3d::Zero();
+  double largest_step = 0;
+  for (double angle = 2.6; angle < 3.7; angle += 0.01) {
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(angle, axis).toRotationMatrix();
+    const Eigen::Vector3d raw = rotation_log(R);
+    CHECK(raw.norm() <= std::numbers::pi + 1e-9);
+    const Eigen::Vector3d chosen = angle == 2.6 ? raw : nearest_log_branch(raw, previous);
+    CHECK((rotation_exp(chosen) - R).norm() < 1e-9);
+    if (angle > 2.6) largest_step = std::max(largest_step, (chosen - previous).norm());
+    previous = chosen;
+  }
+  CHECK(largest_step < 0.02);  // continuous through pi: no jump to the other side
+  CHECK(previous.dot(axis) > 3.6);
+}
+
+TEST_CASE("solvers reproduce the neutral and every built-in shape exactly") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  const auto present = all_present(60);
+  for (const char* name : {"nonlinear", "dt", "linear"}) {
+    auto solver = make_solver(name, model);
+    SolveResult out = solver->make_result();
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+    solver->solve_with_weights(w, markers_of(rig.neutral, layout), present, out);
+    INFO(name);
+    CHECK(max_error(out.vertices, rig.neutral) < 1e-5);
+    for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
+      w.setZero();
+      w[s] = 1.0;
+      const Eigen::Matrix3Xd shape = rig.shape_positions(s);
+      solver->solve_with_weights(w, markers_of(shape, layout), present, out);
+      INFO(rig.shape_names[std::size_t(s)]);
+      CHECK(max_error(out.vertices, shape) < 1e-5);
+    }
+  }
+}
+
+TEST_CASE("a missing marker gives the same mesh as a layout without it") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 40);
+  auto without = layout;
+  without.erase(without.begin() + 7);
+  without.erase(without.begin() + 20);
+  const auto full_model = build_solver_model(rig, layout);
+  const auto small_model = build_solver_model(rig, without);
+  Eigen::VectorXd w = BuiltinFace::instance().motion_weights(1.3);
+  const Eigen::Matrix3Xd pose = BuiltinFace::instance().articulated_pose(w);
+  auto present = all_present(40);
+  present[7] = present[21] = 0;
+  for (const char* name : {"nonlinear", "dt"}) {
+    auto a = make_solver(name, full_model);
+    auto b = make_solver(name, small_model);
+    SolveResult ra = a->make_result(), rb = b->make_result();
+    Eigen::Matrix3Xd targets = markers_of(pose, layout);
+    targets.col(7).setConstant(std::numeric_limits<double>::quiet_NaN());
+    a->solve(targets, present, ra);
+    b->solve(markers_of(pose, without), all_present(38), rb);
+    INFO(name);
+    CHECK(ra.markers_used == 38);
+    CHECK((ra.weights - rb.weights).cwiseAbs().maxCoeff() < 1e-9);
+    CHECK(max_error(ra.vertices, rb.vertices) < 1e-8);
+  }
+}
+
+TEST_CASE("pinned vertices end near their targets") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  auto solver = make_solver("nonlinear", model);
+  SolveResult out = solver->make_result();
+  // Targets 2 mm off the neutral at every marker, in alternating directions.
+  Eigen::Matrix3Xd targets = markers_of(rig.neutral, layout);
+  for (Eigen::Index k = 0; k < targets.cols(); ++k) targets(2, k) += (k % 2 ? 0.2 : -0.2);
+  solver->solve_with_weights(Eigen::VectorXd::Zero(rig.shape_count()), targets, all_present(60), out);
+  const Eigen::Matrix3Xd reached = markers_of(out.vertices, layout);
+  INFO("max pin residual " << max_error(reached, targets) << " cm");
+  CHECK(max_error(reached, targets) < 0.02);  // beta = 100 holds pins within 0.2 mm
+}
+
+TEST_CASE("nonlinear matches the articulated jaw better than linear") {
+  const BuiltinFace& face = BuiltinFace::instance();
+  const Rig& rig = face.rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+  w[*rig.shape_index("jawOpen")] = 0.5;
+  const Eigen::Matrix3Xd truth = face.articulated_pose(w);
+  const Eigen::Matrix3Xd targets = markers_of(truth, layout);
+  double error[2];
+  int i = 0;
+  for (const char* name : {"nonlinear", "linear"}) {
+    auto solver = make_solver(name, model);
+    SolveResult out = solver->make_result();
+    solver->solve(targets, all_present(60), out);
+    error[i++] = mean_error(out.vertices, truth);
+  }
+  INFO("mean vertex error: nonlinear " << error[0] * 10 << " mm, linear " << error[1] * 10 << " mm");
+  CHECK(error[0] < 0.5 * error[1]);
+  CHECK(error[0] < 0.03);  // under 0.3 mm
+}
+
+TEST_CASE("too few markers hold the previous result and unknown solvers are rejected") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 10);
+  const auto model = build_solver_model(rig, layout);
+  auto solver = make_solver("nonlinear", model);
+  SolveResult out = solver->make_result();
+  std::vector<uint8_t> present(10, 0);
+  present[0] = present[1] = 1;
+  solver->solve(markers_of(rig.neutral, layout), present, out);
+  CHECK(out.held);
+  CHECK_THROWS_WITH(make_solver("magic", model), Catch::Contains("unknown solver 'magic'"));
+  CHECK_THROWS_WITH(build_solver_model(rig, {MarkerBinding::at_vertex("bad", 1 << 30)}), Catch::Contains("marker 'bad'"));
+}
+
+#include "tests/alloc_counter.hpp"
+
+TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers") {
+  const BuiltinFace& face = BuiltinFace::instance();
+  const Rig& rig = face.rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  for (const char* name : {"nonlinear", "linear", "dt"}) {
+    auto solver = make_solver(name, model);
+    SolveResult out = solver->make_result();
+    auto present = all_present(60);
+    std::vector<Eigen::Matrix3Xd> frames;
+    for (int f = 0; f < 30; ++f) frames.push_back(markers_of(face.articulated_pose(face.motion_weights(f * 0.05)), layout));
+    frames[5].col(3).setConstant(std::numeric_limits<double>::quiet_NaN());
+    int64_t allocations = 0;
+    {
+      test::CountAllocations counter;
+      for (int f = 0; f < 30; ++f) {
+        present[std::size_t(f % 60)] = f % 3 ? 1 : 0;  // some frames lose a marker
+        solver->solve(frames[std::size_t(f)], present, out);
+      }
+      allocations = counter.count();
+    }
+    INFO(name);
+    CHECK(allocations == 0);
+    CHECK_FALSE(out.held);
+  }
+  // The counter itself works.
+  test::CountAllocations counter;
+  std::vector<int> v(100);
+  CHECK(counter.count() >= 1);
+}
+
+#include "solver/collide.hpp"
+
+TEST_CASE("collision handling removes the lip intersections the nonlinear blend makes") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  SolverParams without;
+  without.collision_region = CollisionRegion::kNone;
+  auto handled = make_solver("nonlinear", build_solver_model(rig, layout));
+  auto unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+  w[*rig.shape_index("mouthPucker")] = 1.0;
+  w[*rig.shape_index("mouthClose")] = 1.0;
+  const Eigen::Matrix3Xd targets = markers_of(rig.linear_blend(w), layout);
+  SolveResult a = handled->make_result(), b = unhandled->make_result();
+  handled->solve_with_weights(w, targets, all_present(60), a);
+  unhandled->solve_with_weights(w, targets, all_present(60), b);
+  const int64_t before = count_intersecting_pairs(rig.triangles, b.vertices);
+  const int64_t after = count_intersecting_pairs(rig.triangles, a.vertices);
+  INFO("intersecting pairs without handling " << before << ", with " << after << "; pins " << a.collision_constraints);
+  CHECK(count_intersecting_pairs(rig.triangles, rig.linear_blend(w)) == 0);  // the blend itself is clean
+  CHECK(before > 10);
+  CHECK(after == 0);
+  CHECK(a.collision_pairs > 0);
+  CHECK(a.collision_constraints > 0);
+  CHECK(b.collision_constraints == 0);
+}
