@@ -30,6 +30,7 @@ struct Options {
   // Real takes (--calib).
   std::string calib;
   int every = 10;
+  int offline_every = 200;
   int max_frames = 0;
   bool progress = false;
 };
@@ -216,6 +217,8 @@ void add_eval_command(CLI::App& app, int& exit_code) {
   calib->excludes(truth);
   cmd->add_option("--every", o->every, "With --calib: held-out error and mesh checks on every Nth frame")
       ->capture_default_str()->check(CLI::PositiveNumber)->needs(calib);
+  cmd->add_option("--offline-every", o->offline_every, "With --calib: solve offline solvers (meshik) on every Nth frame only")
+      ->capture_default_str()->check(CLI::PositiveNumber)->needs(calib);
   cmd->add_option("--max-frames", o->max_frames, "With --calib: only the first N frames (0: all)")->needs(calib);
   cmd->add_flag("--progress", o->progress, "With --calib: progress on stderr (default: on a terminal)")->needs(calib);
   cmd->add_option("--solver", o->solvers, "all, or a comma-separated list of solvers")->capture_default_str();
@@ -233,6 +236,7 @@ void add_eval_command(CLI::App& app, int& exit_code) {
       t.solvers = o->solvers;
       t.rig_units = o->rig_units_override;
       t.every = o->every;
+      t.offline_every = o->offline_every;
       t.max_frames = o->max_frames;
       t.progress = o->progress;
       const auto report = evaluate_take(t);

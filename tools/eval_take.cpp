@@ -40,6 +40,7 @@ struct Summary {
 
 struct SolverRun {
   std::string name;
+  bool offline = false;  // too slow to solve every frame: sampled frames only
   std::unique_ptr<FaceSolver> full;                    // every marker, every frame
   std::vector<std::unique_ptr<FaceSolver>> held_out;   // one per face marker, that marker removed
   SolveResult result, held_result;
@@ -53,7 +54,7 @@ struct SolverRun {
 }  // namespace
 
 nlohmann::json evaluate_take(const TakeEvalOptions& o) {
-  if (o.every < 1) throw Error("--every must be at least 1");
+  if (o.every < 1 || o.offline_every < 1) throw Error("--every and --offline-every must be at least 1");
   const Rig rig = load_rig(o.rig);
   const double rig_mm = rig_mm_per_unit(rig, o.rig_units);
   const align::Calibration cal = align::load_calibration_profile(o.calib);
@@ -74,6 +75,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   for (const auto& name : names) {
     SolverRun run;
     run.name = name;
+    run.offline = name == "meshik";
     run.full = create_solver(name, setup.model);
     run.result = run.full->make_result();
     for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(create_solver(name, setup.model));
@@ -98,6 +100,8 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     const bool sample = f % std::size_t(o.every) == 0;
     sampled += sample;
     for (auto& run : runs) {
+      const bool run_sample = run.offline ? f % std::size_t(o.offline_every) == 0 : sample;
+      if (run.offline && !run_sample) continue;
       const auto t0 = std::chrono::steady_clock::now();
       run.full->solve(mapped.targets, mapped.present, run.result);
       run.solve_ms.add(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
@@ -105,14 +109,14 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       for (Eigen::Index k = 0; k < K; ++k)
         if (mapped.present[std::size_t(k)])
           run.fit_mm.add((bound_position(bindings[std::size_t(k)], run.result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
-      if (run.frames_solved >= 2) {
+      if (run.frames_solved >= 2 && !run.offline) {
         // Second difference: how much the mesh shakes beyond steady motion.
         run.jitter_mm.add(((run.result.vertices - 2.0 * run.previous + run.previous2).colwise().norm().mean()) * rig_mm);
       }
       run.previous2 = run.frames_solved >= 1 ? run.previous : run.result.vertices;
       run.previous = run.result.vertices;
       ++run.frames_solved;
-      if (!sample) continue;
+      if (!run_sample) continue;
       const int64_t hits = count_intersecting_triangle_pairs(rig.triangles, run.result.vertices);
       run.intersections += hits;
       run.intersection_frames += hits > neutral_intersections;
@@ -146,8 +150,10 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   j["stable_markers"] = cal.stable_markers;
   j["sampling"] = {{"every", o.every},
                    {"sampled_frames", sampled},
+                   {"offline_every", o.offline_every},
                    {"what", "every frame is solved with all markers (fit, jitter, timing); held-out error, intersections and "
-                            "flips on frames 0, every, 2*every, ...; held-out solvers see only those frames"}};
+                            "flips on frames 0, every, 2*every, ...; held-out solvers see only those frames. Offline solvers "
+                            "(meshik) are solved on frames 0, offline_every, ... only, and report no jitter"}};
   j["stable_residual_mm"] = stable_mm.json();
   j["head_pose_held_frames"] = head_held;
   j["neutral_intersections"] = neutral_intersections;
@@ -155,12 +161,13 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   for (auto& run : runs) {
     per[run.name] = {{"heldout_mm", run.heldout_mm.json()},
                      {"fit_mm", run.fit_mm.json()},
-                     {"jitter_mm", run.jitter_mm.json()},
+                     {"jitter_mm", run.offline ? nlohmann::json(nullptr) : run.jitter_mm.json()},
                      {"intersections", {{"pairs_per_checked_frame", run.checked_frames ? double(run.intersections) / double(run.checked_frames) : 0.0},
                                         {"frames_above_neutral", run.intersection_frames}}},
                      {"flipped", {{"triangles_per_checked_frame", run.checked_frames ? double(run.flipped) / double(run.checked_frames) : 0.0},
                                   {"frames_with", run.flipped_frames}}},
                      {"checked_frames", run.checked_frames},
+                     {"frames_solved", run.frames_solved},
                      {"solve_ms", run.solve_ms.json()},
                      {"held_frames", run.held}};
   }
@@ -180,9 +187,10 @@ void print_take_evaluation(const nlohmann::json& j) {
   fmt::print("{:<10} {:>16} {:>16} {:>10} {:>14} {:>10} {:>10}\n", "", "median / p95", "median / p95", "mean",
              fmt::format("(neutral {})", j["neutral_intersections"].get<int64_t>()), "", "mean");
   for (const auto& [name, s] : j["solvers"].items()) {
-    fmt::print("{:<10} {:>7.2f} / {:>6.2f} {:>7.2f} / {:>6.2f} {:>10.4f} {:>14.1f} {:>10.2f} {:>10.3f}\n", name,
+    const std::string jitter = s["jitter_mm"].is_null() ? "-" : fmt::format("{:.4f}", s["jitter_mm"]["mean"].get<double>());
+    fmt::print("{:<10} {:>7.2f} / {:>6.2f} {:>7.2f} / {:>6.2f} {:>10} {:>14.1f} {:>10.2f} {:>10.3f}\n", name,
                s["heldout_mm"]["median"].get<double>(), s["heldout_mm"]["p95"].get<double>(), s["fit_mm"]["median"].get<double>(),
-               s["fit_mm"]["p95"].get<double>(), s["jitter_mm"]["mean"].get<double>(),
+               s["fit_mm"]["p95"].get<double>(), jitter,
                s["intersections"]["pairs_per_checked_frame"].get<double>(), s["flipped"]["triangles_per_checked_frame"].get<double>(),
                s["solve_ms"]["mean"].get<double>());
   }
