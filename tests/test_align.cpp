@@ -20,6 +20,7 @@
 #include "solver/align/stabilise.hpp"
 #include "solver/align/surface.hpp"
 #include "tests/align_test_support.hpp"
+#include "tests/alloc_counter.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -570,4 +571,40 @@ TEST_CASE("Calibration gives clear errors for too few markers NaN and flat marke
   Calibration no_stable = c;
   no_stable.stable_markers = {"nope1", "nope2", "nope3"};
   CHECK_THROWS_WITH(MarkerMapper(no_stable, take.labels), Catch::Contains("3 stable markers"));
+}
+
+TEST_CASE("Per-frame stabilise map and label steps allocate nothing") {
+  SyntheticTakeOptions o;
+  o.head_sway_deg = 5.0;
+  o.motion_frames = 60;
+  const auto take = make_synthetic_take(o);
+  const Rig& rig = BuiltinFace::instance().rig();
+  const Calibration cal = calibrate_whole_take(rig, take.labels, take.frames, 60.0, 1.0);
+  MarkerMapper mapper(cal, take.labels, StabiliserParams{.outlier_floor = 1.0});
+  auto mapped = mapper.make_output();
+  std::vector<uint8_t> present;
+  const Eigen::Matrix3Xd reference = positions_of(take.frames[0], present);
+  LabellerParams p;
+  p.gate = 6.0;
+  p.max_gate = 15.0;
+  MarkerLabeller labeller(take.labels, reference, p), checker(take.labels, reference, p);
+  MarkerFrame labelled, checked = take.frames[0];
+  labelled.markers.reserve(take.labels.size());
+  std::vector<uint32_t> flags(take.labels.size(), 0);
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(take.labels.size() + 2);
+  int64_t allocations = 0;
+  for (std::size_t f = 0; f < take.frames.size(); ++f) {
+    points.clear();
+    for (const auto& m : take.frames[f].markers) points.push_back(m.position);
+    checked.markers = take.frames[f].markers;  // same size: copies in place
+    if (f == 20) checked.markers[2].flags = kMarkerMissing, checked.markers[2].position.setConstant(std::nan(""));
+    test::CountAllocations counter;
+    mapper.process(take.frames[f], mapped, flags);
+    labeller.label(points, labelled);
+    checker.check(checked);
+    if (f > 0) allocations += counter.count();  // the first frame sizes the labeller's output
+  }
+  CHECK(allocations == 0);
+  CHECK(mapped.head_held == false);
 }
