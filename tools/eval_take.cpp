@@ -56,8 +56,9 @@ struct SolverRun {
 nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   if (o.every < 1 || o.offline_every < 1) throw Error("--every and --offline-every must be at least 1");
   const Rig rig = load_rig(o.rig);
-  const double rig_mm = rig_mm_per_unit(rig, o.rig_units);
   const align::Calibration cal = align::load_calibration_profile(o.calib);
+  // The rig's units as calibrated, unless overridden.
+  const double rig_mm = o.rig_units.empty() ? cal.rig_mm_per_unit : rig_mm_per_unit(rig, o.rig_units);
   align::check_profile_matches_rig(cal, rig, o.calib);
   const formats::MarkerTake take = formats::read_take(o.take);
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");

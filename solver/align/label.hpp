@@ -47,7 +47,7 @@ struct LabelStats {
   int assigned = 0;
   int missing = 0;
   int ghosts = 0;       // points left unassigned
-  int relabelled = 0;   // points whose given label was changed (check) or initial acquisitions
+  int relabelled = 0;   // check(): markers whose point came with another label
   bool initialised = false;  // the frame was labelled by whole-set alignment to the reference
 };
 

@@ -72,9 +72,10 @@ std::string write_calibration_profile(const Calibration& c) {
   }
   for (const auto& m : c.markers) {
     out("\n[[marker]]\n");
-    out(fmt::format("label = {}\nvertices = [{}, {}, {}]\nbarycentric = {}\nneutral = {}\nbound_point = {}\nresidual_mm = {}\n",
+    out(fmt::format("label = {}\nvertices = [{}, {}, {}]\nbarycentric = {}\nneutral = {}\nbound_point = {}\noffset = {}\nresidual_mm = {}\n",
                     quote(m.label), m.binding.vertices[0], m.binding.vertices[1], m.binding.vertices[2],
-                    vec3(m.binding.barycentric), vec3(m.neutral), vec3(m.bound_point), m.residual_mm));
+                    vec3(m.binding.barycentric), vec3(m.neutral), vec3(m.bound_point),
+                    vec3(c.take_to_rig.apply(m.neutral) - m.bound_point), m.residual_mm));
   }
   // The checksum line goes second; it is left out of its own sum.
   const std::size_t first_break = body.find('\n') + 1;
@@ -258,7 +259,7 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
   std::set<std::string> seen;
   for (const auto& node : *markers->as_array()) {
     const auto& t = *node.as_table();
-    r.only_keys(t, {"label", "vertices", "barycentric", "neutral", "bound_point", "residual_mm"}, "marker.");
+    r.only_keys(t, {"label", "vertices", "barycentric", "neutral", "bound_point", "offset", "residual_mm"}, "marker.");
     MarkerCalibration m;
     m.label = r.string(t, "label", "marker.");
     if (m.label.empty()) r.fail(t.get("label"), "empty marker label", "marker.label");
@@ -278,6 +279,14 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     m.neutral = r.vector3(t, "neutral", "marker.");
     m.bound_point = r.vector3(t, "bound_point", "marker.");
     m.residual_mm = r.number(t, "residual_mm", "marker.");
+    // The neutral offset (the actor's marker from its bound point, rig units) is derived;
+    // when present it must agree with the transform, neutral and bound_point.
+    if (const toml::node* off = t.get("offset")) {
+      const Eigen::Vector3d offset = r.vector3(*off, "marker.offset");
+      const Eigen::Vector3d derived = c.take_to_rig.apply(m.neutral) - m.bound_point;
+      if ((offset - derived).norm() > 1e-6 * (1.0 + derived.norm()))
+        r.fail(off, fmt::format("offset of '{}' disagrees with transform(neutral) - bound_point", m.label), "marker.offset");
+    }
     c.markers.push_back(std::move(m));
   }
   for (const auto& s : c.stable_markers)

@@ -10,7 +10,8 @@
 //   [transform]  scale, rotation (3 rows), translation: rig = scale * rotation * take + translation
 //   [fit]        hull_rms_mm, trimmed_rms_mm, start
 //   [stabilise]  markers = [labels]
-//   [[marker]]   label, vertices, barycentric, neutral (take units), bound_point (rig), residual_mm
+//   [[marker]]   label, vertices, barycentric, neutral (take units), bound_point (rig),
+//                offset (rig: transform(neutral) - bound_point, the identity mismatch), residual_mm
 //   notes = [...]
 //
 // Reading is strict: unknown keys, wrong types, a bad checksum or a newer version are
