@@ -1,0 +1,232 @@
+#include "formats/livelinkface.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+#include "formats/text.hpp"
+
+namespace facecap::formats {
+namespace {
+
+constexpr int64_t kNsPerDay = 24 * 3600 * kNsPerSecond;
+
+// The app's column order: Live Link order except JawRight/JawLeft and
+// MouthRight/MouthLeft are swapped.
+constexpr std::array<std::string_view, kArkitShapeCount> kCsvShapeOrder = {
+    "EyeBlinkLeft",     "EyeLookDownLeft",  "EyeLookInLeft",     "EyeLookOutLeft",    "EyeLookUpLeft",
+    "EyeSquintLeft",    "EyeWideLeft",      "EyeBlinkRight",     "EyeLookDownRight",  "EyeLookInRight",
+    "EyeLookOutRight",  "EyeLookUpRight",   "EyeSquintRight",    "EyeWideRight",      "JawForward",
+    "JawRight",         "JawLeft",          "JawOpen",           "MouthClose",        "MouthFunnel",
+    "MouthPucker",      "MouthRight",       "MouthLeft",         "MouthSmileLeft",    "MouthSmileRight",
+    "MouthFrownLeft",   "MouthFrownRight",  "MouthDimpleLeft",   "MouthDimpleRight",  "MouthStretchLeft",
+    "MouthStretchRight", "MouthRollLower",  "MouthRollUpper",    "MouthShrugLower",   "MouthShrugUpper",
+    "MouthPressLeft",   "MouthPressRight",  "MouthLowerDownLeft", "MouthLowerDownRight", "MouthUpperUpLeft",
+    "MouthUpperUpRight", "BrowDownLeft",    "BrowDownRight",     "BrowInnerUp",       "BrowOuterUpLeft",
+    "BrowOuterUpRight", "CheekPuff",        "CheekSquintLeft",   "CheekSquintRight",  "NoseSneerLeft",
+    "NoseSneerRight",   "TongueOut"};
+
+bool iequals(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    if (std::tolower(uint8_t(a[i])) != std::tolower(uint8_t(b[i]))) return false;
+  }
+  return true;
+}
+
+int64_t timecode_ns(const Timecode& tc) {
+  const int64_t seconds = int64_t(tc.hours) * 3600 + int64_t(tc.minutes) * 60 + tc.seconds;
+  const double frames = double(tc.frames) + double(tc.subframe);
+  return seconds * kNsPerSecond + std::llround(frames * 1e9 / kLiveLinkTimecodeRate);
+}
+
+// Where each CSV column goes.
+struct Column {
+  enum Kind : uint8_t { kIgnored, kWeight, kAngle } kind = kIgnored;
+  std::size_t index = 0;
+};
+
+double estimate_rate(const std::vector<FaceFrame>& frames) {
+  std::vector<int64_t> steps;
+  for (std::size_t i = 1; i < frames.size(); ++i) {
+    const int64_t step = frames[i].source_time_ns - frames[i - 1].source_time_ns;
+    if (step > 0) steps.push_back(step);
+  }
+  if (steps.empty()) return 0.0;
+  std::nth_element(steps.begin(), steps.begin() + std::ptrdiff_t(steps.size() / 2), steps.end());
+  const double rate = 1e9 / double(steps[steps.size() / 2]);
+  const double nearest = std::round(rate);
+  return std::abs(rate - nearest) < 0.01 * nearest ? nearest : rate;
+}
+
+}  // namespace
+
+std::size_t FaceTake::lost_frames() const noexcept {
+  return std::size_t(std::count_if(frames.begin(), frames.end(), [](const FaceFrame& f) { return !f.tracked; }));
+}
+
+std::optional<Timecode> parse_livelink_timecode(std::string_view text) noexcept {
+  text = trim_spaces(text);
+  Timecode tc;
+  int parts[4] = {0, 0, 0, 0};
+  std::size_t at = 0;
+  for (int i = 0; i < 4; ++i) {
+    std::size_t end = at;
+    while (end < text.size() && text[end] >= '0' && text[end] <= '9') ++end;
+    if (end == at || end - at > 2) return std::nullopt;
+    for (std::size_t d = at; d < end; ++d) parts[i] = parts[i] * 10 + (text[d] - '0');
+    at = end;
+    if (i < 3) {
+      if (at >= text.size() || text[at] != ':') return std::nullopt;
+      ++at;
+    }
+  }
+  float fraction = 0.0f;
+  if (at < text.size()) {
+    if (text[at] != '.' || at + 1 >= text.size() || text.size() - at > 10) return std::nullopt;
+    const auto value = parse_double(text.substr(at));
+    if (!value || text.substr(at + 1).find_first_not_of("0123456789") != std::string_view::npos) return std::nullopt;
+    fraction = float(*value);
+  }
+  if (parts[0] > 23 || parts[1] > 59 || parts[2] > 59 || parts[3] >= kLiveLinkTimecodeRate) return std::nullopt;
+  tc.hours = uint8_t(parts[0]);
+  tc.minutes = uint8_t(parts[1]);
+  tc.seconds = uint8_t(parts[2]);
+  tc.frames = uint8_t(parts[3]);
+  tc.subframe = fraction;
+  tc.rate_hz = kLiveLinkTimecodeRate;
+  return tc;
+}
+
+std::string format_livelink_timecode(const Timecode& tc) {
+  const int thousandths = std::clamp(int(std::lround(double(tc.subframe) * 1000.0)), 0, 999);
+  return fmt::format("{:02}:{:02}:{:02}:{:02}.{:03}", tc.hours, tc.minutes, tc.seconds, tc.frames, thousandths);
+}
+
+FaceTake read_livelinkface(std::string_view text, const std::string& name) {
+  FaceTake take;
+  LineCursor lines(text);
+  std::string_view line;
+  std::vector<std::string_view> fields;
+  auto fail = [&](std::string_view field, const std::string& what) -> Error {
+    return text_error(name, lines.line_number(), int64_t(field.data() - line.data()) + 1, what);
+  };
+
+  if (!lines.next(line)) throw line_error(name, 1, "empty file: expected the Live Link Face header line");
+  split_fields(line, ',', fields);
+  if (fields.size() < 2 || !iequals(trim_spaces(fields[0]), "Timecode") || !iequals(trim_spaces(fields[1]), "BlendShapeCount")) {
+    throw line_error(name, 1, "not a Live Link Face CSV: the header does not start with Timecode,BlendShapeCount");
+  }
+  const std::size_t column_count = fields.size();
+  std::vector<Column> columns(column_count);
+  std::vector<std::string> column_names(fields.begin(), fields.end());
+  std::array<bool, kArkitShapeCount> have_weight{};
+  std::array<bool, kLiveLinkAngleCount> have_angle{};
+  std::vector<std::string> ignored;
+  for (std::size_t c = 2; c < column_count; ++c) {
+    const std::string_view column_name = trim_spaces(fields[c]);
+    if (auto s = arkit_shape_index(column_name); s && !have_weight[*s]) {
+      columns[c] = {Column::kWeight, *s};
+      have_weight[*s] = true;
+      continue;
+    }
+    const auto angle = std::find_if(kLiveLinkAngleNames.begin(), kLiveLinkAngleNames.end(),
+                                    [&](std::string_view a) { return iequals(a, column_name); });
+    if (angle != kLiveLinkAngleNames.end() && !have_angle[std::size_t(angle - kLiveLinkAngleNames.begin())]) {
+      const auto a = std::size_t(angle - kLiveLinkAngleNames.begin());
+      columns[c] = {Column::kAngle, a};
+      have_angle[a] = true;
+      continue;
+    }
+    if (column_name.empty() && c + 1 == column_count) continue;  // trailing comma
+    ignored.emplace_back(column_name);
+  }
+  for (std::size_t s = 0; s < kArkitShapeCount; ++s) {
+    if (!have_weight[s]) throw line_error(name, 1, fmt::format("header lacks the {} column", kArkitShapes[s].arkit));
+  }
+  if (!ignored.empty()) {
+    take.warnings.push_back(fmt::format("{}: {} unknown columns ignored (first: '{}')", name, ignored.size(), ignored.front()));
+  }
+  if (std::count(have_angle.begin(), have_angle.end(), false) > 0) {
+    take.warnings.push_back(fmt::format("{}: some head/eye angle columns are missing; read as 0", name));
+  }
+
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  int64_t day_offset_ns = 0;
+  std::size_t count_mismatches = 0;
+  while (lines.next(line)) {
+    if (trim_spaces(line).empty()) continue;
+    split_fields(line, ',', fields);
+    if (fields.size() < 2) throw fail(line, "row has no BlendShapeCount field");
+    const auto timecode = parse_livelink_timecode(fields[0]);
+    if (!timecode) throw fail(fields[0], fmt::format("timecode '{}' is not HH:MM:SS:FF.fff at 60 fps", trim_spaces(fields[0])));
+    const auto count = parse_int(fields[1]);
+    if (!count || *count < 0) throw fail(fields[1], fmt::format("BlendShapeCount '{}' is not a count", fields[1]));
+
+    FaceFrame& frame = take.frames.emplace_back();
+    frame.timecode = *timecode;
+    frame.source_time_ns = timecode_ns(*timecode) + day_offset_ns;
+    if (take.frames.size() > 1 && frame.source_time_ns < take.frames[take.frames.size() - 2].source_time_ns - kNsPerDay / 2) {
+      day_offset_ns += kNsPerDay;  // the take ran past midnight
+      frame.source_time_ns += kNsPerDay;
+    }
+    if (*count == 0 && (fields.size() == 2 || std::all_of(fields.begin() + 2, fields.end(), [](auto f) { return trim_spaces(f).empty(); }))) {
+      frame.tracked = false;
+      frame.weights.fill(nan);
+      frame.angles.fill(nan);
+      continue;
+    }
+    if (fields.size() != column_count) {
+      throw fail(fields.back(), fmt::format("row has {} fields, the header {}", fields.size(), column_count));
+    }
+    if (std::size_t(*count) != column_count - 2) ++count_mismatches;
+    for (std::size_t c = 2; c < column_count; ++c) {
+      if (columns[c].kind == Column::kIgnored) continue;
+      const auto value = parse_double(fields[c]);
+      if (!value || !std::isfinite(*value)) throw fail(fields[c], fmt::format("{} value '{}' is not a number", column_names[c], fields[c]));
+      if (columns[c].kind == Column::kWeight) {
+        frame.weights[columns[c].index] = float(*value);
+      } else {
+        frame.angles[columns[c].index] = float(*value);
+      }
+    }
+  }
+  if (count_mismatches > 0) {
+    take.warnings.push_back(fmt::format("{}: {} rows give a BlendShapeCount other than the {} value columns", name,
+                                        count_mismatches, column_count - 2));
+  }
+  take.rate_hz = estimate_rate(take.frames);
+  return take;
+}
+
+FaceTake read_livelinkface(const std::filesystem::path& path) {
+  const auto bytes = read_file_bytes(path);
+  return read_livelinkface(std::string_view(bytes.data(), bytes.size()), path.string());
+}
+
+std::string write_livelinkface(const FaceTake& take) {
+  std::array<std::size_t, kArkitShapeCount> csv_to_shape{};
+  for (std::size_t c = 0; c < kArkitShapeCount; ++c) csv_to_shape[c] = *arkit_shape_index(kCsvShapeOrder[c]);
+  std::string out = "Timecode,BlendShapeCount";
+  for (auto column : kCsvShapeOrder) out += fmt::format(",{}", column);
+  for (auto column : kLiveLinkAngleNames) out += fmt::format(",{}", column);
+  out += '\n';
+  for (const FaceFrame& frame : take.frames) {
+    out += format_livelink_timecode(frame.timecode);
+    if (!frame.tracked) {
+      out += ",0\n";
+      continue;
+    }
+    out += fmt::format(",{}", kArkitShapeCount + kLiveLinkAngleCount);
+    for (std::size_t c = 0; c < kArkitShapeCount; ++c) out += fmt::format(",{:.10f}", frame.weights[csv_to_shape[c]]);
+    for (float angle : frame.angles) out += fmt::format(",{:.10f}", angle);
+    out += '\n';
+  }
+  return out;
+}
+
+}  // namespace facecap::formats

@@ -1,0 +1,618 @@
+#include "formats/recording.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <ctime>
+#include <limits>
+#include <unordered_map>
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+#include "formats/byte_io.hpp"
+
+namespace facecap::formats {
+namespace {
+
+constexpr char kMagic[8] = {'F', 'C', 'R', 'E', 'C', '\r', '\n', '\x1a'};
+constexpr std::size_t kPreambleBytes = 16;
+constexpr std::size_t kChunkHeaderBytes = 16;
+constexpr std::size_t kIndexEntryBytes = 32;
+constexpr std::size_t kTailPayloadBytes = 16;
+constexpr std::size_t kTailChunkBytes = kChunkHeaderBytes + kTailPayloadBytes;
+
+constexpr uint32_t fourcc(const char (&s)[5]) {
+  return uint32_t(uint8_t(s[0])) | (uint32_t(uint8_t(s[1])) << 8) | (uint32_t(uint8_t(s[2])) << 16) |
+         (uint32_t(uint8_t(s[3])) << 24);
+}
+constexpr uint32_t kHeadChunk = fourcc("HEAD");
+constexpr uint32_t kMarkerChunk = fourcc("MRKF");
+constexpr uint32_t kSolvedChunk = fourcc("SLVF");
+constexpr uint32_t kIndexChunk = fourcc("INDX");
+constexpr uint32_t kTailChunk = fourcc("TAIL");
+
+std::string fourcc_text(uint32_t code) {
+  std::string s;
+  for (int i = 0; i < 4; ++i) {
+    const char c = char((code >> (8 * i)) & 0xff);
+    s += (c >= 0x20 && c < 0x7f) ? c : '?';
+  }
+  return s;
+}
+
+// The checksum covers the chunk's fourcc and size as well as its payload, so a torn
+// header is caught as surely as a torn payload.
+uint64_t chunk_checksum(uint32_t code, uint32_t size, const char* payload) {
+  Fnv1a64 hash;
+  hash.add_value(code);
+  hash.add_value(size);
+  hash.add(payload, size);
+  return hash.digest();
+}
+
+void put_string(ByteWriter& w, std::string_view s) {
+  w.u32(uint32_t(s.size()));
+  w.bytes(s);
+}
+std::string get_string(ByteReader& r, std::string_view what) {
+  const uint32_t size = r.u32(what);
+  return std::string(r.bytes(size, what));
+}
+void put_strings(ByteWriter& w, const std::vector<std::string>& list) {
+  w.u32(uint32_t(list.size()));
+  for (const auto& s : list) put_string(w, s);
+}
+std::vector<std::string> get_strings(ByteReader& r, std::string_view what) {
+  const uint32_t count = r.u32(what);
+  if (count > r.remaining() / 4) r.fail(fmt::format("{} count {} exceeds the chunk", what, count));
+  std::vector<std::string> out;
+  out.reserve(count);
+  for (uint32_t i = 0; i < count; ++i) out.push_back(get_string(r, what));
+  return out;
+}
+
+void put_timecode(ByteWriter& w, const Timecode& tc) {
+  w.u8(tc.hours);
+  w.u8(tc.minutes);
+  w.u8(tc.seconds);
+  w.u8(tc.frames);
+  w.f32(tc.subframe);
+  w.u16(tc.rate_hz);
+  w.u16(0);
+}
+Timecode get_timecode(ByteReader& r) {
+  Timecode tc;
+  tc.hours = r.u8("timecode");
+  tc.minutes = r.u8("timecode");
+  tc.seconds = r.u8("timecode");
+  tc.frames = r.u8("timecode");
+  tc.subframe = r.f32("timecode");
+  tc.rate_hz = r.u16("timecode");
+  r.skip(2, "timecode");
+  return tc;
+}
+
+void encode_header(ByteWriter& w, const RecordingHeader& h, int64_t created_unix_ns) {
+  put_string(w, h.rig_name);
+  w.u64(h.rig_hash);
+  put_string(w, h.source_description);
+  put_string(w, h.calibration);
+  put_string(w, h.units);
+  w.f64(h.rate_hz);
+  w.i64(created_unix_ns);
+  put_strings(w, h.marker_labels);
+  put_strings(w, h.shape_names);
+}
+
+void decode_header(ByteReader& r, RecordingHeader& h) {
+  h.rig_name = get_string(r, "rig name");
+  h.rig_hash = r.u64("rig hash");
+  h.source_description = get_string(r, "source description");
+  h.calibration = get_string(r, "calibration");
+  h.units = get_string(r, "units");
+  h.rate_hz = r.f64("rate");
+  h.created_unix_ns = r.i64("creation time");
+  h.marker_labels = get_strings(r, "marker labels");
+  h.shape_names = get_strings(r, "shape names");
+  // Later format versions may append fields; this reader ignores them.
+}
+
+void encode_marker_frame(ByteWriter& w, const MarkerFrame& f) {
+  w.i64(f.frame_no);
+  w.i64(f.source_time_ns);
+  w.i64(f.receive_time_ns);
+  put_timecode(w, f.timecode);
+  w.u32(uint32_t(f.markers.size()));
+  for (const Marker& m : f.markers) {
+    w.i32(m.id);
+    w.u32(m.flags);
+    w.f64(m.position.x());
+    w.f64(m.position.y());
+    w.f64(m.position.z());
+    const auto label = m.label.view();
+    w.u8(uint8_t(label.size()));  // MarkerLabel holds at most 47 characters
+    w.bytes(label);
+  }
+}
+
+constexpr std::size_t kMinMarkerBytes = 4 + 4 + 24 + 1;
+
+void decode_marker_frame(ByteReader& r, MarkerFrame& f) {
+  f.frame_no = r.i64("frame number");
+  f.source_time_ns = r.i64("source time");
+  f.receive_time_ns = r.i64("receive time");
+  f.timecode = get_timecode(r);
+  const uint32_t count = r.u32("marker count");
+  if (count > r.remaining() / kMinMarkerBytes) r.fail(fmt::format("marker count {} exceeds the chunk", count));
+  f.markers.resize(count);
+  for (Marker& m : f.markers) {
+    m.id = r.i32("marker id");
+    m.flags = r.u32("marker flags");
+    const double x = r.f64("marker position");
+    const double y = r.f64("marker position");
+    const double z = r.f64("marker position");
+    m.position = Eigen::Vector3d(x, y, z);
+    const uint8_t length = r.u8("label length");
+    m.label.assign(r.bytes(length, "label"));
+  }
+}
+
+void encode_solved_frame(ByteWriter& w, const SolvedFrame& f) {
+  w.i64(f.frame_no);
+  w.i64(f.source_time_ns);
+  w.i64(f.receive_time_ns);
+  w.i64(f.solve_start_ns);
+  w.i64(f.solve_end_ns);
+  put_timecode(w, f.timecode);
+  w.f64(f.head_rotation.w());
+  w.f64(f.head_rotation.x());
+  w.f64(f.head_rotation.y());
+  w.f64(f.head_rotation.z());
+  for (int i = 0; i < 3; ++i) w.f64(f.head_translation[i]);
+  w.u32(f.collision_constraints);
+  w.u32(f.markers_used);
+  w.u32(f.flags);
+  w.u32(uint32_t(f.stage_ns.size()));
+  for (int64_t ns : f.stage_ns) w.i64(ns);
+  w.u32(uint32_t(f.weights.size()));
+  for (Eigen::Index i = 0; i < f.weights.size(); ++i) w.f32(f.weights[i]);
+  w.u32(uint32_t(f.vertices.cols()));
+  for (Eigen::Index i = 0; i < f.vertices.size(); ++i) w.f32(f.vertices.data()[i]);  // column-major: x y z per vertex
+}
+
+void decode_solved_frame(ByteReader& r, SolvedFrame& f) {
+  f.frame_no = r.i64("frame number");
+  f.source_time_ns = r.i64("source time");
+  f.receive_time_ns = r.i64("receive time");
+  f.solve_start_ns = r.i64("solve start");
+  f.solve_end_ns = r.i64("solve end");
+  f.timecode = get_timecode(r);
+  const double qw = r.f64("head rotation"), qx = r.f64("head rotation"), qy = r.f64("head rotation"), qz = r.f64("head rotation");
+  f.head_rotation = Eigen::Quaterniond(qw, qx, qy, qz);
+  for (int i = 0; i < 3; ++i) f.head_translation[i] = r.f64("head translation");
+  f.collision_constraints = r.u32("collision count");
+  f.markers_used = r.u32("markers used");
+  f.flags = r.u32("flags");
+  const uint32_t stages = r.u32("stage count");
+  if (stages > r.remaining() / 8) r.fail(fmt::format("stage count {} exceeds the chunk", stages));
+  f.stage_ns.fill(0);
+  for (uint32_t i = 0; i < stages; ++i) {
+    const int64_t ns = r.i64("stage time");
+    if (i < f.stage_ns.size()) f.stage_ns[i] = ns;
+  }
+  const uint32_t weights = r.u32("weight count");
+  if (weights > r.remaining() / 4) r.fail(fmt::format("weight count {} exceeds the chunk", weights));
+  f.weights.resize(weights);
+  for (uint32_t i = 0; i < weights; ++i) f.weights[i] = r.f32("weight");
+  const uint32_t vertices = r.u32("vertex count");
+  if (vertices > r.remaining() / 12) r.fail(fmt::format("vertex count {} exceeds the chunk", vertices));
+  f.vertices.resize(3, vertices);
+  for (Eigen::Index i = 0; i < f.vertices.size(); ++i) f.vertices.data()[i] = r.f32("vertex");
+}
+
+int64_t realtime_now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return int64_t(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------- writer
+
+RecordingWriter::RecordingWriter(const std::filesystem::path& path, const RecordingHeader& header, Options options)
+    : path_(path.string()), options_(options) {
+  const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | (options.overwrite ? O_TRUNC : O_EXCL);
+  fd_ = ::open(path_.c_str(), flags, 0644);
+  if (fd_ < 0) throw file_error(path_, fmt::format("cannot create recording: {}", std::strerror(errno)));
+  ByteWriter w(buffer_);
+  w.bytes(std::string_view(kMagic, sizeof kMagic));
+  w.u16(kRecordingFormatVersion);
+  w.u16(kRecordingReaderVersion);
+  w.u32(0);  // reserved
+  ByteWriter p(payload_);
+  encode_header(p, header, header.created_unix_ns != 0 ? header.created_unix_ns : realtime_now_ns());
+  append_chunk(kHeadChunk, payload_);
+  flush();  // the header reaches the file at once: a recording killed early still names its rig
+}
+
+RecordingWriter::~RecordingWriter() {
+  if (!is_open()) return;
+  try {
+    close();
+  } catch (const Error& e) {
+    spdlog::error("recording {}: closing failed: {}", path_, e.what());
+  }
+}
+
+void RecordingWriter::append_chunk(uint32_t code, const std::vector<char>& payload) {
+  if (payload.size() > std::numeric_limits<uint32_t>::max()) {
+    throw file_error(path_, fmt::format("chunk of {} bytes is too large for a recording", payload.size()));
+  }
+  ByteWriter w(buffer_);
+  const auto size = uint32_t(payload.size());
+  w.u32(code);
+  w.u32(size);
+  w.u64(chunk_checksum(code, size, payload.data()));
+  w.bytes(std::string_view(payload.data(), payload.size()));
+  if (buffer_.size() >= options_.buffer_bytes) flush();
+}
+
+void RecordingWriter::append_marker_frame(const MarkerFrame& frame) {
+  if (!is_open()) throw file_error(path_, "append to a closed recording");
+  payload_.clear();
+  ByteWriter w(payload_);
+  encode_marker_frame(w, frame);
+  index_.push_back({ChunkKind::kMarkerFrame, bytes_written(), frame.frame_no, frame.source_time_ns});
+  append_chunk(kMarkerChunk, payload_);
+  ++marker_frames_;
+}
+
+void RecordingWriter::append_solved_frame(const SolvedFrame& frame) {
+  if (!is_open()) throw file_error(path_, "append to a closed recording");
+  payload_.clear();
+  ByteWriter w(payload_);
+  encode_solved_frame(w, frame);
+  index_.push_back({ChunkKind::kSolvedFrame, bytes_written(), frame.frame_no, frame.source_time_ns});
+  append_chunk(kSolvedChunk, payload_);
+  ++solved_frames_;
+}
+
+void RecordingWriter::write_out(const char* data, std::size_t size) {
+  while (size > 0) {
+    const ssize_t n = ::write(fd_, data, size);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw file_error(path_, fmt::format("write failed: {}", std::strerror(errno)));
+    }
+    data += n;
+    size -= std::size_t(n);
+    file_bytes_ += uint64_t(n);
+  }
+}
+
+void RecordingWriter::flush(bool durable) {
+  if (!is_open()) return;
+  write_out(buffer_.data(), buffer_.size());
+  buffer_.clear();
+  if (durable && ::fdatasync(fd_) != 0) throw file_error(path_, fmt::format("fdatasync failed: {}", std::strerror(errno)));
+}
+
+void RecordingWriter::close() {
+  if (!is_open()) return;
+  try {
+    const uint64_t index_offset = bytes_written();
+    payload_.clear();
+    ByteWriter w(payload_);
+    w.u32(uint32_t(index_.size()));
+    for (const auto& e : index_) {
+      w.u8(uint8_t(e.kind));
+      w.zeros(7);
+      w.u64(e.offset);
+      w.i64(e.frame_no);
+      w.i64(e.source_time_ns);
+    }
+    append_chunk(kIndexChunk, payload_);
+    const uint64_t tail_offset = bytes_written();
+    payload_.clear();
+    w.u64(index_offset);
+    w.u64(tail_offset);
+    append_chunk(kTailChunk, payload_);
+    flush(true);
+  } catch (...) {
+    ::close(fd_);
+    fd_ = -1;
+    throw;
+  }
+  const int rc = ::close(fd_);
+  fd_ = -1;
+  if (rc != 0) throw file_error(path_, fmt::format("close failed: {}", std::strerror(errno)));
+}
+
+// ---------------------------------------------------------------------------- reader
+
+struct RecordingReader::Mapping {
+  void* address = nullptr;
+  std::size_t size = 0;
+  ~Mapping() {
+    if (address) ::munmap(address, size);
+  }
+};
+
+RecordingReader::RecordingReader(const std::filesystem::path& path) : name_(path.string()) {
+  const int fd = ::open(name_.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw file_error(name_, fmt::format("cannot open: {}", std::strerror(errno)));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    throw file_error(name_, "not a regular file");
+  }
+  mapping_ = std::make_unique<Mapping>();
+  mapping_->size = std::size_t(st.st_size);
+  if (mapping_->size > 0) {
+    void* address = ::mmap(nullptr, mapping_->size, PROT_READ, MAP_PRIVATE, fd, 0);
+    if (address == MAP_FAILED) {
+      const int err = errno;
+      ::close(fd);
+      throw file_error(name_, fmt::format("cannot map: {}", std::strerror(err)));
+    }
+    mapping_->address = address;
+  }
+  ::close(fd);
+  open(std::span<const char>(static_cast<const char*>(mapping_->address), mapping_->size));
+}
+
+RecordingReader::RecordingReader(std::span<const char> bytes, std::string name) : name_(std::move(name)) { open(bytes); }
+
+RecordingReader::~RecordingReader() = default;
+RecordingReader::RecordingReader(RecordingReader&&) noexcept = default;
+RecordingReader& RecordingReader::operator=(RecordingReader&&) noexcept = default;
+
+namespace {
+
+struct ChunkView {
+  uint32_t code = 0;
+  std::size_t offset = 0;  // of the chunk header
+  std::span<const char> payload;
+};
+
+// A complete chunk with a valid checksum at offset, or why there is none.
+std::optional<ChunkView> chunk_at(std::span<const char> bytes, std::size_t offset, std::string& why) {
+  if (offset > bytes.size() || bytes.size() - offset < kChunkHeaderBytes) {
+    why = fmt::format("incomplete chunk header at byte {}", offset);
+    return std::nullopt;
+  }
+  ByteReader r(bytes, "");
+  r.seek(offset);
+  const uint32_t code = r.u32();
+  const uint32_t size = r.u32();
+  const uint64_t checksum = r.u64();
+  if (size > r.remaining()) {
+    why = fmt::format("chunk {} at byte {} needs {} payload bytes, {} remain", fourcc_text(code), offset, size, r.remaining());
+    return std::nullopt;
+  }
+  const char* payload = bytes.data() + r.offset();
+  if (chunk_checksum(code, size, payload) != checksum) {
+    why = fmt::format("checksum mismatch in chunk {} at byte {}", fourcc_text(code), offset);
+    return std::nullopt;
+  }
+  return ChunkView{code, offset, std::span<const char>(payload, size)};
+}
+
+}  // namespace
+
+void RecordingReader::open(std::span<const char> bytes) {
+  bytes_ = bytes;
+  ByteReader r(bytes, name_);
+  if (bytes.size() < kPreambleBytes) {
+    if (bytes.size() >= sizeof kMagic && std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
+      r.fail_at(0, "not a facecap recording (bad magic)");
+    }
+    r.fail_at(bytes.size(), "recording cut off inside its 16-byte preamble");
+  }
+  if (std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) r.fail_at(0, "not a facecap recording (bad magic)");
+  r.seek(sizeof kMagic);
+  header_.format_version = r.u16();
+  header_.min_reader_version = r.u16();
+  if (header_.min_reader_version > kRecordingReaderVersion) {
+    r.fail_at(10, fmt::format("recording format {} needs reader version {}; this reader is version {}",
+                              header_.format_version, header_.min_reader_version, kRecordingReaderVersion));
+  }
+  std::string why;
+  const auto head = chunk_at(bytes, kPreambleBytes, why);
+  if (!head) r.fail_at(kPreambleBytes, fmt::format("recording header unreadable: {}", why));
+  if (head->code != kHeadChunk) r.fail_at(kPreambleBytes, fmt::format("first chunk is {}, expected HEAD", fourcc_text(head->code)));
+  ByteReader header_reader(head->payload, name_ + " [HEAD]");
+  decode_header(header_reader, header_);
+  const std::size_t chunks_begin = kPreambleBytes + kChunkHeaderBytes + head->payload.size();
+  if (!load_index(chunks_begin)) scan(chunks_begin);
+  for (std::size_t i = 0; i < index_.size(); ++i) {
+    (index_[i].kind == ChunkKind::kMarkerFrame ? marker_entries_ : solved_entries_).push_back(i);
+  }
+}
+
+bool RecordingReader::load_index(std::size_t chunks_begin) {
+  if (bytes_.size() < chunks_begin + kTailChunkBytes) return false;
+  const std::size_t tail_offset = bytes_.size() - kTailChunkBytes;
+  std::string why;
+  const auto tail = chunk_at(bytes_, tail_offset, why);
+  if (!tail || tail->code != kTailChunk || tail->payload.size() != kTailPayloadBytes) return false;
+  ByteReader t(tail->payload, name_);
+  const uint64_t index_offset = t.u64();
+  if (t.u64() != tail_offset || index_offset < chunks_begin || index_offset >= tail_offset) return false;
+  const auto index = chunk_at(bytes_, std::size_t(index_offset), why);
+  if (!index || index->code != kIndexChunk || index_offset + kChunkHeaderBytes + index->payload.size() != tail_offset) return false;
+  ByteReader r(index->payload, name_);
+  const uint32_t count = r.u32();
+  if (count != r.remaining() / kIndexEntryBytes || r.remaining() % kIndexEntryBytes != 0) return false;
+  std::vector<RecordingIndexEntry> entries(count);
+  uint64_t previous_end = chunks_begin;
+  for (auto& e : entries) {
+    const uint8_t kind = r.u8();
+    r.skip(7);
+    e.kind = ChunkKind(kind);
+    e.offset = r.u64();
+    e.frame_no = r.i64();
+    e.source_time_ns = r.i64();
+    // Chunks follow each other without overlap and before the index.
+    if (kind > uint8_t(ChunkKind::kSolvedFrame) || e.offset < previous_end || e.offset + kChunkHeaderBytes > index_offset) return false;
+    previous_end = e.offset + kChunkHeaderBytes;
+  }
+  index_ = std::move(entries);
+  return true;
+}
+
+void RecordingReader::scan(std::size_t chunks_begin) {
+  index_rebuilt_ = true;
+  std::size_t at = chunks_begin;
+  while (at < bytes_.size()) {
+    std::string why;
+    const auto chunk = chunk_at(bytes_, at, why);
+    if (!chunk) {
+      truncated_ = true;
+      stop_reason_ = why;
+      return;
+    }
+    if (chunk->code == kMarkerChunk || chunk->code == kSolvedChunk) {
+      if (chunk->payload.size() < 16) {
+        truncated_ = true;
+        stop_reason_ = fmt::format("frame chunk at byte {} has only {} payload bytes", at, chunk->payload.size());
+        return;
+      }
+      ByteReader r(chunk->payload, name_);
+      const int64_t frame_no = r.i64();
+      const int64_t source_time_ns = r.i64();
+      index_.push_back({chunk->code == kMarkerChunk ? ChunkKind::kMarkerFrame : ChunkKind::kSolvedFrame, at, frame_no, source_time_ns});
+    }
+    // HEAD, INDX, TAIL and chunk kinds of later versions carry no frames: skipped.
+    at += kChunkHeaderBytes + chunk->payload.size();
+  }
+}
+
+void RecordingReader::read_marker_frame(std::size_t i, MarkerFrame& out) const {
+  if (i >= marker_entries_.size()) throw file_error(name_, fmt::format("marker frame {} of {} requested", i, marker_entries_.size()));
+  const auto& entry = index_[marker_entries_[i]];
+  std::string why;
+  const auto chunk = chunk_at(bytes_, std::size_t(entry.offset), why);
+  if (!chunk) throw offset_error(name_, int64_t(entry.offset), why);
+  if (chunk->code != kMarkerChunk) throw offset_error(name_, int64_t(entry.offset), fmt::format("index points at a {} chunk, expected MRKF", fourcc_text(chunk->code)));
+  ByteReader r(chunk->payload, fmt::format("{} [MRKF @ byte {}]", name_, entry.offset));
+  decode_marker_frame(r, out);
+}
+
+void RecordingReader::read_solved_frame(std::size_t i, SolvedFrame& out) const {
+  if (i >= solved_entries_.size()) throw file_error(name_, fmt::format("solved frame {} of {} requested", i, solved_entries_.size()));
+  const auto& entry = index_[solved_entries_[i]];
+  std::string why;
+  const auto chunk = chunk_at(bytes_, std::size_t(entry.offset), why);
+  if (!chunk) throw offset_error(name_, int64_t(entry.offset), why);
+  if (chunk->code != kSolvedChunk) throw offset_error(name_, int64_t(entry.offset), fmt::format("index points at a {} chunk, expected SLVF", fourcc_text(chunk->code)));
+  ByteReader r(chunk->payload, fmt::format("{} [SLVF @ byte {}]", name_, entry.offset));
+  decode_solved_frame(r, out);
+}
+
+// ---------------------------------------------------------------------------- takes
+
+MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& progress) {
+  MarkerTake take;
+  take.format = TakeFormat::kRecording;
+  const RecordingHeader& h = reader.header();
+  take.units = h.units;
+  take.labels = h.marker_labels;
+  std::unordered_map<std::string, std::size_t> slot_of;
+  for (std::size_t k = 0; k < take.labels.size(); ++k) slot_of.emplace(take.labels[k], k);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::size_t duplicates = 0;
+  MarkerFrame raw;
+  std::vector<bool> filled;
+  const std::size_t count = reader.marker_frame_count();
+  take.frames.reserve(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    reader.read_marker_frame(i, raw);
+    MarkerFrame& frame = take.frames.emplace_back();
+    frame.frame_no = raw.frame_no;
+    frame.source_time_ns = raw.source_time_ns;
+    frame.receive_time_ns = raw.receive_time_ns;
+    frame.timecode = raw.timecode;
+    filled.assign(take.labels.size(), false);
+    for (std::size_t k = 0; k < raw.markers.size(); ++k) {
+      const Marker& m = raw.markers[k];
+      std::string label(m.label.view());
+      if (label.empty()) label = m.id >= 0 ? fmt::format("id_{}", m.id) : fmt::format("unlabelled_{}", k);
+      auto [it, added] = slot_of.emplace(label, take.labels.size());
+      if (added) {
+        take.labels.push_back(label);
+        filled.push_back(false);
+      }
+      if (frame.markers.size() < take.labels.size()) frame.markers.resize(take.labels.size());
+      if (filled[it->second]) {
+        ++duplicates;
+        continue;
+      }
+      filled[it->second] = true;
+      frame.markers[it->second] = m;
+      frame.markers[it->second].label.assign(label);
+    }
+    if (progress && (i % 256 == 255 || i + 1 == count)) progress(i + 1, count);
+  }
+  // Slots a frame did not fill (including labels first seen later) are missing markers.
+  for (auto& frame : take.frames) {
+    const std::size_t had = frame.markers.size();
+    frame.markers.resize(take.labels.size());
+    for (std::size_t k = 0; k < frame.markers.size(); ++k) {
+      Marker& m = frame.markers[k];
+      if (k >= had || m.label.empty()) {
+        m.id = -1;
+        m.label.assign(take.labels[k]);
+        set_missing(m);
+      } else if (!m.present()) {
+        m.position = Eigen::Vector3d(nan, nan, nan);
+      }
+    }
+  }
+  take.first_frame = take.frames.empty() ? 1 : take.frames.front().frame_no;
+  take.rate_hz = h.rate_hz;
+  if (take.rate_hz <= 0 && take.frames.size() > 1) {
+    const int64_t span_ns = take.frames.back().source_time_ns - take.frames.front().source_time_ns;
+    if (span_ns > 0) take.rate_hz = double(take.frames.size() - 1) * 1e9 / double(span_ns);
+  }
+  take.metadata = {
+      {"format_version", fmt::format("{}", h.format_version)},
+      {"min_reader_version", fmt::format("{}", h.min_reader_version)},
+      {"rig_name", h.rig_name},
+      {"rig_hash", fmt::format("{:016x}", h.rig_hash)},
+      {"source", h.source_description},
+      {"solved_frames", fmt::format("{}", reader.solved_frame_count())},
+      {"index", reader.index_rebuilt() ? "rebuilt by scanning" : "present"},
+  };
+  if (reader.truncated()) take.warnings.push_back(fmt::format("{}: recording cut off: {}", reader.name(), reader.stop_reason()));
+  if (duplicates > 0) take.warnings.push_back(fmt::format("{}: {} markers repeated a label within a frame (kept the first)", reader.name(), duplicates));
+  return take;
+}
+
+void write_recording(const std::filesystem::path& path, const MarkerTake& take, const std::string& source_description,
+                     const ProgressFn& progress) {
+  check_take_shape(take, "recording writer");
+  RecordingHeader header;
+  header.source_description = source_description;
+  header.units = take.units;
+  header.rate_hz = take.rate_hz;
+  header.marker_labels = take.labels;
+  RecordingWriter writer(path, header, RecordingWriter::Options{.overwrite = true});
+  for (std::size_t f = 0; f < take.frames.size(); ++f) {
+    writer.append_marker_frame(take.frames[f]);
+    if (progress && (f % 256 == 255 || f + 1 == take.frames.size())) progress(f + 1, take.frames.size());
+  }
+  writer.close();
+}
+
+}  // namespace facecap::formats

@@ -1,0 +1,150 @@
+#pragma once
+// facecap recordings (.fcrec): raw marker frames and solved frames as written by the
+// recorder, read back by replay, convert and inspect. Byte layout: docs/recording-format.md.
+//
+// A file is a preamble (magic, format version, minimum reader version) and a sequence of
+// checksummed chunks: one HEAD (rig identity, calibration, source), then MRKF (marker
+// frame) and SLVF (solved frame) chunks in the order they were appended, and at close an
+// INDX chunk and a fixed-size TAIL pointing at it. A file without a valid tail (process
+// killed, disk full) is scanned instead, and reads back up to its last complete chunk.
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/frame.hpp"
+#include "formats/take.hpp"
+
+namespace facecap::formats {
+
+inline constexpr uint16_t kRecordingFormatVersion = 1;
+// Readers of this version understand files whose minimum reader version is <= this.
+inline constexpr uint16_t kRecordingReaderVersion = 1;
+
+struct RecordingHeader {
+  uint16_t format_version = kRecordingFormatVersion;          // as read; writers write theirs
+  uint16_t min_reader_version = kRecordingFormatVersion;
+  std::string rig_name;                // empty for marker-only recordings
+  uint64_t rig_hash = 0;               // identity of the rig the solved frames refer to
+  std::string source_description;     // "natnet 10.0.0.5:1511", "converted from take.c3d", ...
+  std::string calibration;            // calibration as text (TOML), may be empty
+  std::string units;                  // marker units ("mm", "cm", "m")
+  double rate_hz = 0.0;               // nominal frame rate, 0 when unknown
+  int64_t created_unix_ns = 0;        // wall clock at open (CLOCK_REALTIME)
+  std::vector<std::string> marker_labels;  // expected marker set, may be empty
+  std::vector<std::string> shape_names;    // rig shapes, the order of SolvedFrame::weights
+};
+
+enum class ChunkKind : uint8_t { kMarkerFrame, kSolvedFrame };
+
+struct RecordingIndexEntry {
+  ChunkKind kind = ChunkKind::kMarkerFrame;
+  uint64_t offset = 0;   // of the chunk header
+  int64_t frame_no = 0;
+  int64_t source_time_ns = 0;
+};
+
+// Appends frames to a new recording. Not real-time safe (allocates, writes, checksums):
+// call it from a recorder thread fed by a queue. Every append adds one whole chunk to an
+// in-memory buffer that reaches the file on flush() or when it grows past a limit, so a
+// killed process leaves whole chunks and at most one partial chunk at the end.
+class RecordingWriter {
+ public:
+  struct Options {
+    bool overwrite = false;                    // else an existing file is an error
+    std::size_t buffer_bytes = std::size_t(1) << 20;  // flush automatically past this
+  };
+  // Creates the file and writes the preamble and HEAD chunk. Throws Error.
+  RecordingWriter(const std::filesystem::path& path, const RecordingHeader& header, Options options);
+  RecordingWriter(const std::filesystem::path& path, const RecordingHeader& header)
+      : RecordingWriter(path, header, Options{}) {}
+  ~RecordingWriter();  // closes (writes the index) if close() was not called; logs errors
+  RecordingWriter(const RecordingWriter&) = delete;
+  RecordingWriter& operator=(const RecordingWriter&) = delete;
+
+  void append_marker_frame(const MarkerFrame& frame);
+  void append_solved_frame(const SolvedFrame& frame);
+  // Hands buffered chunks to the kernel; durable also waits for the disk (fdatasync).
+  void flush(bool durable = false);
+  // Writes INDX and TAIL, syncs and closes. Further appends throw.
+  void close();
+
+  bool is_open() const noexcept { return fd_ >= 0; }
+  std::size_t marker_frames() const noexcept { return marker_frames_; }
+  std::size_t solved_frames() const noexcept { return solved_frames_; }
+  uint64_t bytes_written() const noexcept { return file_bytes_ + buffer_.size(); }
+
+ private:
+  void append_chunk(uint32_t fourcc, const std::vector<char>& payload);
+  void write_out(const char* data, std::size_t size);
+
+  std::string path_;
+  Options options_;
+  int fd_ = -1;
+  uint64_t file_bytes_ = 0;  // bytes already handed to the kernel
+  std::vector<char> buffer_;
+  std::vector<char> payload_;  // reused per frame
+  std::vector<RecordingIndexEntry> index_;
+  std::size_t marker_frames_ = 0;
+  std::size_t solved_frames_ = 0;
+};
+
+// Reads a recording held in memory or mapped from a file. Frames are decoded on demand,
+// each chunk's checksum checked as it is read.
+class RecordingReader {
+ public:
+  // Maps the file read-only. Throws Error (not a recording, newer than this reader,
+  // cut off before its header is complete).
+  explicit RecordingReader(const std::filesystem::path& path);
+  // Reads from a buffer the caller keeps alive (tests, fuzzing).
+  RecordingReader(std::span<const char> bytes, std::string name);
+  ~RecordingReader();
+  RecordingReader(RecordingReader&&) noexcept;
+  RecordingReader& operator=(RecordingReader&&) noexcept;
+
+  const RecordingHeader& header() const noexcept { return header_; }
+  const std::string& name() const noexcept { return name_; }
+  // The index as written at close, or rebuilt by scanning.
+  const std::vector<RecordingIndexEntry>& index() const noexcept { return index_; }
+  bool index_rebuilt() const noexcept { return index_rebuilt_; }
+  // True when the file ends in an incomplete or damaged chunk (writer killed); the
+  // frames before it are all readable. stop_reason says what was found where.
+  bool truncated() const noexcept { return truncated_; }
+  const std::string& stop_reason() const noexcept { return stop_reason_; }
+
+  std::size_t marker_frame_count() const noexcept { return marker_entries_.size(); }
+  std::size_t solved_frame_count() const noexcept { return solved_entries_.size(); }
+  // Decodes the i-th marker / solved frame into out (its storage is reused). Throws Error
+  // on a checksum mismatch or malformed payload.
+  void read_marker_frame(std::size_t i, MarkerFrame& out) const;
+  void read_solved_frame(std::size_t i, SolvedFrame& out) const;
+
+ private:
+  struct Mapping;
+  void open(std::span<const char> bytes);
+  bool load_index(std::size_t chunks_begin);
+  void scan(std::size_t chunks_begin);
+
+  std::string name_;
+  std::unique_ptr<Mapping> mapping_;  // owns the mapped file, when there is one
+  std::span<const char> bytes_;
+  RecordingHeader header_;
+  std::vector<RecordingIndexEntry> index_;
+  std::vector<std::size_t> marker_entries_;  // positions in index_
+  std::vector<std::size_t> solved_entries_;
+  bool index_rebuilt_ = false;
+  bool truncated_ = false;
+  std::string stop_reason_;
+};
+
+// A recording's marker frames as a take: one slot per distinct label in order of first
+// appearance (unlabelled markers are named id_<id>), absent markers missing.
+MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& progress = {});
+
+// Writes a take's frames as a marker-only recording (the HEAD names the source).
+void write_recording(const std::filesystem::path& path, const MarkerTake& take, const std::string& source_description,
+                     const ProgressFn& progress = {});
+
+}  // namespace facecap::formats

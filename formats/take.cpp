@@ -1,0 +1,172 @@
+#include "formats/take.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+#include "formats/c3d.hpp"
+#include "formats/recording.hpp"
+#include "formats/trc.hpp"
+
+namespace facecap::formats {
+
+std::string_view format_name(TakeFormat format) noexcept {
+  switch (format) {
+    case TakeFormat::kC3d: return "c3d";
+    case TakeFormat::kTrc: return "trc";
+    case TakeFormat::kRecording: return "fcrec";
+    case TakeFormat::kLiveLinkFace: return "livelinkface";
+  }
+  return "?";
+}
+
+std::optional<TakeFormat> format_from_extension(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (ext == ".c3d") return TakeFormat::kC3d;
+  if (ext == ".trc") return TakeFormat::kTrc;
+  if (ext == ".fcrec") return TakeFormat::kRecording;
+  if (ext == ".csv") return TakeFormat::kLiveLinkFace;
+  return std::nullopt;
+}
+
+namespace {
+
+bool starts_with_nocase(std::span<const char> head, std::string_view prefix) {
+  if (head.size() < prefix.size()) return false;
+  for (std::size_t i = 0; i < prefix.size(); ++i) {
+    if (std::tolower(uint8_t(head[i])) != std::tolower(uint8_t(prefix[i]))) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+TakeFormat detect_format(std::span<const char> head, const std::filesystem::path& path) {
+  if (starts_with_nocase(head, "FCREC\r\n\x1a")) return TakeFormat::kRecording;
+  if (starts_with_nocase(head, "PathFileType")) return TakeFormat::kTrc;
+  if (starts_with_nocase(head, "Timecode,")) return TakeFormat::kLiveLinkFace;
+  if (auto by_extension = format_from_extension(path)) return *by_extension;
+  // C3D has no magic string, only 0x50 as its second byte.
+  if (head.size() >= 2 && uint8_t(head[1]) == 0x50) return TakeFormat::kC3d;
+  throw file_error(path.string(), "unknown format: not C3D, TRC, Live Link Face CSV or a facecap recording "
+                                  "(by content or extension)");
+}
+
+std::string_view MarkerTake::metadata_value(std::string_view key) const noexcept {
+  for (const auto& [k, v] : metadata) {
+    if (k == key) return v;
+  }
+  return {};
+}
+
+void set_missing(Marker& marker) noexcept {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  marker.flags |= kMarkerMissing;
+  marker.position = Eigen::Vector3d(nan, nan, nan);
+}
+
+MarkerFrame& append_empty_frame(MarkerTake& take, int64_t frame_no, int64_t source_time_ns) {
+  MarkerFrame& frame = take.frames.emplace_back();
+  frame.frame_no = frame_no;
+  frame.source_time_ns = source_time_ns;
+  frame.markers.resize(take.labels.size());
+  for (std::size_t k = 0; k < take.labels.size(); ++k) {
+    frame.markers[k].id = int32_t(k);
+    frame.markers[k].label.assign(take.labels[k]);
+    set_missing(frame.markers[k]);
+  }
+  return frame;
+}
+
+GapStats count_gaps(const MarkerTake& take) {
+  GapStats stats;
+  std::vector<bool> in_gap(take.labels.size(), false);
+  for (const auto& frame : take.frames) {
+    for (std::size_t k = 0; k < frame.markers.size() && k < in_gap.size(); ++k) {
+      const bool missing = !frame.markers[k].present();
+      stats.missing_samples += missing ? 1 : 0;
+      stats.gap_runs += (missing && !in_gap[k]) ? 1 : 0;
+      in_gap[k] = missing;
+    }
+  }
+  return stats;
+}
+
+void check_take_shape(const MarkerTake& take, const std::string& name) {
+  for (std::size_t f = 0; f < take.frames.size(); ++f) {
+    const auto& markers = take.frames[f].markers;
+    if (markers.size() != take.labels.size()) {
+      throw Error(fmt::format("{}: frame {} has {} markers, the take has {} labels", name, f, markers.size(), take.labels.size()));
+    }
+  }
+}
+
+MarkerTake read_take(std::span<const char> bytes, const std::string& name) {
+  switch (detect_format(bytes.first(std::min<std::size_t>(bytes.size(), 64)), name)) {
+    case TakeFormat::kC3d: return read_c3d(bytes, name);
+    case TakeFormat::kTrc: return read_trc(std::string_view(bytes.data(), bytes.size()), name);
+    case TakeFormat::kRecording: return take_from_recording(RecordingReader(bytes, name));
+    case TakeFormat::kLiveLinkFace:
+      throw file_error(name, "a Live Link Face CSV holds blendshape weights, not markers");
+  }
+  throw file_error(name, "unknown format");
+}
+
+MarkerTake read_take(const std::filesystem::path& path) {
+  char head[64];
+  std::size_t head_size = 0;
+  if (std::ifstream in(path, std::ios::binary); in) {
+    in.read(head, sizeof head);
+    head_size = std::size_t(in.gcount());
+  }
+  if (detect_format(std::span<const char>(head, head_size), path) == TakeFormat::kRecording) {
+    return take_from_recording(RecordingReader(path));  // mapped, not read: recordings can be large
+  }
+  const auto bytes = read_file_bytes(path);
+  return read_take(std::span<const char>(bytes), path.string());
+}
+
+void write_take(const std::filesystem::path& path, const MarkerTake& take, const ProgressFn& progress) {
+  const auto format = format_from_extension(path);
+  if (!format) throw file_error(path.string(), "cannot tell the output format: use .c3d, .trc or .fcrec");
+  switch (*format) {
+    case TakeFormat::kC3d: {
+      const auto bytes = write_c3d(take, progress);
+      write_file_atomically(path, bytes);
+      return;
+    }
+    case TakeFormat::kTrc: {
+      const auto text = write_trc(take, path.filename().string(), progress);
+      write_file_atomically(path, std::span<const char>(text.data(), text.size()));
+      return;
+    }
+    case TakeFormat::kRecording: {
+      // Written beside the target and renamed, like the other formats.
+      const auto tmp = std::filesystem::path(path.string() + fmt::format(".tmp.{}", ::getpid()));
+      try {
+        write_recording(tmp, take, fmt::format("converted from a {} take", format_name(take.format)), progress);
+        std::error_code ec;
+        std::filesystem::rename(tmp, path, ec);
+        if (ec) throw file_error(path.string(), fmt::format("cannot rename the finished recording into place: {}", ec.message()));
+      } catch (...) {
+        std::error_code ec;
+        std::filesystem::remove(tmp, ec);
+        throw;
+      }
+      return;
+    }
+    case TakeFormat::kLiveLinkFace:
+      throw file_error(path.string(), "markers cannot be written as Live Link Face CSV (it holds blendshape weights)");
+  }
+}
+
+}  // namespace facecap::formats
