@@ -10,6 +10,7 @@
 
 #include "core/error.hpp"
 #include "formats/byte_io.hpp"
+#include "formats/text.hpp"
 
 namespace facecap::formats {
 namespace {
@@ -29,11 +30,7 @@ std::string_view processor_name(Processor p) {
   return "?";
 }
 
-bool iequals(std::string_view a, std::string_view b) {
-  return a.size() == b.size() &&
-         std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) { return std::toupper(uint8_t(x)) == std::toupper(uint8_t(y)); });
-}
-
+// C3D pads text with spaces, some writers with NULs.
 std::string_view trim(std::string_view s) {
   while (!s.empty() && (s.back() == ' ' || s.back() == '\0' || s.back() == '\t')) s.remove_suffix(1);
   while (!s.empty() && (s.front() == ' ' || s.front() == '\0' || s.front() == '\t')) s.remove_prefix(1);
@@ -55,7 +52,7 @@ class Parameters {
  public:
   const Parameter* find(std::string_view group, std::string_view name) const {
     for (const auto& p : list) {
-      if (iequals(p.group, group) && iequals(p.name, name)) return &p;
+      if (equals_ignore_case(p.group, group) && equals_ignore_case(p.name, name)) return &p;
     }
     return nullptr;
   }
@@ -260,7 +257,8 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
 
   // DATA_START: the parameter wins, the header fills in when it is 0 or absent.
   const std::size_t block_count = (bytes.size() + kBlockBytes - 1) / kBlockBytes;
-  auto usable_block = [&](int64_t block) { return block >= 2 && std::size_t(block) <= block_count; };
+  // The data may start at the very end of the file (a take of 0 frames).
+  auto usable_block = [&](int64_t block) { return block >= 2 && std::size_t(block) <= block_count + 1; };
   int64_t data_start = values.count(params.find("POINT", "DATA_START")).value_or(0);
   if (!usable_block(data_start)) {
     if (data_start != 0) {
@@ -547,7 +545,7 @@ std::vector<char> write_c3d(const MarkerTake& take, const ProgressFn& progress) 
         w.f32(-1.0f);
       }
     }
-    if (progress && (f % 256 == 255 || f + 1 == take.frames.size())) progress(f + 1, take.frames.size());
+    report_progress(progress, f + 1, take.frames.size());
   }
   pad_to_block(out);
   return out;

@@ -30,14 +30,6 @@ constexpr std::array<std::string_view, kArkitShapeCount> kCsvShapeOrder = {
     "BrowOuterUpRight", "CheekPuff",        "CheekSquintLeft",   "CheekSquintRight",  "NoseSneerLeft",
     "NoseSneerRight",   "TongueOut"};
 
-bool iequals(std::string_view a, std::string_view b) {
-  if (a.size() != b.size()) return false;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    if (std::tolower(uint8_t(a[i])) != std::tolower(uint8_t(b[i]))) return false;
-  }
-  return true;
-}
-
 int64_t timecode_ns(const Timecode& tc) {
   const int64_t seconds = int64_t(tc.hours) * 3600 + int64_t(tc.minutes) * 60 + tc.seconds;
   const double frames = double(tc.frames) + double(tc.subframe);
@@ -118,7 +110,7 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
 
   if (!lines.next(line)) throw line_error(name, 1, "empty file: expected the Live Link Face header line");
   split_fields(line, ',', fields);
-  if (fields.size() < 2 || !iequals(trim_spaces(fields[0]), "Timecode") || !iequals(trim_spaces(fields[1]), "BlendShapeCount")) {
+  if (fields.size() < 2 || !equals_ignore_case(trim_spaces(fields[0]), "Timecode") || !equals_ignore_case(trim_spaces(fields[1]), "BlendShapeCount")) {
     throw line_error(name, 1, "not a Live Link Face CSV: the header does not start with Timecode,BlendShapeCount");
   }
   const std::size_t column_count = fields.size();
@@ -135,7 +127,7 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
       continue;
     }
     const auto angle = std::find_if(kLiveLinkAngleNames.begin(), kLiveLinkAngleNames.end(),
-                                    [&](std::string_view a) { return iequals(a, column_name); });
+                                    [&](std::string_view a) { return equals_ignore_case(a, column_name); });
     if (angle != kLiveLinkAngleNames.end() && !have_angle[std::size_t(angle - kLiveLinkAngleNames.begin())]) {
       const auto a = std::size_t(angle - kLiveLinkAngleNames.begin());
       columns[c] = {Column::kAngle, a};

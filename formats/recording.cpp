@@ -498,25 +498,31 @@ void RecordingReader::scan(std::size_t chunks_begin) {
   }
 }
 
-void RecordingReader::read_marker_frame(std::size_t i, MarkerFrame& out) const {
-  if (i >= marker_entries_.size()) throw file_error(name_, fmt::format("marker frame {} of {} requested", i, marker_entries_.size()));
-  const auto& entry = index_[marker_entries_[i]];
+std::span<const char> RecordingReader::frame_payload(const std::vector<std::size_t>& entries, std::size_t i,
+                                                     uint32_t expected_code) const {
+  if (i >= entries.size()) {
+    throw file_error(name_, fmt::format("{} frame {} requested, the recording has {}", fourcc_text(expected_code), i, entries.size()));
+  }
+  const uint64_t offset = index_[entries[i]].offset;
   std::string why;
-  const auto chunk = chunk_at(bytes_, std::size_t(entry.offset), why);
-  if (!chunk) throw offset_error(name_, int64_t(entry.offset), why);
-  if (chunk->code != kMarkerChunk) throw offset_error(name_, int64_t(entry.offset), fmt::format("index points at a {} chunk, expected MRKF", fourcc_text(chunk->code)));
-  ByteReader r(chunk->payload, fmt::format("{} [MRKF @ byte {}]", name_, entry.offset));
+  const auto chunk = chunk_at(bytes_, std::size_t(offset), why);
+  if (!chunk) throw offset_error(name_, int64_t(offset), why);
+  if (chunk->code != expected_code) {
+    throw offset_error(name_, int64_t(offset), fmt::format("index points at a {} chunk, expected {}", fourcc_text(chunk->code),
+                                                           fourcc_text(expected_code)));
+  }
+  return chunk->payload;
+}
+
+void RecordingReader::read_marker_frame(std::size_t i, MarkerFrame& out) const {
+  const auto payload = frame_payload(marker_entries_, i, kMarkerChunk);
+  ByteReader r(payload, fmt::format("{} [MRKF @ byte {}]", name_, index_[marker_entries_[i]].offset));
   decode_marker_frame(r, out);
 }
 
 void RecordingReader::read_solved_frame(std::size_t i, SolvedFrame& out) const {
-  if (i >= solved_entries_.size()) throw file_error(name_, fmt::format("solved frame {} of {} requested", i, solved_entries_.size()));
-  const auto& entry = index_[solved_entries_[i]];
-  std::string why;
-  const auto chunk = chunk_at(bytes_, std::size_t(entry.offset), why);
-  if (!chunk) throw offset_error(name_, int64_t(entry.offset), why);
-  if (chunk->code != kSolvedChunk) throw offset_error(name_, int64_t(entry.offset), fmt::format("index points at a {} chunk, expected SLVF", fourcc_text(chunk->code)));
-  ByteReader r(chunk->payload, fmt::format("{} [SLVF @ byte {}]", name_, entry.offset));
+  const auto payload = frame_payload(solved_entries_, i, kSolvedChunk);
+  ByteReader r(payload, fmt::format("{} [SLVF @ byte {}]", name_, index_[solved_entries_[i]].offset));
   decode_solved_frame(r, out);
 }
 
@@ -534,6 +540,7 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
   std::size_t duplicates = 0;
   MarkerFrame raw;
   std::vector<bool> filled;
+  std::string generated;
   const std::size_t count = reader.marker_frame_count();
   take.frames.reserve(count);
   for (std::size_t i = 0; i < count; ++i) {
@@ -546,23 +553,32 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
     filled.assign(take.labels.size(), false);
     for (std::size_t k = 0; k < raw.markers.size(); ++k) {
       const Marker& m = raw.markers[k];
-      std::string label(m.label.view());
-      if (label.empty()) label = m.id >= 0 ? fmt::format("id_{}", m.id) : fmt::format("unlabelled_{}", k);
-      auto [it, added] = slot_of.emplace(label, take.labels.size());
-      if (added) {
-        take.labels.push_back(label);
-        filled.push_back(false);
+      std::string_view label = m.label.view();
+      if (label.empty()) {
+        generated = m.id >= 0 ? fmt::format("id_{}", m.id) : fmt::format("unlabelled_{}", k);
+        label = generated;
+      }
+      // Most sources send the same markers in the same order every frame: check the
+      // slot of the same position before the map.
+      std::size_t slot = k;
+      if (k >= take.labels.size() || take.labels[k] != label) {
+        auto [it, added] = slot_of.emplace(std::string(label), take.labels.size());
+        if (added) {
+          take.labels.emplace_back(label);
+          filled.push_back(false);
+        }
+        slot = it->second;
       }
       if (frame.markers.size() < take.labels.size()) frame.markers.resize(take.labels.size());
-      if (filled[it->second]) {
+      if (filled[slot]) {
         ++duplicates;
         continue;
       }
-      filled[it->second] = true;
-      frame.markers[it->second] = m;
-      frame.markers[it->second].label.assign(label);
+      filled[slot] = true;
+      frame.markers[slot] = m;
+      frame.markers[slot].label.assign(label);
     }
-    if (progress && (i % 256 == 255 || i + 1 == count)) progress(i + 1, count);
+    report_progress(progress, i + 1, count);
   }
   // Slots a frame did not fill (including labels first seen later) are missing markers.
   for (auto& frame : take.frames) {
@@ -591,6 +607,7 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
       {"rig_name", h.rig_name},
       {"rig_hash", fmt::format("{:016x}", h.rig_hash)},
       {"source", h.source_description},
+      {"calibration_bytes", fmt::format("{}", h.calibration.size())},
       {"solved_frames", fmt::format("{}", reader.solved_frame_count())},
       {"index", reader.index_rebuilt() ? "rebuilt by scanning" : "present"},
   };
@@ -610,7 +627,7 @@ void write_recording(const std::filesystem::path& path, const MarkerTake& take, 
   RecordingWriter writer(path, header, RecordingWriter::Options{.overwrite = true});
   for (std::size_t f = 0; f < take.frames.size(); ++f) {
     writer.append_marker_frame(take.frames[f]);
-    if (progress && (f % 256 == 255 || f + 1 == take.frames.size())) progress(f + 1, take.frames.size());
+    report_progress(progress, f + 1, take.frames.size());
   }
   writer.close();
 }

@@ -126,6 +126,8 @@ class RecordingReader {
   void open(std::span<const char> bytes);
   bool load_index(std::size_t chunks_begin);
   void scan(std::size_t chunks_begin);
+  // The checked payload of entries[i]'s chunk, which must be of expected_code's kind.
+  std::span<const char> frame_payload(const std::vector<std::size_t>& entries, std::size_t i, uint32_t expected_code) const;
 
   std::string name_;
   std::unique_ptr<Mapping> mapping_;  // owns the mapped file, when there is one

@@ -14,6 +14,7 @@
 #include "core/io.hpp"
 #include "formats/c3d.hpp"
 #include "formats/recording.hpp"
+#include "formats/text.hpp"
 #include "formats/trc.hpp"
 
 namespace facecap::formats {
@@ -29,23 +30,18 @@ std::string_view format_name(TakeFormat format) noexcept {
 }
 
 std::optional<TakeFormat> format_from_extension(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  if (ext == ".c3d") return TakeFormat::kC3d;
-  if (ext == ".trc") return TakeFormat::kTrc;
-  if (ext == ".fcrec") return TakeFormat::kRecording;
-  if (ext == ".csv") return TakeFormat::kLiveLinkFace;
+  const std::string ext = path.extension().string();
+  if (equals_ignore_case(ext, ".c3d")) return TakeFormat::kC3d;
+  if (equals_ignore_case(ext, ".trc")) return TakeFormat::kTrc;
+  if (equals_ignore_case(ext, ".fcrec")) return TakeFormat::kRecording;
+  if (equals_ignore_case(ext, ".csv")) return TakeFormat::kLiveLinkFace;
   return std::nullopt;
 }
 
 namespace {
 
 bool starts_with_nocase(std::span<const char> head, std::string_view prefix) {
-  if (head.size() < prefix.size()) return false;
-  for (std::size_t i = 0; i < prefix.size(); ++i) {
-    if (std::tolower(uint8_t(head[i])) != std::tolower(uint8_t(prefix[i]))) return false;
-  }
-  return true;
+  return head.size() >= prefix.size() && equals_ignore_case(std::string_view(head.data(), prefix.size()), prefix);
 }
 
 }  // namespace
@@ -87,6 +83,10 @@ MarkerFrame& append_empty_frame(MarkerTake& take, int64_t frame_no, int64_t sour
   return frame;
 }
 
+void report_progress(const ProgressFn& progress, std::size_t done, std::size_t total) {
+  if (progress && (done % 256 == 0 || done == total)) progress(done, total);
+}
+
 GapStats count_gaps(const MarkerTake& take) {
   GapStats stats;
   std::vector<bool> in_gap(take.labels.size(), false);
@@ -121,14 +121,18 @@ MarkerTake read_take(std::span<const char> bytes, const std::string& name) {
   throw file_error(name, "unknown format");
 }
 
-MarkerTake read_take(const std::filesystem::path& path) {
+TakeFormat detect_file_format(const std::filesystem::path& path) {
   char head[64];
   std::size_t head_size = 0;
   if (std::ifstream in(path, std::ios::binary); in) {
     in.read(head, sizeof head);
     head_size = std::size_t(in.gcount());
   }
-  if (detect_format(std::span<const char>(head, head_size), path) == TakeFormat::kRecording) {
+  return detect_format(std::span<const char>(head, head_size), path);
+}
+
+MarkerTake read_take(const std::filesystem::path& path) {
+  if (detect_file_format(path) == TakeFormat::kRecording) {
     return take_from_recording(RecordingReader(path));  // mapped, not read: recordings can be large
   }
   const auto bytes = read_file_bytes(path);

@@ -29,6 +29,8 @@ std::optional<TakeFormat> format_from_extension(const std::filesystem::path& pat
 // By content (magic bytes or first line); falls back to the extension. Throws Error
 // naming the file when neither identifies a format.
 TakeFormat detect_format(std::span<const char> head, const std::filesystem::path& path);
+// The same for a file, reading only its first bytes.
+TakeFormat detect_file_format(const std::filesystem::path& path);
 
 struct MarkerTake {
   TakeFormat format = TakeFormat::kC3d;
@@ -64,6 +66,8 @@ void check_take_shape(const MarkerTake& take, const std::string& name);
 
 // Called as frames are written: done of total.
 using ProgressFn = std::function<void(std::size_t done, std::size_t total)>;
+// Calls progress (when set) every 256 frames and at the last one.
+void report_progress(const ProgressFn& progress, std::size_t done, std::size_t total);
 
 // Reads a marker take in any supported format (chosen by content, then extension).
 // Live Link Face CSV holds blendshape weights, not markers, and is refused here (read it

@@ -33,18 +33,26 @@ std::string_view trim_spaces(std::string_view s) noexcept {
   return s;
 }
 
+bool equals_ignore_case(std::string_view a, std::string_view b) noexcept {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const auto lower = [](char c) { return (c >= 'A' && c <= 'Z') ? char(c - 'A' + 'a') : c; };
+    if (lower(a[i]) != lower(b[i])) return false;
+  }
+  return true;
+}
+
 void split_fields(std::string_view line, char delimiter, std::vector<std::string_view>& out) {
   out.clear();
+  // A plain loop: fields are short, and a memchr call per field costs more than it saves.
   std::size_t start = 0;
-  while (true) {
-    const std::size_t at = line.find(delimiter, start);
-    if (at == std::string_view::npos) {
-      out.push_back(line.substr(start));
-      return;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    if (line[i] == delimiter) {
+      out.push_back(line.substr(start, i - start));
+      start = i + 1;
     }
-    out.push_back(line.substr(start, at - start));
-    start = at + 1;
   }
+  out.push_back(line.substr(start));
 }
 
 void split_whitespace(std::string_view line, std::vector<std::string_view>& out) {

@@ -33,6 +33,9 @@ class LineCursor {
 
 std::string_view trim_spaces(std::string_view s) noexcept;
 
+// ASCII case-insensitive equality (header keys, C3D names, column names).
+bool equals_ignore_case(std::string_view a, std::string_view b) noexcept;
+
 // Splits on one delimiter; empty fields are kept.
 void split_fields(std::string_view line, char delimiter, std::vector<std::string_view>& out);
 // Splits on runs of spaces and tabs; no empty fields.

@@ -11,14 +11,6 @@
 namespace facecap::formats {
 namespace {
 
-bool iequals(std::string_view a, std::string_view b) {
-  if (a.size() != b.size()) return false;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    if (std::tolower(uint8_t(a[i])) != std::tolower(uint8_t(b[i]))) return false;
-  }
-  return true;
-}
-
 // TRC rows are tab-separated (empty cells meaningful) or, in some exports, separated by
 // runs of spaces.
 void split_row(std::string_view line, std::vector<std::string_view>& out) {
@@ -54,7 +46,7 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
   };
 
   next_header_line("PathFileType");
-  if (fields.size() < 2 || !iequals(fields[0], "PathFileType")) {
+  if (fields.size() < 2 || !equals_ignore_case(fields[0], "PathFileType")) {
     throw line_error(name, 1, "not a TRC file: the first line does not start with PathFileType");
   }
   const auto path_file_type = parse_int(fields[1]);
@@ -86,11 +78,11 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
       if (!v || *v < 0) throw fail(value.empty() ? line.substr(line.size()) : value, fmt::format("{} '{}' is not a count", keys[i], value));
       return *v;
     };
-    if (iequals(keys[i], "NumMarkers")) marker_count = count();
-    else if (iequals(keys[i], "NumFrames")) declared_frames = count();
-    else if (iequals(keys[i], "DataRate")) data_rate = number();
-    else if (iequals(keys[i], "CameraRate")) camera_rate = number();
-    else if (iequals(keys[i], "Units")) units = value;
+    if (equals_ignore_case(keys[i], "NumMarkers")) marker_count = count();
+    else if (equals_ignore_case(keys[i], "NumFrames")) declared_frames = count();
+    else if (equals_ignore_case(keys[i], "DataRate")) data_rate = number();
+    else if (equals_ignore_case(keys[i], "CameraRate")) camera_rate = number();
+    else if (equals_ignore_case(keys[i], "Units")) units = value;
   }
   if (!marker_count) throw line_error(name, keys_line, "header has no NumMarkers");
   take.rate_hz = data_rate.value_or(camera_rate.value_or(0.0));
@@ -99,7 +91,7 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
   if (units.empty()) take.warnings.push_back(fmt::format("{}: no Units in the header; assuming mm", name));
 
   next_header_line("marker labels");
-  if (fields.empty() || !iequals(fields[0], "Frame#")) {
+  if (fields.empty() || !equals_ignore_case(fields[0], "Frame#")) {
     throw fail(fields.empty() ? line : fields[0], "expected the label line to start with Frame#");
   }
   std::vector<std::string> labels;
@@ -227,7 +219,7 @@ std::string write_trc(const MarkerTake& take, std::string_view file_name, const 
       }
     }
     out += '\n';
-    if (progress && (f % 256 == 255 || f + 1 == take.frames.size())) progress(f + 1, take.frames.size());
+    report_progress(progress, f + 1, take.frames.size());
   }
   return out;
 }

@@ -1,0 +1,155 @@
+// facecap inspect and convert, run as processes the way operators run them.
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+#include <sys/wait.h>
+
+#include "core/io.hpp"
+#include "formats/c3d.hpp"
+#include "formats/livelinkface.hpp"
+#include "tests/formats_test_support.hpp"
+#include "tests/test_support.hpp"
+
+using namespace facecap;
+using namespace facecap::formats;
+
+namespace {
+
+struct Run {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+std::string slurp(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Runs the facecap binary with arguments (single-quoted), capturing stdout and stderr.
+Run run_facecap(const std::filesystem::path& dir, const std::vector<std::string>& args) {
+  std::string command = std::string("'") + FACECAP_BINARY_DIR + "/tools/facecap'";
+  for (const auto& a : args) command += " '" + a + "'";
+  command += " >'" + (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "' </dev/null";
+  const int status = std::system(command.c_str());
+  Run run;
+  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  run.out = slurp(dir / "stdout");
+  run.err = slurp(dir / "stderr");
+  return run;
+}
+
+}  // namespace
+
+TEST_CASE("facecap inspect --json lists format, frames, rate, markers, labels, units, gaps, first frame", "[tools]") {
+  const auto dir = facecap::test::scratch_dir("tool-inspect");
+  const MarkerTake take = facecap::test::synthetic_take(25, 5, 50.0);  // marker 3 missing in frame 0
+  write_take(dir / "take.c3d", take);
+  const Run run = run_facecap(dir, {"inspect", (dir / "take.c3d").string(), "--json"});
+  INFO(run.err);
+  REQUIRE(run.exit_code == 0);
+  const auto j = nlohmann::json::parse(run.out);
+  CHECK(j["format"] == "c3d");
+  CHECK(j["frames"] == 25);
+  CHECK(j["rate_hz"] == 50.0);
+  CHECK(j["markers"] == 5);
+  CHECK(j["labels"] == std::vector<std::string>{"M000", "M001", "M002", "M003", "M004"});
+  CHECK(j["units"] == "mm");
+  CHECK(j["gaps"] == count_gaps(take).missing_samples);
+  REQUIRE(j["first_frame"].size() == 5);
+  CHECK(j["first_frame"][3].is_null());
+  const auto& first = take.frames[0].markers;
+  for (std::size_t k = 0; k < 5; ++k) {
+    if (first[k].present()) {
+      CHECK(j["first_frame"][k][0].get<double>() == Approx(first[k].position.x()).margin(1e-4));
+      CHECK(j["first_frame"][k][2].get<double>() == Approx(first[k].position.z()).margin(1e-4));
+    } else {
+      CHECK(j["first_frame"][k].is_null());
+    }
+  }
+}
+
+TEST_CASE("facecap inspect reads Live Link Face CSV and recordings", "[tools]") {
+  const auto dir = facecap::test::scratch_dir("tool-inspect-kinds");
+  FaceTake face;
+  for (int i = 0; i < 6; ++i) {
+    FaceFrame& f = face.frames.emplace_back();
+    f.timecode = *parse_livelink_timecode(fmt::format("01:00:00:{:02}.000", i));
+    f.tracked = i != 2;
+    f.weights.fill(f.tracked ? 0.5f : NAN);
+  }
+  const std::string csv = write_livelinkface(face);
+  facecap::test::write_text(dir / "face.csv", csv);
+  const Run csv_run = run_facecap(dir, {"inspect", (dir / "face.csv").string(), "--json"});
+  INFO(csv_run.err);
+  REQUIRE(csv_run.exit_code == 0);
+  const auto j = nlohmann::json::parse(csv_run.out);
+  CHECK(j["format"] == "livelinkface");
+  CHECK(j["frames"] == 6);
+  CHECK(j["gaps"] == 1);
+  CHECK(j["rate_hz"] == 60.0);
+  CHECK(j["first_weights"]["JawOpen"] == 0.5);
+
+  write_take(dir / "take.fcrec", facecap::test::synthetic_take(10, 2));
+  const Run rec_run = run_facecap(dir, {"inspect", (dir / "take.fcrec").string()});
+  INFO(rec_run.err);
+  REQUIRE(rec_run.exit_code == 0);
+  CHECK(rec_run.out.find("format    fcrec") != std::string::npos);
+  CHECK(rec_run.out.find("frames    10") != std::string::npos);
+  CHECK(rec_run.out.find("M001") != std::string::npos);
+}
+
+TEST_CASE("facecap convert C3D -> TRC -> fcrec keeps the take, progress on request", "[tools]") {
+  const auto dir = facecap::test::scratch_dir("tool-convert");
+  const MarkerTake take = facecap::test::synthetic_take(1200, 4);
+  write_take(dir / "in.c3d", take);
+  const Run to_trc = run_facecap(dir, {"convert", (dir / "in.c3d").string(), (dir / "out.trc").string(), "--progress"});
+  INFO(to_trc.err);
+  REQUIRE(to_trc.exit_code == 0);
+  CHECK(to_trc.out.find("1200 frames, 4 markers") != std::string::npos);
+  CHECK(to_trc.err.find("writing out.trc: 100% (1200/1200 frames") != std::string::npos);
+  const Run to_rec = run_facecap(dir, {"convert", (dir / "out.trc").string(), (dir / "out.fcrec").string()});
+  REQUIRE(to_rec.exit_code == 0);
+  CHECK(to_rec.err.empty());  // no terminal, no --progress: no bar
+  facecap::test::require_same_points(take, read_take(dir / "out.fcrec"), 1e-4);
+
+  const Run refused = run_facecap(dir, {"convert", (dir / "in.c3d").string(), (dir / "out.trc").string()});
+  CHECK(refused.exit_code == 1);
+  CHECK(refused.err.find("out.trc: exists; pass --force") != std::string::npos);
+  CHECK(run_facecap(dir, {"convert", (dir / "in.c3d").string(), (dir / "out.trc").string(), "--force"}).exit_code == 0);
+}
+
+TEST_CASE("facecap inspect and convert report bad input with file and place", "[tools]") {
+  const auto dir = facecap::test::scratch_dir("tool-errors");
+  auto bytes = write_c3d(facecap::test::synthetic_take(5, 2));
+  bytes.resize(bytes.size() - 512);  // data cut short
+  write_file_atomically(dir / "short.c3d", bytes);
+  const Run run = run_facecap(dir, {"inspect", (dir / "short.c3d").string()});
+  CHECK(run.exit_code == 1);
+  CHECK(run.err.find("short.c3d @ byte 1024: data section holds 0 complete frames") != std::string::npos);
+  CHECK(run.out.empty());
+
+  const Run csv = run_facecap(dir, {"convert", (dir / "short.c3d").string(), (dir / "x.csv").string()});
+  CHECK(csv.exit_code == 1);
+  CHECK(csv.err.find("output must end in .c3d, .trc or .fcrec") != std::string::npos);
+}
+
+TEST_CASE("facecap inspect on shared data: Eb015pi JSON and --time", "[tools][shared]") {
+  FACECAP_REQUIRE_SHARED_DATA(path, "c3d/Eb015pi.c3d");
+  const auto dir = facecap::test::scratch_dir("tool-inspect-shared");
+  const Run run = run_facecap(dir, {"inspect", path.string(), "--json", "--time", "--repeat", "3"});
+  INFO(run.err);
+  REQUIRE(run.exit_code == 0);
+  const auto j = nlohmann::json::parse(run.out);
+  CHECK(j["frames"] == 450);
+  CHECK(j["markers"] == 26);
+  CHECK(j["gaps"] == 226);
+  CHECK(j["labels"][0] == "RFT1");
+  CHECK(j["first_frame"][0][0].get<double>() == Approx(248.583).margin(1e-3));
+  CHECK(j["read_ms"]["reads"] == 3);
+  CHECK(j["read_ms"]["min"].get<double>() > 0.0);
+}

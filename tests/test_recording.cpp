@@ -1,0 +1,304 @@
+// .fcrec recordings: round trip, index, crash safety (truncation at every byte), versions.
+#include <algorithm>
+#include <cstring>
+
+#include <catch2/catch.hpp>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+#include "formats/recording.hpp"
+#include "tests/formats_test_support.hpp"
+#include "tests/test_support.hpp"
+
+using namespace facecap;
+using namespace facecap::formats;
+
+namespace {
+
+RecordingHeader test_header() {
+  RecordingHeader h;
+  h.rig_name = "ict-narrow";
+  h.rig_hash = 0x0123456789abcdefull;
+  h.source_description = "sim: 3 markers";
+  h.calibration = "[calibration]\nscale = 1.25\n";
+  h.units = "mm";
+  h.rate_hz = 120.0;
+  h.created_unix_ns = 1'700'000'000'000'000'000;
+  h.marker_labels = {"nose", "chin", "brow"};
+  h.shape_names = {"jawOpen", "eyeBlink_L"};
+  return h;
+}
+
+MarkerFrame test_marker_frame(int64_t i) {
+  MarkerFrame f;
+  f.frame_no = 100 + i;
+  f.source_time_ns = i * 8'333'333;
+  f.receive_time_ns = 5'000'000'000 + i * 8'400'000;
+  f.timecode = Timecode{1, 2, 3, uint8_t(i % 60), 0.5f, 60};
+  for (int k = 0; k < 3; ++k) {
+    Marker m;
+    m.id = k + 10;
+    m.label.assign(test_header().marker_labels[std::size_t(k)]);
+    m.position = Eigen::Vector3d(double(i) + 0.125 * k, -double(k), 1e-3 * double(i));
+    if ((i + k) % 4 == 0) set_missing(m);
+    f.markers.push_back(m);
+  }
+  return f;
+}
+
+SolvedFrame test_solved_frame(int64_t i) {
+  SolvedFrame f;
+  f.resize(2, 4);
+  f.frame_no = 100 + i;
+  f.source_time_ns = i * 8'333'333;
+  f.receive_time_ns = 7;
+  f.solve_start_ns = 1000 + i;
+  f.solve_end_ns = 2000 + i;
+  f.head_rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.1 * double(i), Eigen::Vector3d::UnitY()));
+  f.head_translation = Eigen::Vector3d(1, 2, double(i));
+  f.weights << 0.25f * float(i), 1.0f;
+  for (Eigen::Index v = 0; v < 4; ++v) f.vertices.col(v) = Eigen::Vector3f(float(v), float(i), -1.0f);
+  for (std::size_t s = 0; s < f.stage_ns.size(); ++s) f.stage_ns[s] = int64_t(s) * 10 + i;
+  f.collision_constraints = 3;
+  f.markers_used = 2;
+  f.flags = kSolvedHeadPoseHeld;
+  return f;
+}
+
+void check_marker_frame(const MarkerFrame& got, const MarkerFrame& want) {
+  CHECK(got.frame_no == want.frame_no);
+  CHECK(got.source_time_ns == want.source_time_ns);
+  CHECK(got.receive_time_ns == want.receive_time_ns);
+  CHECK(got.timecode == want.timecode);
+  REQUIRE(got.markers.size() == want.markers.size());
+  for (std::size_t k = 0; k < got.markers.size(); ++k) {
+    CHECK(got.markers[k].id == want.markers[k].id);
+    CHECK(got.markers[k].label == want.markers[k].label);
+    CHECK(got.markers[k].flags == want.markers[k].flags);
+    if (want.markers[k].present()) CHECK(got.markers[k].position == want.markers[k].position);
+  }
+}
+
+void check_solved_frame(const SolvedFrame& got, const SolvedFrame& want) {
+  CHECK(got.frame_no == want.frame_no);
+  CHECK(got.solve_end_ns == want.solve_end_ns);
+  CHECK(got.head_rotation.coeffs() == want.head_rotation.coeffs());
+  CHECK(got.head_translation == want.head_translation);
+  CHECK(got.weights == want.weights);
+  CHECK(got.vertices == want.vertices);
+  CHECK(got.stage_ns == want.stage_ns);
+  CHECK(got.collision_constraints == want.collision_constraints);
+  CHECK(got.markers_used == want.markers_used);
+  CHECK(got.flags == want.flags);
+}
+
+// A small recording: 3 marker frames and 2 solved frames, interleaved.
+std::filesystem::path write_small_recording(const std::filesystem::path& dir) {
+  const auto path = dir / "small.fcrec";
+  RecordingWriter writer(path, test_header());
+  for (int64_t i = 0; i < 3; ++i) {
+    writer.append_marker_frame(test_marker_frame(i));
+    if (i < 2) writer.append_solved_frame(test_solved_frame(i));
+  }
+  writer.close();
+  return path;
+}
+
+}  // namespace
+
+TEST_CASE("Recording: header and frames round-trip through the index", "[recording]") {
+  const auto path = write_small_recording(facecap::test::scratch_dir("recording-roundtrip"));
+  const RecordingReader reader(path);
+  CHECK_FALSE(reader.index_rebuilt());
+  CHECK_FALSE(reader.truncated());
+  const RecordingHeader& h = reader.header();
+  const RecordingHeader want = test_header();
+  CHECK(h.format_version == kRecordingFormatVersion);
+  CHECK(h.min_reader_version == kRecordingReaderVersion);
+  CHECK(h.rig_name == want.rig_name);
+  CHECK(h.rig_hash == want.rig_hash);
+  CHECK(h.source_description == want.source_description);
+  CHECK(h.calibration == want.calibration);
+  CHECK(h.units == want.units);
+  CHECK(h.rate_hz == want.rate_hz);
+  CHECK(h.created_unix_ns == want.created_unix_ns);
+  CHECK(h.marker_labels == want.marker_labels);
+  CHECK(h.shape_names == want.shape_names);
+  REQUIRE(reader.marker_frame_count() == 3);
+  REQUIRE(reader.solved_frame_count() == 2);
+  CHECK(reader.index().size() == 5);
+  MarkerFrame marker_frame;
+  SolvedFrame solved_frame;
+  for (std::size_t i = 0; i < 3; ++i) {
+    reader.read_marker_frame(i, marker_frame);
+    check_marker_frame(marker_frame, test_marker_frame(int64_t(i)));
+  }
+  for (std::size_t i = 0; i < 2; ++i) {
+    reader.read_solved_frame(i, solved_frame);
+    check_solved_frame(solved_frame, test_solved_frame(int64_t(i)));
+  }
+  CHECK_THROWS_AS(reader.read_marker_frame(3, marker_frame), Error);
+}
+
+TEST_CASE("Recording cut off at every byte reads back up to its last complete chunk", "[recording]") {
+  const auto bytes = read_file_bytes(write_small_recording(facecap::test::scratch_dir("recording-truncate")));
+  // Where each frame chunk ends: where the next begins, and the last where INDX begins
+  // (the TAIL's first payload word, 16 bytes before the end of a closed file).
+  const RecordingReader full(bytes, "full");
+  uint64_t index_offset = 0;
+  std::memcpy(&index_offset, bytes.data() + bytes.size() - 16, 8);
+  std::vector<uint64_t> chunk_end;
+  for (std::size_t c = 0; c < full.index().size(); ++c) {
+    chunk_end.push_back(c + 1 < full.index().size() ? full.index()[c + 1].offset : index_offset);
+  }
+  const uint64_t header_end = full.index().front().offset;
+
+  MarkerFrame marker_frame;
+  SolvedFrame solved_frame;
+  std::size_t refused = 0;
+  for (std::size_t cut = 0; cut < bytes.size(); ++cut) {
+    INFO("cut at byte " << cut << " of " << bytes.size());
+    const std::span<const char> part(bytes.data(), cut);
+    if (cut < header_end) {
+      CHECK_THROWS_AS(RecordingReader(part, "cut"), Error);  // no complete header: nothing to replay
+      ++refused;
+      continue;
+    }
+    const RecordingReader reader(part, "cut");
+    std::size_t want_markers = 0, want_solved = 0;
+    for (std::size_t c = 0; c < chunk_end.size(); ++c) {
+      if (chunk_end[c] <= cut) ++(full.index()[c].kind == ChunkKind::kMarkerFrame ? want_markers : want_solved);
+    }
+    CHECK(reader.index_rebuilt());
+    REQUIRE(reader.header().rig_name == "ict-narrow");
+    REQUIRE(reader.marker_frame_count() == want_markers);
+    REQUIRE(reader.solved_frame_count() == want_solved);
+    const bool at_boundary = cut == header_end || cut == bytes.size() - 32 /* INDX end, TAIL start */ ||
+                             std::find(chunk_end.begin(), chunk_end.end(), cut) != chunk_end.end();
+    CHECK(reader.truncated() == !at_boundary);
+    for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) {
+      reader.read_marker_frame(i, marker_frame);
+      check_marker_frame(marker_frame, test_marker_frame(int64_t(i)));
+    }
+    for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) {
+      reader.read_solved_frame(i, solved_frame);
+      check_solved_frame(solved_frame, test_solved_frame(int64_t(i)));
+    }
+  }
+  CHECK(refused == header_end);
+  CHECK(header_end > 100);  // the header holds the calibration text and names
+}
+
+TEST_CASE("Recording: a cut exactly at a chunk boundary is not flagged truncated", "[recording]") {
+  const auto bytes = read_file_bytes(write_small_recording(facecap::test::scratch_dir("recording-boundary")));
+  const RecordingReader full(bytes, "full");
+  const uint64_t second = full.index()[1].offset;
+  const RecordingReader at_boundary(std::span<const char>(bytes).first(second), "boundary");
+  CHECK_FALSE(at_boundary.truncated());
+  CHECK(at_boundary.marker_frame_count() == 1);
+  const RecordingReader inside(std::span<const char>(bytes).first(second + 3), "inside");
+  CHECK(inside.truncated());
+  CHECK(inside.stop_reason() == fmt::format("incomplete chunk header at byte {}", second));
+}
+
+TEST_CASE("Recording: flushed frames are readable while the writer is still open", "[recording]") {
+  const auto path = facecap::test::scratch_dir("recording-flush") / "live.fcrec";
+  RecordingWriter writer(path, test_header());
+  writer.append_marker_frame(test_marker_frame(0));
+  writer.append_marker_frame(test_marker_frame(1));
+  CHECK(RecordingReader(path).marker_frame_count() == 0);  // still buffered
+  writer.flush();
+  {
+    const RecordingReader reader(path);
+    CHECK(reader.index_rebuilt());
+    CHECK_FALSE(reader.truncated());
+    CHECK(reader.marker_frame_count() == 2);
+  }
+  writer.append_solved_frame(test_solved_frame(0));
+  writer.close();
+  const RecordingReader reader(path);
+  CHECK_FALSE(reader.index_rebuilt());
+  CHECK(reader.marker_frame_count() == 2);
+  CHECK(reader.solved_frame_count() == 1);
+  CHECK_THROWS_AS(writer.append_marker_frame(test_marker_frame(2)), Error);
+}
+
+TEST_CASE("Recording: existing files are not overwritten unless asked", "[recording]") {
+  const auto path = write_small_recording(facecap::test::scratch_dir("recording-exists"));
+  CHECK_THROWS_WITH(RecordingWriter(path, test_header()), Catch::Contains("cannot create recording") && Catch::Contains("exists"));
+  RecordingWriter(path, test_header(), RecordingWriter::Options{.overwrite = true}).close();
+  CHECK(RecordingReader(path).marker_frame_count() == 0);
+}
+
+TEST_CASE("Recording: damage is found by checksums", "[recording]") {
+  const auto bytes = read_file_bytes(write_small_recording(facecap::test::scratch_dir("recording-damage")));
+  const RecordingReader full(bytes, "full");
+  const uint64_t second = full.index()[1].offset;  // the first solved frame
+
+  auto flipped = bytes;
+  flipped[second + 40] ^= 0x10;  // inside the payload
+  const RecordingReader with_index(flipped, "flipped.fcrec");
+  CHECK_FALSE(with_index.index_rebuilt());
+  SolvedFrame solved;
+  CHECK_THROWS_WITH(with_index.read_solved_frame(0, solved),
+                    Catch::Contains(fmt::format("checksum mismatch in chunk SLVF at byte {}", second)));
+
+  // Without the tail the scan stops at the damaged chunk and keeps what came before.
+  const RecordingReader scanned(std::span<const char>(flipped).first(flipped.size() - 8), "flipped.fcrec");
+  CHECK(scanned.index_rebuilt());
+  CHECK(scanned.truncated());
+  CHECK(scanned.marker_frame_count() == 1);
+  CHECK(scanned.solved_frame_count() == 0);
+}
+
+TEST_CASE("Recording: a file for a newer reader is refused; a bad magic is named", "[recording]") {
+  auto bytes = read_file_bytes(write_small_recording(facecap::test::scratch_dir("recording-version")));
+  bytes[10] = char(kRecordingReaderVersion + 1);
+  CHECK_THROWS_WITH(RecordingReader(bytes, "future.fcrec"),
+                    Catch::Contains("future.fcrec @ byte 10") && Catch::Contains("needs reader version 2"));
+  bytes[0] = 'X';
+  CHECK_THROWS_WITH(RecordingReader(bytes, "other.bin"), Catch::Contains("not a facecap recording"));
+}
+
+TEST_CASE("Recording <-> take: labels become slots, absent markers missing", "[recording]") {
+  const auto dir = facecap::test::scratch_dir("recording-take");
+  const MarkerTake take = facecap::test::synthetic_take(40, 6, 100.0);
+  write_recording(dir / "take.fcrec", take, "test");
+  const MarkerTake back = take_from_recording(RecordingReader(dir / "take.fcrec"));
+  CHECK(back.format == TakeFormat::kRecording);
+  CHECK(back.rate_hz == 100.0);
+  CHECK(back.units == "mm");
+  CHECK(back.first_frame == 1);
+  facecap::test::require_same_points(take, back, 0.0);
+
+  // A live source whose marker set changes: a marker appears late, one has no label.
+  RecordingHeader header;
+  {
+    RecordingWriter writer(dir / "live.fcrec", header);
+    MarkerFrame f0;
+    f0.frame_no = 5;
+    f0.source_time_ns = 0;
+    Marker a;
+    a.label.assign("a");
+    a.position = Eigen::Vector3d(1, 2, 3);
+    f0.markers = {a};
+    writer.append_marker_frame(f0);
+    MarkerFrame f1 = f0;
+    f1.frame_no = 6;
+    f1.source_time_ns = 10'000'000;
+    Marker b;
+    b.id = 42;
+    b.position = Eigen::Vector3d(4, 5, 6);
+    f1.markers = {b};
+    writer.append_marker_frame(f1);
+  }  // the destructor closes the file
+  const MarkerTake live = take_from_recording(RecordingReader(dir / "live.fcrec"));
+  CHECK(live.labels == std::vector<std::string>{"a", "id_42"});
+  REQUIRE(live.frames.size() == 2);
+  CHECK(live.frames[0].markers[0].position == Eigen::Vector3d(1, 2, 3));
+  CHECK_FALSE(live.frames[0].markers[1].present());
+  CHECK_FALSE(live.frames[1].markers[0].present());
+  CHECK(live.frames[1].markers[1].position == Eigen::Vector3d(4, 5, 6));
+  CHECK(live.rate_hz == Approx(100.0));  // from the timestamps: the header had none
+  CHECK(count_gaps(live).missing_samples == 2);
+}
