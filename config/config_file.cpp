@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <set>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <toml++/toml.h>
@@ -17,9 +18,12 @@ namespace {
 
 std::size_t key_index(const KeySpec& key) { return std::size_t(&key - config_schema().data()); }
 
+// Line and column only where they mean something (not for --set overrides).
 ErrorLocation location_of(const toml::node& node, const std::string& file, std::string_view key_path) {
   const auto& begin = node.source().begin;
-  return ErrorLocation{.file = file, .line = int64_t(begin.line), .column = int64_t(begin.column), .key = std::string(key_path)};
+  const bool positioned = file != "--set" && begin.line > 0;
+  return ErrorLocation{.file = file, .line = positioned ? int64_t(begin.line) : -1,
+                       .column = positioned ? int64_t(begin.column) : -1, .key = std::string(key_path)};
 }
 
 // "string \"fast\"", "integer 5", ... for messages.
@@ -83,16 +87,20 @@ class Loader {
     }
   }
 
-  // Rules that involve more than one key, and files that must exist.
-  void check_across_keys() {
-    const DaemonConfig& c = out_.values;
+  // Every input file named must exist (checked even when other keys have problems).
+  void check_input_files() {
     for (const KeySpec& key : config_schema()) {
       if (!key.names_input_file) continue;
-      const std::string value = std::get<std::string>(get_value(key, c));
+      const std::string value = std::get<std::string>(get_value(key, out_.values));
       if (value.empty() || value == "builtin") continue;
       std::error_code ec;
       if (!fs::exists(value, ec)) problem(where(key), fmt::format("\"{}\" does not exist", value));
     }
+  }
+
+  // Rules that involve more than one key.
+  void check_across_keys() {
+    const DaemonConfig& c = out_.values;
     const drivers::DriverEntry* driver = drivers::find_driver(c.source.driver);
     if (c.source.driver == "replay" && c.source.replay.file.empty())
       problem(where("source.replay.file"), "source.driver is \"replay\" but no file is given");
@@ -316,8 +324,15 @@ LoadedConfig load_config(const std::string& file, const std::vector<std::string>
   }
   for (const std::string& text : overrides)
     loader.apply_table(parse_override(text, loader), "", Origin::kCommandLine, "--set", fs::current_path());
+  loader.check_input_files();
   if (loader.problems().empty()) loader.check_across_keys();
-  if (!loader.problems().empty()) throw ConfigError(std::move(loader.problems()));
+  if (!loader.problems().empty()) {
+    auto& problems = loader.problems();
+    std::stable_sort(problems.begin(), problems.end(), [](const Error& a, const Error& b) {
+      return std::tie(a.where().file, a.where().line) < std::tie(b.where().file, b.where().line);
+    });
+    throw ConfigError(std::move(problems));
+  }
   return out;
 }
 

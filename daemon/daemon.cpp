@@ -133,6 +133,7 @@ void Daemon::start() {
       r.header.calibration.assign(bytes.begin(), bytes.end());
     }
     recorder_ = std::make_unique<Recorder>(r, drivers::make_marker_frame(source_->info().labels), rig_->shape_count());
+    recording_file_ = recorder_->file();
     spdlog::info("recording to {}", recorder_->file().string());
   }
 
@@ -215,6 +216,7 @@ bool Daemon::reload() {
   } catch (const Error& e) {
     spdlog::error("reload rejected; the running configuration stays:\n{}", e.what());
     notifier_.ready(last_status_ + " (reload rejected: invalid configuration)");
+    reloads_rejected_.fetch_add(1, std::memory_order_release);
     return false;
   }
   bool rebuild = false;
@@ -242,6 +244,7 @@ bool Daemon::reload() {
     });
   }
   notifier_.ready(last_status_);
+  reloads_accepted_.fetch_add(1, std::memory_order_release);
   return true;
 }
 
@@ -270,7 +273,7 @@ void Daemon::supervise_once(int64_t now_ns) {
     spdlog::info("ready: first frame solved {:.0f} ms after the loop started", ms(now_ns - start_ns_));
   }
   // The watchdog is fed only while the loop keeps ticking: a stuck solve thread lets it expire.
-  if (notifier_.watchdog_interval_ns() > 0 && now_ns >= next_watchdog_ns_) {
+  if (ready_sent_ && notifier_.watchdog_interval_ns() > 0 && now_ns >= next_watchdog_ns_) {
     const uint64_t ticks = loop_->counters().ticks.load(std::memory_order_relaxed);
     if (ticks != ticks_at_last_watchdog_) {
       notifier_.watchdog();
@@ -314,6 +317,7 @@ int Daemon::run() {
       timespec slice{0, long(kSuperviseSliceNs)};
       nanosleep(&slice, nullptr);
     }
+    if (reload_requested_.exchange(false, std::memory_order_acq_rel)) reload();
     const int64_t now = monotonic_now_ns();
     supervise_once(now);
     if (stop_requested_.load(std::memory_order_acquire)) reason = "stop requested";

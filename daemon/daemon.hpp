@@ -60,21 +60,25 @@ class Daemon {
   int run();
   // Any thread.
   void request_stop() noexcept { stop_requested_.store(true, std::memory_order_release); }
-  // Re-reads the configuration: an invalid one is rejected and the running one kept.
-  // Returns whether it was accepted.
-  bool reload();
+  // Asks the supervising thread to reload, as SIGHUP does. Any thread.
+  void request_reload() noexcept { reload_requested_.store(true, std::memory_order_release); }
+  uint64_t reloads_accepted() const noexcept { return reloads_accepted_.load(std::memory_order_acquire); }
+  uint64_t reloads_rejected() const noexcept { return reloads_rejected_.load(std::memory_order_acquire); }
 
   const config::DaemonConfig& config() const noexcept { return config_.values; }
   const SolveLoop* loop() const noexcept { return loop_.get(); }
   drivers::MarkerSource* source() noexcept { return source_.get(); }
   const Rig& rig() const noexcept { return *rig_; }
   const MarkerCalibration& calibration() const noexcept { return calibration_; }
-  std::filesystem::path recording_file() const { return recorder_ ? recorder_->file() : std::filesystem::path(); }
+  // The run's recording (empty when not recording); still known after the run.
+  const std::filesystem::path& recording_file() const noexcept { return recording_file_; }
   Figures figures_since_start() const;
   std::string status_line(const Figures& window) const;
 
  private:
   struct Sample;
+  // Re-reads the configuration: an invalid one is rejected and the running one kept.
+  bool reload();
   Sample take_sample() const;
   Figures figures_between(const Sample& from, const Sample& to) const;
   void supervise_once(int64_t now_ns);
@@ -91,10 +95,13 @@ class Daemon {
   std::unique_ptr<drivers::MarkerSource> source_;
   std::unique_ptr<ShmWriter> shm_;
   std::unique_ptr<Recorder> recorder_;
+  std::filesystem::path recording_file_;
   std::unique_ptr<SolveLoop> loop_;  // last: it borrows the members above
   std::future<std::unique_ptr<SolvePipeline>> rebuild_;
 
   std::atomic<bool> stop_requested_{false};
+  std::atomic<bool> reload_requested_{false};
+  std::atomic<uint64_t> reloads_accepted_{0}, reloads_rejected_{0};
   bool ready_sent_ = false;
   bool realtime_logged_ = false;
   std::unique_ptr<Sample> start_sample_, status_sample_, stats_sample_;

@@ -83,6 +83,10 @@ ShmWriter::ShmWriter(const ShmOutputSpec& spec) : name_(shm_object_name(spec.nam
   if (fd < 0) throw Error(fmt::format("cannot create shared memory {}: {}", name_, std::strerror(errno)));
   // The umask may have narrowed the mode; readers in the group need exactly 0640.
   const bool sized = fchmod(fd, kSegmentMode) == 0 && ftruncate(fd, off_t(geometry.total_bytes)) == 0;
+  if (struct stat st {}; fstat(fd, &st) == 0) {
+    device_ = st.st_dev;
+    inode_ = st.st_ino;
+  }
   void* p = sized ? mmap(nullptr, geometry.total_bytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0) : MAP_FAILED;
   const int saved_errno = errno;
   close(fd);
@@ -128,7 +132,12 @@ ShmWriter::~ShmWriter() {
   if (!base_) return;
   mark_stopped();
   munmap(base_, size_);
-  shm_unlink(name_.c_str());
+  const int fd = shm_open(name_.c_str(), O_RDONLY, 0);
+  if (fd < 0) return;
+  struct stat st {};
+  const bool still_ours = fstat(fd, &st) == 0 && st.st_dev == device_ && st.st_ino == inode_;
+  close(fd);
+  if (still_ours) shm_unlink(name_.c_str());
 }
 
 shm::SlotHeader& ShmWriter::slot_for(uint64_t sequence) noexcept {

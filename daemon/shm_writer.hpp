@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include <sys/types.h>
+
 #include "client/facecap_shm_layout.hpp"
 #include "core/frame.hpp"
 
@@ -27,7 +29,8 @@ class ShmWriter {
   // Creates the segment with O_EXCL and mode 0640. A segment left behind by a writer that
   // is dead (or stopped beating) is removed first; a live one is an Error. Not RT-safe.
   explicit ShmWriter(const ShmOutputSpec& spec);
-  // Marks the writer stopped, unmaps and unlinks. Not RT-safe.
+  // Marks the writer stopped, unmaps, and unlinks the name unless a newer writer has
+  // already replaced this segment under it. Not RT-safe.
   ~ShmWriter();
   ShmWriter(const ShmWriter&) = delete;
   ShmWriter& operator=(const ShmWriter&) = delete;
@@ -55,6 +58,8 @@ class ShmWriter {
   std::string name_;
   unsigned char* base_ = nullptr;
   std::size_t size_ = 0;
+  dev_t device_ = 0;
+  ino_t inode_ = 0;
   shm::Header* header_ = nullptr;
   uint64_t published_ = 0;
 };

@@ -25,17 +25,19 @@ MarkerSet default_marker_set(const Rig& rig, int face_markers, int head_markers)
     throw Error(fmt::format("head stabilisation needs at least 3 head markers, {} asked (0 turns it off)", head_markers));
   MarkerSet set;
   set.face = spread_marker_layout(rig, face_markers);
-  // A headband: points on an arc over the brow, alternating height and depth so that no
-  // three are collinear and the rigid fit is well conditioned.
+  // A rigid head rig: points on an arc across the front of the head, alternating between
+  // above the brow and temple height (and depth), so that the rigid fit is well
+  // conditioned about every axis, not only about the vertical.
   const BoundingBox box = bounding_box(rig.neutral);
   const Eigen::Vector3d size = box.size();
   const double centre_x = 0.5 * (box.min.x() + box.max.x());
   const double centre_z = 0.5 * (box.min.z() + box.max.z());
   for (int i = 0; i < head_markers; ++i) {
-    const double angle = std::numbers::pi * (0.15 + 0.7 * (i + 0.5) / head_markers);  // across the front
-    const double y = box.max.y() + (i % 2 == 0 ? 0.08 : 0.0) * size.y();
-    const Eigen::Vector3d p(centre_x - 0.55 * size.x() * std::cos(angle), y,
-                            centre_z + 0.5 * size.z() * std::sin(angle) - (i % 2 == 0 ? 0.0 : 0.2) * size.z());
+    const double angle = std::numbers::pi * (0.15 + 0.7 * (i + 0.5) / head_markers);
+    const bool high = i % 2 == 0;
+    const Eigen::Vector3d p(centre_x - 0.55 * size.x() * std::cos(angle),
+                            box.max.y() + (high ? 0.1 : -0.3) * size.y(),
+                            centre_z + 0.5 * size.z() * std::sin(angle) - (high ? 0.0 : 0.6) * size.z());
     set.head.push_back({fmt::format("H{}", i), p});
   }
   return set;
