@@ -80,7 +80,7 @@ const std::vector<KeySpec>& schema_rows() {
                       "restarts load the rig in milliseconds."},
 
       {FACECAP_KEY(calibration.file), .default_value = std::string(),
-       .names_input_file = true,
+       .reload = Reload::kRebuild, .names_input_file = true,
        .description = "Marker calibration (TOML, see docs/config.md): which rig point each marker sits on, the head "
                       "markers, and the transform from marker space to rig space. Empty: the default marker set, in "
                       "rig space, which the sim produces."},

@@ -3,6 +3,7 @@
 #include <cerrno>
 #include <csignal>
 #include <fstream>
+#include <utility>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -235,27 +236,39 @@ bool Daemon::reload() {
     spdlog::info("{} = {}", key->path, config::format_value(value));
   }
   apply_live_settings();
-  if (rebuild) {
-    // Built aside; the loop adopts it between two frames once it is ready.
-    rebuild_ = std::async(std::launch::async, [rig = rig_, calibration = calibration_, info = source_->info(),
-                                               solver = config_.values.solver,
-                                               stabilise = config_.values.calibration.stabilise_head] {
-      return std::make_unique<SolvePipeline>(*rig, calibration, info, solver, stabilise);
-    });
-  }
+  if (rebuild) start_rebuild();
   notifier_.ready(last_status_);
   reloads_accepted_.fetch_add(1, std::memory_order_release);
   return true;
 }
 
+// The new calibration and solver are built on another thread (seconds for a large rig);
+// the loop adopts the result between two frames.
+void Daemon::start_rebuild() {
+  if (rebuild_.valid()) {
+    rebuild_again_ = true;  // after the one in flight, with the configuration as it is then
+    return;
+  }
+  spdlog::info("rebuilding the solver aside");
+  rebuild_ = std::async(std::launch::async, [rig = rig_, info = source_->info(), solver = config_.values.solver,
+                                             section = config_.values.calibration] {
+    MarkerCalibration calibration = load_calibration(section, *rig);
+    auto pipeline = std::make_unique<SolvePipeline>(*rig, calibration, info, solver, section.stabilise_head);
+    return Rebuilt{std::move(pipeline), std::move(calibration)};
+  });
+}
+
 void Daemon::adopt_rebuilt_pipeline() {
   if (!rebuild_.valid() || rebuild_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
   try {
-    loop_->offer_pipeline(rebuild_.get());
-    spdlog::info("new solver handed to the loop");
+    Rebuilt rebuilt = rebuild_.get();
+    calibration_ = std::move(rebuilt.calibration);
+    loop_->offer_pipeline(std::move(rebuilt.pipeline));
+    spdlog::info("new solver handed to the loop ({}, {})", config_.values.solver.method, calibration_.origin);
   } catch (const std::exception& e) {
     spdlog::error("rebuilding the solver failed; the running one stays: {}", e.what());
   }
+  if (std::exchange(rebuild_again_, false)) start_rebuild();
 }
 
 void Daemon::supervise_once(int64_t now_ns) {

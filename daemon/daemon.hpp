@@ -82,6 +82,7 @@ class Daemon {
   Sample take_sample() const;
   Figures figures_between(const Sample& from, const Sample& to) const;
   void supervise_once(int64_t now_ns);
+  void start_rebuild();
   void adopt_rebuilt_pipeline();
   void apply_live_settings();
   void shutdown(const std::string& reason);
@@ -97,7 +98,12 @@ class Daemon {
   std::unique_ptr<Recorder> recorder_;
   std::filesystem::path recording_file_;
   std::unique_ptr<SolveLoop> loop_;  // last: it borrows the members above
-  std::future<std::unique_ptr<SolvePipeline>> rebuild_;
+  struct Rebuilt {
+    std::unique_ptr<SolvePipeline> pipeline;
+    MarkerCalibration calibration;
+  };
+  std::future<Rebuilt> rebuild_;  // in flight
+  bool rebuild_again_ = false;    // a reload arrived while one was in flight
 
   std::atomic<bool> stop_requested_{false};
   std::atomic<bool> reload_requested_{false};
