@@ -11,7 +11,7 @@ void add_inspect_command(CLI::App& app, int& exit_code);
 void add_convert_command(CLI::App& app, int& exit_code);
 
 void add_subscribe_command(CLI::App& app, int& exit_code);
-void add_demo_command(CLI::App& app, int& exit_code);
+void add_daemon_demo_command(CLI::App& app, int& exit_code);
 void add_sim_take_command(CLI::App& app, int& exit_code);
 
 }  // namespace facecap::tools

@@ -20,7 +20,7 @@ int main(int argc, char** argv) {
   facecap::tools::add_convert_command(app, exit_code);
   facecap::tools::add_sim_take_command(app, exit_code);
   facecap::tools::add_subscribe_command(app, exit_code);
-  facecap::tools::add_demo_command(app, exit_code);
+  facecap::tools::add_daemon_demo_command(app, exit_code);
 
   try {
     app.parse(argc, argv);

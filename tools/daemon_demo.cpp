@@ -1,4 +1,4 @@
-// facecap demo: starts facecapd on its built-in default (simulated capture of the built-in
+// facecap daemon-demo: starts facecapd on its built-in default (simulated capture of the built-in
 // face, shared-memory output), waits for its READY=1 the way systemd would, subscribes
 // for a few seconds printing live figures, then stops it with SIGTERM.
 #include <cerrno>
@@ -128,9 +128,9 @@ int run_demo(const DemoOptions& options) {
 
 }  // namespace
 
-void add_demo_command(CLI::App& app, int& exit_code) {
+void add_daemon_demo_command(CLI::App& app, int& exit_code) {
   auto opts = std::make_shared<DemoOptions>();
-  auto* cmd = app.add_subcommand("demo", "Run facecapd on its built-in default, show its live output, stop it");
+  auto* cmd = app.add_subcommand("daemon-demo", "Run facecapd on its built-in default as systemd would, watch its live output, stop it");
   cmd->add_option("--seconds", opts->seconds, "How long to watch")->capture_default_str();
   cmd->add_option("--facecapd", opts->facecapd, "The facecapd binary (default: beside facecap, or on PATH)");
   cmd->add_option("--config", opts->config, "A facecapd configuration file instead of the defaults");
