@@ -88,7 +88,8 @@ std::optional<std::string_view> rig_to_arkit_name(std::string_view rig_name) noe
   return std::nullopt;
 }
 
-std::array<std::vector<std::size_t>, kArkitShapeCount> match_arkit_to_rig(std::span<const std::string> rig_shape_names) {
+std::array<std::vector<std::size_t>, kArkitShapeCount> match_arkit_to_rig(
+    std::span<const std::string> rig_shape_names) {
   std::array<std::vector<std::size_t>, kArkitShapeCount> out;
   auto find = [&](std::string_view name) -> std::optional<std::size_t> {
     for (std::size_t i = 0; i < rig_shape_names.size(); ++i) {

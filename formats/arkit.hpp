@@ -24,7 +24,7 @@ extern const std::array<ArkitShapeName, kArkitShapeCount> kArkitShapes;
 // The nine angles (radians) that follow the weights in Live Link Face data.
 inline constexpr std::size_t kLiveLinkAngleCount = 9;
 inline constexpr std::array<std::string_view, kLiveLinkAngleCount> kLiveLinkAngleNames = {
-    "HeadYaw",     "HeadPitch",    "HeadRoll",    "LeftEyeYaw", "LeftEyePitch",
+    "HeadYaw",     "HeadPitch",   "HeadRoll",      "LeftEyeYaw",  "LeftEyePitch",
     "LeftEyeRoll", "RightEyeYaw", "RightEyePitch", "RightEyeRoll"};
 
 // Index in kArkitShapes of an ARKit name, in Live Link's PascalCase ("JawOpen") or

@@ -27,8 +27,8 @@ void ByteReader::fail_at(std::size_t offset, std::string what) const {
 
 void ByteReader::require(std::size_t count, std::string_view what) const {
   if (count > remaining()) {
-    fail(fmt::format("unexpected end of data reading {} ({} bytes needed, {} left of {})", what, count,
-                     remaining(), bytes_.size()));
+    fail(fmt::format("unexpected end of data reading {} ({} bytes needed, {} left of {})", what, count, remaining(),
+                     bytes_.size()));
   }
 }
 

@@ -29,7 +29,10 @@ class ByteReader {
              RealFormat reals = RealFormat::kIeee)
       : bytes_(bytes), name_(std::move(name)), order_(order), reals_(reals) {}
 
-  void set_encoding(ByteOrder order, RealFormat reals) noexcept { order_ = order; reals_ = reals; }
+  void set_encoding(ByteOrder order, RealFormat reals) noexcept {
+    order_ = order;
+    reals_ = reals;
+  }
 
   std::size_t size() const noexcept { return bytes_.size(); }
   std::size_t offset() const noexcept { return offset_; }
@@ -39,7 +42,10 @@ class ByteReader {
 
   // Moves to an absolute offset (may equal size()); throws past the end.
   void seek(std::size_t offset, std::string_view what = "position");
-  void skip(std::size_t count, std::string_view what = "field") { require(count, what); offset_ += count; }
+  void skip(std::size_t count, std::string_view what = "field") {
+    require(count, what);
+    offset_ += count;
+  }
   // Throws unless count more bytes are available at the current offset.
   void require(std::size_t count, std::string_view what) const;
   bool has(std::size_t count) const noexcept { return count <= remaining(); }
@@ -88,7 +94,9 @@ class ByteWriter {
   void zeros(std::size_t count) { out_.insert(out_.end(), count, '\0'); }
   // Overwrites a value written earlier (sizes and offsets known only later).
   template <typename T>
-  void patch(std::size_t offset, T value) noexcept { std::memcpy(out_.data() + offset, &value, sizeof(T)); }
+  void patch(std::size_t offset, T value) noexcept {
+    std::memcpy(out_.data() + offset, &value, sizeof(T));
+  }
 
  private:
   template <typename T>

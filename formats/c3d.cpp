@@ -16,7 +16,7 @@ namespace facecap::formats {
 namespace {
 
 constexpr std::size_t kBlockBytes = 512;
-constexpr uint8_t kHeaderKey = 0x50;  // second byte of every C3D file
+constexpr uint8_t kHeaderKey = 0x50;    // second byte of every C3D file
 constexpr uint8_t kProcessorBase = 83;  // processor byte = 83 + type
 enum class Processor : uint8_t { kIntel = 1, kDec = 2, kMips = 3 };
 constexpr std::size_t kMaxLabelsPerParameter = 255;  // a dimension is one byte
@@ -123,13 +123,14 @@ bool valid_name_char(char c) { return c > ' ' && c < 0x7f; }
 // Walks the linked list of groups and parameters. Damage (a bad name, type, dimension
 // or link) ends the walk with a warning: everything before it is kept, because the
 // entries readers need usually come first and the data section is intact.
-Parameters parse_parameters(ByteReader& reader, std::size_t begin, std::size_t end, std::vector<std::string>& warnings) {
+Parameters parse_parameters(ByteReader& reader, std::size_t begin, std::size_t end,
+                            std::vector<std::string>& warnings) {
   Parameters params;
   std::vector<std::pair<int, std::string>> groups;
   std::size_t at = begin;
   auto damaged = [&](std::size_t offset, const std::string& what) {
-    warnings.push_back(fmt::format("{} @ byte {}: parameter section damaged ({}); ignored from there on",
-                                   reader.name(), offset, what));
+    warnings.push_back(fmt::format("{} @ byte {}: parameter section damaged ({}); ignored from there on", reader.name(),
+                                   offset, what));
   };
   while (at + 2 <= end) {
     reader.seek(at);
@@ -137,9 +138,15 @@ Parameters parse_parameters(ByteReader& reader, std::size_t begin, std::size_t e
     const int8_t id = reader.i8();
     if (name_length_signed == 0) break;  // end marker used by many writers
     const std::size_t name_length = std::size_t(std::abs(int(name_length_signed)));
-    if (id == 0) { damaged(at, "entry with group id 0"); break; }
+    if (id == 0) {
+      damaged(at, "entry with group id 0");
+      break;
+    }
     // name, 2-byte link, and for parameters at least type and dimension count
-    if (at + 2 + name_length + 2 > end) { damaged(at, "entry runs past the parameter section"); break; }
+    if (at + 2 + name_length + 2 > end) {
+      damaged(at, "entry runs past the parameter section");
+      break;
+    }
     std::string name(reader.bytes(name_length));
     if (!std::all_of(name.begin(), name.end(), valid_name_char)) {
       damaged(at, fmt::format("name of {} bytes is not printable text", name_length));
@@ -148,7 +155,10 @@ Parameters parse_parameters(ByteReader& reader, std::size_t begin, std::size_t e
     const std::size_t link_at = reader.offset();
     const int16_t link = reader.i16();
     const std::size_t next = link == 0 ? end : link_at + std::size_t(uint16_t(link));
-    if (link < 0 || next <= link_at) { damaged(link_at, fmt::format("link {} to the next entry points backwards", link)); break; }
+    if (link < 0 || next <= link_at) {
+      damaged(link_at, fmt::format("link {} to the next entry points backwards", link));
+      break;
+    }
 
     if (id < 0) {
       groups.emplace_back(-int(id), std::move(name));
@@ -156,10 +166,14 @@ Parameters parse_parameters(ByteReader& reader, std::size_t begin, std::size_t e
       Parameter p;
       p.group_id = id;
       p.name = std::move(name);
-      if (!reader.has(2)) { damaged(reader.offset(), "truncated parameter"); break; }
+      if (!reader.has(2)) {
+        damaged(reader.offset(), "truncated parameter");
+        break;
+      }
       p.type = reader.i8();
       if (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4) {
-        damaged(reader.offset() - 1, fmt::format("parameter {} has data type {}, expected -1, 1, 2 or 4", p.name, int(p.type)));
+        damaged(reader.offset() - 1,
+                fmt::format("parameter {} has data type {}, expected -1, 1, 2 or 4", p.name, int(p.type)));
         break;
       }
       const uint8_t dim_count = reader.u8();
@@ -174,7 +188,8 @@ Parameters parse_parameters(ByteReader& reader, std::size_t begin, std::size_t e
       p.data_offset = reader.offset();
       const std::size_t data_bytes = p.element_count * std::size_t(std::abs(int(p.type)));
       if (data_bytes > end - std::min(end, p.data_offset)) {
-        damaged(p.data_offset, fmt::format("data of parameter {} ({} bytes) runs past the section", p.name, data_bytes));
+        damaged(p.data_offset,
+                fmt::format("data of parameter {} ({} bytes) runs past the section", p.name, data_bytes));
         break;
       }
       params.list.push_back(std::move(p));
@@ -209,13 +224,16 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
   if (parameter_block == 0) reader.fail_at(0, "header points to parameter block 0 (blocks count from 1)");
   const std::size_t parameter_start = (std::size_t(parameter_block) - 1) * kBlockBytes;
   if (parameter_start + 4 > bytes.size()) {
-    reader.fail_at(0, fmt::format("parameter block {} lies past the end of the file ({} bytes)", parameter_block, bytes.size()));
+    reader.fail_at(
+        0, fmt::format("parameter block {} lies past the end of the file ({} bytes)", parameter_block, bytes.size()));
   }
   reader.seek(parameter_start + 2);
   const uint8_t parameter_blocks = reader.u8();
   const uint8_t processor_byte = reader.u8();
   if (processor_byte < kProcessorBase + 1 || processor_byte > kProcessorBase + 3) {
-    reader.fail_at(parameter_start + 3, fmt::format("processor type byte is {}, expected 84 (Intel), 85 (DEC) or 86 (MIPS)", processor_byte));
+    reader.fail_at(
+        parameter_start + 3,
+        fmt::format("processor type byte is {}, expected 84 (Intel), 85 (DEC) or 86 (MIPS)", processor_byte));
   }
   const auto processor = Processor(processor_byte - kProcessorBase);
   reader.set_encoding(processor == Processor::kMips ? ByteOrder::kBig : ByteOrder::kLittle,
@@ -223,22 +241,22 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
 
   // Header words (1-based word numbers as in the C3D manual).
   reader.seek(2);
-  const int64_t header_points = reader.u16("header point count");          // word 2
+  const int64_t header_points = reader.u16("header point count");             // word 2
   const int64_t header_analog_per_frame = reader.u16("header analog count");  // word 3
-  const int64_t header_first = reader.u16("header first frame");           // word 4
-  const int64_t header_last = reader.u16("header last frame");             // word 5
-  reader.skip(2);                                                          // word 6: max gap
-  const float header_scale = reader.f32("header scale");                   // words 7-8
-  const int64_t header_data_start = reader.u16("header data start");       // word 9
-  reader.skip(2);                                                          // word 10
-  const float header_rate = reader.f32("header frame rate");               // words 11-12
+  const int64_t header_first = reader.u16("header first frame");              // word 4
+  const int64_t header_last = reader.u16("header last frame");                // word 5
+  reader.skip(2);                                                             // word 6: max gap
+  const float header_scale = reader.f32("header scale");                      // words 7-8
+  const int64_t header_data_start = reader.u16("header data start");          // word 9
+  reader.skip(2);                                                             // word 10
+  const float header_rate = reader.f32("header frame rate");                  // words 11-12
 
   // The section's block count is not a reliable bound (s13_Dance understates it): the
   // walk ends at the list's terminator, and damage detection stops it in foreign data.
   Parameters params = parse_parameters(reader, parameter_start + 4, bytes.size(), take.warnings);
   if (params.list.empty()) {
-    take.warnings.push_back(fmt::format("{}: no parameters (the section declares {} blocks); layout taken from the header",
-                                        name, parameter_blocks));
+    take.warnings.push_back(fmt::format(
+        "{}: no parameters (the section declares {} blocks); layout taken from the header", name, parameter_blocks));
   }
   ParameterValues values(reader);
 
@@ -262,13 +280,14 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
   int64_t data_start = values.count(params.find("POINT", "DATA_START")).value_or(0);
   if (!usable_block(data_start)) {
     if (data_start != 0) {
-      take.warnings.push_back(fmt::format("{}: POINT:DATA_START {} lies outside the file; using the header's {}",
-                                          name, data_start, header_data_start));
+      take.warnings.push_back(fmt::format("{}: POINT:DATA_START {} lies outside the file; using the header's {}", name,
+                                          data_start, header_data_start));
     }
     data_start = header_data_start;
   }
   if (!usable_block(data_start)) {
-    reader.fail_at(16, fmt::format("data section start block {} lies outside the file ({} blocks)", data_start, block_count));
+    reader.fail_at(
+        16, fmt::format("data section start block {} lies outside the file ({} blocks)", data_start, block_count));
   }
 
   // Analog words per frame: the header's count, or the parameters' when it is 0.
@@ -297,11 +316,13 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
   const uint64_t frame_bytes = (uint64_t(points) * 4 + uint64_t(analog_per_frame)) * word_bytes;
   const std::size_t data_offset = (std::size_t(data_start) - 1) * kBlockBytes;
   const uint64_t available = bytes.size() - std::min(bytes.size(), data_offset);
-  if (frame_count > 0 && (frame_bytes == 0 ? uint64_t(frame_count) > bytes.size() : uint64_t(frame_count) > available / frame_bytes)) {
-    reader.fail_at(data_offset, fmt::format("data section holds {} complete frames, but the file declares {} ({} points, "
-                                            "{} analog words, {} bytes per frame)",
-                                            frame_bytes ? available / frame_bytes : 0, frame_count, points,
-                                            analog_per_frame, frame_bytes));
+  if (frame_count > 0 &&
+      (frame_bytes == 0 ? uint64_t(frame_count) > bytes.size() : uint64_t(frame_count) > available / frame_bytes)) {
+    reader.fail_at(
+        data_offset,
+        fmt::format("data section holds {} complete frames, but the file declares {} ({} points, "
+                    "{} analog words, {} bytes per frame)",
+                    frame_bytes ? available / frame_bytes : 0, frame_count, points, analog_per_frame, frame_bytes));
   }
 
   // Labels: POINT:LABELS then LABELS2, LABELS3, ... until every point has one.
@@ -442,7 +463,9 @@ class ParameterSectionWriter {
   std::optional<std::size_t> link_at_;
 };
 
-void pad_to_block(std::vector<char>& out) { out.resize((out.size() + kBlockBytes - 1) / kBlockBytes * kBlockBytes, '\0'); }
+void pad_to_block(std::vector<char>& out) {
+  out.resize((out.size() + kBlockBytes - 1) / kBlockBytes * kBlockBytes, '\0');
+}
 
 int16_t word_bits(int64_t unsigned_value) { return int16_t(uint16_t(std::clamp<int64_t>(unsigned_value, 0, 65535))); }
 
@@ -455,7 +478,7 @@ std::vector<char> write_c3d(const MarkerTake& take, const ProgressFn& progress) 
   const int64_t frames = int64_t(take.frames.size());
   const int64_t first = std::max<int64_t>(1, take.first_frame);
   const int64_t last = first + frames - 1;  // first - 1 for an empty take
-  const float scale = -1.0f;  // float storage; residuals are written as 0 (present) or -1 (missing)
+  const float scale = -1.0f;                // float storage; residuals are written as 0 (present) or -1 (missing)
   const float rate = float(take.rate_hz);
 
   // Parameters first (their size sets the data start block).
@@ -477,7 +500,8 @@ std::vector<char> write_c3d(const MarkerTake& take, const ProgressFn& progress) 
   for (std::size_t part = 1;; ++part) {
     const std::size_t begin = (part - 1) * kMaxLabelsPerParameter;
     const std::size_t end = std::min(points, begin + kMaxLabelsPerParameter);
-    const std::vector<std::string> chunk(take.labels.begin() + std::ptrdiff_t(begin), take.labels.begin() + std::ptrdiff_t(end));
+    const std::vector<std::string> chunk(take.labels.begin() + std::ptrdiff_t(begin),
+                                         take.labels.begin() + std::ptrdiff_t(end));
     pw.texts(kPoint, part == 1 ? std::string("LABELS") : fmt::format("LABELS{}", part), chunk);
     if (end >= points) break;
   }
@@ -496,7 +520,8 @@ std::vector<char> write_c3d(const MarkerTake& take, const ProgressFn& progress) 
 
   const std::size_t parameter_bytes = 4 + params.size() + 1;  // 4-byte section header, end byte
   const std::size_t parameter_blocks = (parameter_bytes + kBlockBytes - 1) / kBlockBytes;
-  if (parameter_blocks > 255) throw Error(fmt::format("C3D parameter section would need {} blocks (at most 255)", parameter_blocks));
+  if (parameter_blocks > 255)
+    throw Error(fmt::format("C3D parameter section would need {} blocks (at most 255)", parameter_blocks));
   const std::size_t data_start = 2 + parameter_blocks;
   // Patch DATA_START's value: after the entry's name length, id, name, link, type, dims.
   {
@@ -511,16 +536,16 @@ std::vector<char> write_c3d(const MarkerTake& take, const ProgressFn& progress) 
   w.u8(2);  // parameter block
   w.u8(kHeaderKey);
   w.u16(uint16_t(used));
-  w.u16(0);                      // analog words per frame
+  w.u16(0);  // analog words per frame
   w.u16(uint16_t(std::min<int64_t>(first, 65535)));
   w.u16(uint16_t(std::clamp<int64_t>(last, 0, 65535)));
-  w.u16(0);                      // max interpolation gap
+  w.u16(0);  // max interpolation gap
   w.f32(scale);
   w.u16(uint16_t(data_start));
-  w.u16(0);                      // analog samples per frame
+  w.u16(0);  // analog samples per frame
   w.f32(rate);
   w.zeros(298 - out.size());
-  w.u16(12345);                  // word 150: 4-character event labels supported
+  w.u16(12345);  // word 150: 4-character event labels supported
   pad_to_block(out);
   // Parameter section.
   w.u8(1);

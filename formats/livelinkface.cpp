@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 #include <fmt/format.h>
 
@@ -15,20 +16,18 @@ namespace {
 
 constexpr int64_t kNsPerDay = 24 * 3600 * kNsPerSecond;
 
-// The app's column order: Live Link order except JawRight/JawLeft and
-// MouthRight/MouthLeft are swapped.
-constexpr std::array<std::string_view, kArkitShapeCount> kCsvShapeOrder = {
-    "EyeBlinkLeft",     "EyeLookDownLeft",  "EyeLookInLeft",     "EyeLookOutLeft",    "EyeLookUpLeft",
-    "EyeSquintLeft",    "EyeWideLeft",      "EyeBlinkRight",     "EyeLookDownRight",  "EyeLookInRight",
-    "EyeLookOutRight",  "EyeLookUpRight",   "EyeSquintRight",    "EyeWideRight",      "JawForward",
-    "JawRight",         "JawLeft",          "JawOpen",           "MouthClose",        "MouthFunnel",
-    "MouthPucker",      "MouthRight",       "MouthLeft",         "MouthSmileLeft",    "MouthSmileRight",
-    "MouthFrownLeft",   "MouthFrownRight",  "MouthDimpleLeft",   "MouthDimpleRight",  "MouthStretchLeft",
-    "MouthStretchRight", "MouthRollLower",  "MouthRollUpper",    "MouthShrugLower",   "MouthShrugUpper",
-    "MouthPressLeft",   "MouthPressRight",  "MouthLowerDownLeft", "MouthLowerDownRight", "MouthUpperUpLeft",
-    "MouthUpperUpRight", "BrowDownLeft",    "BrowDownRight",     "BrowInnerUp",       "BrowOuterUpLeft",
-    "BrowOuterUpRight", "CheekPuff",        "CheekSquintLeft",   "CheekSquintRight",  "NoseSneerLeft",
-    "NoseSneerRight",   "TongueOut"};
+// The app's CSV column order: Live Link order with JawLeft/JawRight and
+// MouthLeft/MouthRight swapped. Indices into kArkitShapes.
+std::array<std::size_t, kArkitShapeCount> csv_shape_order() {
+  std::array<std::size_t, kArkitShapeCount> order{};
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  auto swap_columns = [&order](std::string_view a, std::string_view b) {
+    std::swap(order[*arkit_shape_index(a)], order[*arkit_shape_index(b)]);
+  };
+  swap_columns("JawLeft", "JawRight");
+  swap_columns("MouthLeft", "MouthRight");
+  return order;
+}
 
 int64_t timecode_ns(const Timecode& tc) {
   const int64_t seconds = int64_t(tc.hours) * 3600 + int64_t(tc.minutes) * 60 + tc.seconds;
@@ -110,7 +109,8 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
 
   if (!lines.next(line)) throw line_error(name, 1, "empty file: expected the Live Link Face header line");
   split_fields(line, ',', fields);
-  if (fields.size() < 2 || !equals_ignore_case(trim_spaces(fields[0]), "Timecode") || !equals_ignore_case(trim_spaces(fields[1]), "BlendShapeCount")) {
+  if (fields.size() < 2 || !equals_ignore_case(trim_spaces(fields[0]), "Timecode") ||
+      !equals_ignore_case(trim_spaces(fields[1]), "BlendShapeCount")) {
     throw line_error(name, 1, "not a Live Link Face CSV: the header does not start with Timecode,BlendShapeCount");
   }
   const std::size_t column_count = fields.size();
@@ -141,7 +141,8 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
     if (!have_weight[s]) throw line_error(name, 1, fmt::format("header lacks the {} column", kArkitShapes[s].arkit));
   }
   if (!ignored.empty()) {
-    take.warnings.push_back(fmt::format("{}: {} unknown columns ignored (first: '{}')", name, ignored.size(), ignored.front()));
+    take.warnings.push_back(
+        fmt::format("{}: {} unknown columns ignored (first: '{}')", name, ignored.size(), ignored.front()));
   }
   if (std::count(have_angle.begin(), have_angle.end(), false) > 0) {
     take.warnings.push_back(fmt::format("{}: some head/eye angle columns are missing; read as 0", name));
@@ -155,18 +156,21 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
     split_fields(line, ',', fields);
     if (fields.size() < 2) throw fail(line, "row has no BlendShapeCount field");
     const auto timecode = parse_livelink_timecode(fields[0]);
-    if (!timecode) throw fail(fields[0], fmt::format("timecode '{}' is not HH:MM:SS:FF.fff at 60 fps", trim_spaces(fields[0])));
+    if (!timecode)
+      throw fail(fields[0], fmt::format("timecode '{}' is not HH:MM:SS:FF.fff at 60 fps", trim_spaces(fields[0])));
     const auto count = parse_int(fields[1]);
     if (!count || *count < 0) throw fail(fields[1], fmt::format("BlendShapeCount '{}' is not a count", fields[1]));
 
     FaceFrame& frame = take.frames.emplace_back();
     frame.timecode = *timecode;
     frame.source_time_ns = timecode_ns(*timecode) + day_offset_ns;
-    if (take.frames.size() > 1 && frame.source_time_ns < take.frames[take.frames.size() - 2].source_time_ns - kNsPerDay / 2) {
+    if (take.frames.size() > 1 &&
+        frame.source_time_ns < take.frames[take.frames.size() - 2].source_time_ns - kNsPerDay / 2) {
       day_offset_ns += kNsPerDay;  // the take ran past midnight
       frame.source_time_ns += kNsPerDay;
     }
-    if (*count == 0 && (fields.size() == 2 || std::all_of(fields.begin() + 2, fields.end(), [](auto f) { return trim_spaces(f).empty(); }))) {
+    if (*count == 0 && (fields.size() == 2 ||
+                        std::all_of(fields.begin() + 2, fields.end(), [](auto f) { return trim_spaces(f).empty(); }))) {
       frame.tracked = false;
       frame.weights.fill(nan);
       frame.angles.fill(nan);
@@ -179,7 +183,8 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
     for (std::size_t c = 2; c < column_count; ++c) {
       if (columns[c].kind == Column::kIgnored) continue;
       const auto value = parse_double(fields[c]);
-      if (!value || !std::isfinite(*value)) throw fail(fields[c], fmt::format("{} value '{}' is not a number", column_names[c], fields[c]));
+      if (!value || !std::isfinite(*value))
+        throw fail(fields[c], fmt::format("{} value '{}' is not a number", column_names[c], fields[c]));
       if (columns[c].kind == Column::kWeight) {
         frame.weights[columns[c].index] = float(*value);
       } else {
@@ -201,10 +206,9 @@ FaceTake read_livelinkface(const std::filesystem::path& path) {
 }
 
 std::string write_livelinkface(const FaceTake& take) {
-  std::array<std::size_t, kArkitShapeCount> csv_to_shape{};
-  for (std::size_t c = 0; c < kArkitShapeCount; ++c) csv_to_shape[c] = *arkit_shape_index(kCsvShapeOrder[c]);
+  const auto order = csv_shape_order();
   std::string out = "Timecode,BlendShapeCount";
-  for (auto column : kCsvShapeOrder) out += fmt::format(",{}", column);
+  for (std::size_t shape : order) out += fmt::format(",{}", kArkitShapes[shape].arkit);
   for (auto column : kLiveLinkAngleNames) out += fmt::format(",{}", column);
   out += '\n';
   for (const FaceFrame& frame : take.frames) {
@@ -214,7 +218,7 @@ std::string write_livelinkface(const FaceTake& take) {
       continue;
     }
     out += fmt::format(",{}", kArkitShapeCount + kLiveLinkAngleCount);
-    for (std::size_t c = 0; c < kArkitShapeCount; ++c) out += fmt::format(",{:.10f}", frame.weights[csv_to_shape[c]]);
+    for (std::size_t shape : order) out += fmt::format(",{:.10f}", frame.weights[shape]);
     for (float angle : frame.angles) out += fmt::format(",{:.10f}", angle);
     out += '\n';
   }

@@ -25,8 +25,8 @@ struct FaceFrame {
   Timecode timecode;
   int64_t source_time_ns = 0;  // timecode as time since midnight (days added past a wrap)
   bool tracked = true;
-  std::array<float, kArkitShapeCount> weights{};     // kArkitShapes order
-  std::array<float, kLiveLinkAngleCount> angles{};   // kLiveLinkAngleNames order, radians
+  std::array<float, kArkitShapeCount> weights{};    // kArkitShapes order
+  std::array<float, kLiveLinkAngleCount> angles{};  // kLiveLinkAngleNames order, radians
 };
 
 struct FaceTake {

@@ -196,7 +196,8 @@ void decode_solved_frame(ByteReader& r, SolvedFrame& f) {
   f.solve_start_ns = r.i64("solve start");
   f.solve_end_ns = r.i64("solve end");
   f.timecode = get_timecode(r);
-  const double qw = r.f64("head rotation"), qx = r.f64("head rotation"), qy = r.f64("head rotation"), qz = r.f64("head rotation");
+  const double qw = r.f64("head rotation"), qx = r.f64("head rotation"), qy = r.f64("head rotation"),
+               qz = r.f64("head rotation");
   f.head_rotation = Eigen::Quaterniond(qw, qx, qy, qz);
   for (int i = 0; i < 3; ++i) f.head_translation[i] = r.f64("head translation");
   f.collision_constraints = r.u32("collision count");
@@ -304,7 +305,8 @@ void RecordingWriter::flush(bool durable) {
   if (!is_open()) return;
   write_out(buffer_.data(), buffer_.size());
   buffer_.clear();
-  if (durable && ::fdatasync(fd_) != 0) throw file_error(path_, fmt::format("fdatasync failed: {}", std::strerror(errno)));
+  if (durable && ::fdatasync(fd_) != 0)
+    throw file_error(path_, fmt::format("fdatasync failed: {}", std::strerror(errno)));
 }
 
 void RecordingWriter::close() {
@@ -371,7 +373,9 @@ RecordingReader::RecordingReader(const std::filesystem::path& path) : name_(path
   open(std::span<const char>(static_cast<const char*>(mapping_->address), mapping_->size));
 }
 
-RecordingReader::RecordingReader(std::span<const char> bytes, std::string name) : name_(std::move(name)) { open(bytes); }
+RecordingReader::RecordingReader(std::span<const char> bytes, std::string name) : name_(std::move(name)) {
+  open(bytes);
+}
 
 RecordingReader::~RecordingReader() = default;
 RecordingReader::RecordingReader(RecordingReader&&) noexcept = default;
@@ -397,7 +401,8 @@ std::optional<ChunkView> chunk_at(std::span<const char> bytes, std::size_t offse
   const uint32_t size = r.u32();
   const uint64_t checksum = r.u64();
   if (size > r.remaining()) {
-    why = fmt::format("chunk {} at byte {} needs {} payload bytes, {} remain", fourcc_text(code), offset, size, r.remaining());
+    why = fmt::format("chunk {} at byte {} needs {} payload bytes, {} remain", fourcc_text(code), offset, size,
+                      r.remaining());
     return std::nullopt;
   }
   const char* payload = bytes.data() + r.offset();
@@ -430,7 +435,8 @@ void RecordingReader::open(std::span<const char> bytes) {
   std::string why;
   const auto head = chunk_at(bytes, kPreambleBytes, why);
   if (!head) r.fail_at(kPreambleBytes, fmt::format("recording header unreadable: {}", why));
-  if (head->code != kHeadChunk) r.fail_at(kPreambleBytes, fmt::format("first chunk is {}, expected HEAD", fourcc_text(head->code)));
+  if (head->code != kHeadChunk)
+    r.fail_at(kPreambleBytes, fmt::format("first chunk is {}, expected HEAD", fourcc_text(head->code)));
   ByteReader header_reader(head->payload, name_ + " [HEAD]");
   decode_header(header_reader, header_);
   const std::size_t chunks_begin = kPreambleBytes + kChunkHeaderBytes + head->payload.size();
@@ -450,7 +456,8 @@ bool RecordingReader::load_index(std::size_t chunks_begin) {
   const uint64_t index_offset = t.u64();
   if (t.u64() != tail_offset || index_offset < chunks_begin || index_offset >= tail_offset) return false;
   const auto index = chunk_at(bytes_, std::size_t(index_offset), why);
-  if (!index || index->code != kIndexChunk || index_offset + kChunkHeaderBytes + index->payload.size() != tail_offset) return false;
+  if (!index || index->code != kIndexChunk || index_offset + kChunkHeaderBytes + index->payload.size() != tail_offset)
+    return false;
   ByteReader r(index->payload, name_);
   const uint32_t count = r.u32();
   if (count != r.remaining() / kIndexEntryBytes || r.remaining() % kIndexEntryBytes != 0) return false;
@@ -464,7 +471,9 @@ bool RecordingReader::load_index(std::size_t chunks_begin) {
     e.frame_no = r.i64();
     e.source_time_ns = r.i64();
     // Chunks follow each other without overlap and before the index.
-    if (kind > uint8_t(ChunkKind::kSolvedFrame) || e.offset < previous_end || e.offset + kChunkHeaderBytes > index_offset) return false;
+    if (kind > uint8_t(ChunkKind::kSolvedFrame) || e.offset < previous_end ||
+        e.offset + kChunkHeaderBytes > index_offset)
+      return false;
     previous_end = e.offset + kChunkHeaderBytes;
   }
   index_ = std::move(entries);
@@ -491,7 +500,8 @@ void RecordingReader::scan(std::size_t chunks_begin) {
       ByteReader r(chunk->payload, name_);
       const int64_t frame_no = r.i64();
       const int64_t source_time_ns = r.i64();
-      index_.push_back({chunk->code == kMarkerChunk ? ChunkKind::kMarkerFrame : ChunkKind::kSolvedFrame, at, frame_no, source_time_ns});
+      index_.push_back({chunk->code == kMarkerChunk ? ChunkKind::kMarkerFrame : ChunkKind::kSolvedFrame, at, frame_no,
+                        source_time_ns});
     }
     // HEAD, INDX, TAIL and chunk kinds of later versions carry no frames: skipped.
     at += kChunkHeaderBytes + chunk->payload.size();
@@ -501,15 +511,17 @@ void RecordingReader::scan(std::size_t chunks_begin) {
 std::span<const char> RecordingReader::frame_payload(const std::vector<std::size_t>& entries, std::size_t i,
                                                      uint32_t expected_code) const {
   if (i >= entries.size()) {
-    throw file_error(name_, fmt::format("{} frame {} requested, the recording has {}", fourcc_text(expected_code), i, entries.size()));
+    throw file_error(name_, fmt::format("{} frame {} requested, the recording has {}", fourcc_text(expected_code), i,
+                                        entries.size()));
   }
   const uint64_t offset = index_[entries[i]].offset;
   std::string why;
   const auto chunk = chunk_at(bytes_, std::size_t(offset), why);
   if (!chunk) throw offset_error(name_, int64_t(offset), why);
   if (chunk->code != expected_code) {
-    throw offset_error(name_, int64_t(offset), fmt::format("index points at a {} chunk, expected {}", fourcc_text(chunk->code),
-                                                           fourcc_text(expected_code)));
+    throw offset_error(
+        name_, int64_t(offset),
+        fmt::format("index points at a {} chunk, expected {}", fourcc_text(chunk->code), fourcc_text(expected_code)));
   }
   return chunk->payload;
 }
@@ -611,8 +623,11 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
       {"solved_frames", fmt::format("{}", reader.solved_frame_count())},
       {"index", reader.index_rebuilt() ? "rebuilt by scanning" : "present"},
   };
-  if (reader.truncated()) take.warnings.push_back(fmt::format("{}: recording cut off: {}", reader.name(), reader.stop_reason()));
-  if (duplicates > 0) take.warnings.push_back(fmt::format("{}: {} markers repeated a label within a frame (kept the first)", reader.name(), duplicates));
+  if (reader.truncated())
+    take.warnings.push_back(fmt::format("{}: recording cut off: {}", reader.name(), reader.stop_reason()));
+  if (duplicates > 0)
+    take.warnings.push_back(
+        fmt::format("{}: {} markers repeated a label within a frame (kept the first)", reader.name(), duplicates));
   return take;
 }
 

@@ -24,15 +24,15 @@ inline constexpr uint16_t kRecordingFormatVersion = 1;
 inline constexpr uint16_t kRecordingReaderVersion = 1;
 
 struct RecordingHeader {
-  uint16_t format_version = kRecordingFormatVersion;          // as read; writers write theirs
+  uint16_t format_version = kRecordingFormatVersion;  // as read; writers write theirs
   uint16_t min_reader_version = kRecordingFormatVersion;
-  std::string rig_name;                // empty for marker-only recordings
-  uint64_t rig_hash = 0;               // identity of the rig the solved frames refer to
-  std::string source_description;     // "natnet 10.0.0.5:1511", "converted from take.c3d", ...
-  std::string calibration;            // calibration as text (TOML), may be empty
-  std::string units;                  // marker units ("mm", "cm", "m")
-  double rate_hz = 0.0;               // nominal frame rate, 0 when unknown
-  int64_t created_unix_ns = 0;        // wall clock at open (CLOCK_REALTIME)
+  std::string rig_name;                    // empty for marker-only recordings
+  uint64_t rig_hash = 0;                   // identity of the rig the solved frames refer to
+  std::string source_description;          // "natnet 10.0.0.5:1511", "converted from take.c3d", ...
+  std::string calibration;                 // calibration as text (TOML), may be empty
+  std::string units;                       // marker units ("mm", "cm", "m")
+  double rate_hz = 0.0;                    // nominal frame rate, 0 when unknown
+  int64_t created_unix_ns = 0;             // wall clock at open (CLOCK_REALTIME)
   std::vector<std::string> marker_labels;  // expected marker set, may be empty
   std::vector<std::string> shape_names;    // rig shapes, the order of SolvedFrame::weights
 };
@@ -41,7 +41,7 @@ enum class ChunkKind : uint8_t { kMarkerFrame, kSolvedFrame };
 
 struct RecordingIndexEntry {
   ChunkKind kind = ChunkKind::kMarkerFrame;
-  uint64_t offset = 0;   // of the chunk header
+  uint64_t offset = 0;  // of the chunk header
   int64_t frame_no = 0;
   int64_t source_time_ns = 0;
 };
@@ -53,7 +53,7 @@ struct RecordingIndexEntry {
 class RecordingWriter {
  public:
   struct Options {
-    bool overwrite = false;                    // else an existing file is an error
+    bool overwrite = false;                           // else an existing file is an error
     std::size_t buffer_bytes = std::size_t(1) << 20;  // flush automatically past this
   };
   // Creates the file and writes the preamble and HEAD chunk. Throws Error.
@@ -127,7 +127,8 @@ class RecordingReader {
   bool load_index(std::size_t chunks_begin);
   void scan(std::size_t chunks_begin);
   // The checked payload of entries[i]'s chunk, which must be of expected_code's kind.
-  std::span<const char> frame_payload(const std::vector<std::size_t>& entries, std::size_t i, uint32_t expected_code) const;
+  std::span<const char> frame_payload(const std::vector<std::size_t>& entries, std::size_t i,
+                                      uint32_t expected_code) const;
 
   std::string name_;
   std::unique_ptr<Mapping> mapping_;  // owns the mapped file, when there is one

@@ -53,8 +53,9 @@ TakeFormat detect_format(std::span<const char> head, const std::filesystem::path
   if (auto by_extension = format_from_extension(path)) return *by_extension;
   // C3D has no magic string, only 0x50 as its second byte.
   if (head.size() >= 2 && uint8_t(head[1]) == 0x50) return TakeFormat::kC3d;
-  throw file_error(path.string(), "unknown format: not C3D, TRC, Live Link Face CSV or a facecap recording "
-                                  "(by content or extension)");
+  throw file_error(path.string(),
+                   "unknown format: not C3D, TRC, Live Link Face CSV or a facecap recording "
+                   "(by content or extension)");
 }
 
 std::string_view MarkerTake::metadata_value(std::string_view key) const noexcept {
@@ -105,7 +106,8 @@ void check_take_shape(const MarkerTake& take, const std::string& name) {
   for (std::size_t f = 0; f < take.frames.size(); ++f) {
     const auto& markers = take.frames[f].markers;
     if (markers.size() != take.labels.size()) {
-      throw Error(fmt::format("{}: frame {} has {} markers, the take has {} labels", name, f, markers.size(), take.labels.size()));
+      throw Error(fmt::format("{}: frame {} has {} markers, the take has {} labels", name, f, markers.size(),
+                              take.labels.size()));
     }
   }
 }
@@ -160,7 +162,9 @@ void write_take(const std::filesystem::path& path, const MarkerTake& take, const
         write_recording(tmp, take, fmt::format("converted from a {} take", format_name(take.format)), progress);
         std::error_code ec;
         std::filesystem::rename(tmp, path, ec);
-        if (ec) throw file_error(path.string(), fmt::format("cannot rename the finished recording into place: {}", ec.message()));
+        if (ec)
+          throw file_error(path.string(),
+                           fmt::format("cannot rename the finished recording into place: {}", ec.message()));
       } catch (...) {
         std::error_code ec;
         std::filesystem::remove(tmp, ec);

@@ -41,7 +41,8 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
     return text_error(name, lines.line_number(), column_of(field), what);
   };
   auto next_header_line = [&](std::string_view what) {
-    if (!lines.next(line)) throw line_error(name, lines.line_number() + 1, fmt::format("file ends before the {} line", what));
+    if (!lines.next(line))
+      throw line_error(name, lines.line_number() + 1, fmt::format("file ends before the {} line", what));
     split_row(line, fields);
   };
 
@@ -70,19 +71,28 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
     take.metadata.emplace_back(std::string(keys[i]), std::string(value));
     auto number = [&]() {
       auto v = parse_double(value);
-      if (!v || !std::isfinite(*v)) throw fail(value.empty() ? line.substr(line.size()) : value, fmt::format("{} '{}' is not a number", keys[i], value));
+      if (!v || !std::isfinite(*v))
+        throw fail(value.empty() ? line.substr(line.size()) : value,
+                   fmt::format("{} '{}' is not a number", keys[i], value));
       return *v;
     };
     auto count = [&]() {
       auto v = parse_int(value);
-      if (!v || *v < 0) throw fail(value.empty() ? line.substr(line.size()) : value, fmt::format("{} '{}' is not a count", keys[i], value));
+      if (!v || *v < 0)
+        throw fail(value.empty() ? line.substr(line.size()) : value,
+                   fmt::format("{} '{}' is not a count", keys[i], value));
       return *v;
     };
-    if (equals_ignore_case(keys[i], "NumMarkers")) marker_count = count();
-    else if (equals_ignore_case(keys[i], "NumFrames")) declared_frames = count();
-    else if (equals_ignore_case(keys[i], "DataRate")) data_rate = number();
-    else if (equals_ignore_case(keys[i], "CameraRate")) camera_rate = number();
-    else if (equals_ignore_case(keys[i], "Units")) units = value;
+    if (equals_ignore_case(keys[i], "NumMarkers"))
+      marker_count = count();
+    else if (equals_ignore_case(keys[i], "NumFrames"))
+      declared_frames = count();
+    else if (equals_ignore_case(keys[i], "DataRate"))
+      data_rate = number();
+    else if (equals_ignore_case(keys[i], "CameraRate"))
+      camera_rate = number();
+    else if (equals_ignore_case(keys[i], "Units"))
+      units = value;
   }
   if (!marker_count) throw line_error(name, keys_line, "header has no NumMarkers");
   take.rate_hz = data_rate.value_or(camera_rate.value_or(0.0));
@@ -103,12 +113,14 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
   for (auto f : fields) coordinate_names += f.empty() ? 0 : 1;
   const std::size_t named_markers = std::max(labels.size(), coordinate_names / 3);
   if (std::size_t(*marker_count) > named_markers) {
-    throw line_error(name, lines.line_number(), fmt::format("NumMarkers is {} but the header names only {} markers",
-                                                            *marker_count, named_markers));
+    throw line_error(
+        name, lines.line_number(),
+        fmt::format("NumMarkers is {} but the header names only {} markers", *marker_count, named_markers));
   }
   const std::size_t markers = std::size_t(*marker_count);
   if (labels.size() != markers) {
-    take.warnings.push_back(fmt::format("{}: NumMarkers is {} but the label line names {} markers", name, markers, labels.size()));
+    take.warnings.push_back(
+        fmt::format("{}: NumMarkers is {} but the label line names {} markers", name, markers, labels.size()));
   }
   labels.resize(markers);
   for (std::size_t k = 0; k < markers; ++k) {
@@ -125,13 +137,16 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
     split_row(line, fields);
     if (fields.size() < 2) throw fail(fields[0], "data row has no Time column");
     if ((take.frames.size() + 1) * std::max<std::size_t>(markers, 1) > limit) {
-      throw line_error(name, lines.line_number(), fmt::format("{} markers per frame over this many rows is more than a file "
-                                                              "of {} bytes can hold", markers, text.size()));
+      throw line_error(name, lines.line_number(),
+                       fmt::format("{} markers per frame over this many rows is more than a file "
+                                   "of {} bytes can hold",
+                                   markers, text.size()));
     }
     const auto frame_no = parse_int(fields[0]);
     if (!frame_no) throw fail(fields[0], fmt::format("frame number '{}' is not an integer", fields[0]));
     const auto time = parse_double(fields[1]);
-    if (!time || !std::isfinite(*time) || std::abs(*time) > 9.2e9) throw fail(fields[1], fmt::format("time '{}' is not a number", fields[1]));
+    if (!time || !std::isfinite(*time) || std::abs(*time) > 9.2e9)
+      throw fail(fields[1], fmt::format("time '{}' is not a number", fields[1]));
     MarkerFrame& frame = take.frames.emplace_back();
     frame.frame_no = *frame_no;
     frame.source_time_ns = std::llround(*time * 1e9);
@@ -152,7 +167,8 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
         }
         const auto v = parse_double(fields[at]);
         if (!v) {
-          throw fail(fields[at], fmt::format("{} of marker {} is '{}', not a number", "XYZ"[axis], take.labels[k], fields[at]));
+          throw fail(fields[at],
+                     fmt::format("{} of marker {} is '{}', not a number", "XYZ"[axis], take.labels[k], fields[at]));
         }
         xyz[axis] = *v;
         not_a_number |= !std::isfinite(*v);
@@ -174,14 +190,16 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
   }
   take.first_frame = take.frames.empty() ? 1 : take.frames.front().frame_no;
   if (declared_frames && std::size_t(*declared_frames) != take.frames.size()) {
-    take.warnings.push_back(fmt::format("{}: NumFrames is {} but {} data rows were read", name, *declared_frames, take.frames.size()));
+    take.warnings.push_back(
+        fmt::format("{}: NumFrames is {} but {} data rows were read", name, *declared_frames, take.frames.size()));
   }
   if (rows_with_extra_columns > 0) {
     take.warnings.push_back(fmt::format("{}: {} rows carry values past the {} declared markers (ignored)", name,
                                         rows_with_extra_columns, markers));
   }
   if (partial_cells > 0) {
-    take.warnings.push_back(fmt::format("{}: {} markers had only some coordinates and were read as missing", name, partial_cells));
+    take.warnings.push_back(
+        fmt::format("{}: {} markers had only some coordinates and were read as missing", name, partial_cells));
   }
   return take;
 }

@@ -31,7 +31,7 @@ class BoxQpSolver {
   Eigen::VectorXi state_;      // 0 free, -1 at lower, +1 at upper
   Eigen::VectorXi free_;       // indices of free variables
   Eigen::Index free_count_ = 0;
-  Eigen::MatrixXd chol_;       // Cholesky factor of H restricted to the free set
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> chol_;  // lower Cholesky factor of H on the free set
   Eigen::VectorXd rhs_;        // free-set right-hand side, then solution
   Eigen::VectorXd candidate_;  // full-size candidate point
   Eigen::VectorXd gradient_;

@@ -49,6 +49,7 @@ void build_marker_rows(SolverModel& model) {
       model.marker_neutral.segment<3>(3 * k) += m.barycentric[i] * rig.neutral.col(m.vertices[i]);
     }
   }
+  model.marker_basis_rows = model.marker_basis;
   model.gram_all = model.marker_basis.transpose() * model.marker_basis;
   model.gram_per_marker.resize(M, M * K);
   for (Eigen::Index k = 0; k < K; ++k)
@@ -147,15 +148,24 @@ ShapeTriangleTerms build_shape_terms(const Rig& rig, Eigen::Index shape, const T
     if (!decided[std::size_t(t)]) { decided[std::size_t(t)] = 1; frontier.push(int(t)); propagate(); }
 
   ShapeTriangleTerms terms;
-  for (Eigen::Index t = 0; t < T; ++t) {
-    const std::size_t i = std::size_t(t);
+  Eigen::Index first = T, last = -1;
+  for (Eigen::Index t = 0; t < T; ++t)
+    if (changed[std::size_t(t)]) { first = std::min(first, t); last = t; }
+  if (last < 0) return terms;
+  terms.first_triangle = int(first);
+  terms.count = int(last - first + 1);
+  const std::size_t n = std::size_t(terms.count);
+  terms.nonlinear.assign(9 * n, 0.0f);
+  terms.gradient.assign(9 * n, 0.0f);
+  for (Eigen::Index t = first; t <= last; ++t) {
+    const std::size_t i = std::size_t(t), e = std::size_t(t - first);
     if (!changed[i]) continue;
-    terms.triangles.push_back(int(t));
-    for (int k = 0; k < 3; ++k) terms.log_rotation.push_back(float(logs[i][k]));
     const Eigen::Matrix3d& s = stretch[i];
-    terms.stretch.insert(terms.stretch.end(), {float(s(0, 0)), float(s(1, 1)), float(s(2, 2)), float(s(0, 1)),
-                                               float(s(0, 2)), float(s(1, 2))});
-    for (int k = 0; k < 9; ++k) terms.gradient.push_back(float(gradient[i].data()[k]));
+    const double values[9] = {logs[i][0], logs[i][1], logs[i][2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
+    for (std::size_t c = 0; c < 9; ++c) {
+      terms.nonlinear[c * n + e] = float(values[c]);
+      terms.gradient[c * n + e] = float(gradient[i].data()[c]);
+    }
   }
   return terms;
 }
@@ -168,10 +178,8 @@ void build_marker_paths(SolverModel& model) {
   for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
     for (int k = 0; k < 3; ++k) incident[std::size_t(rig.triangles(k, t))].push_back(int(t));
   constexpr double kTurning = 0.05;  // radians; below this a straight path is as good
-  std::vector<int> entry_of(std::size_t(rig.triangle_count()), -1);
   for (Eigen::Index s = 0; s < M; ++s) {
     const auto& terms = model.shape_terms[std::size_t(s)];
-    for (std::size_t e = 0; e < terms.triangles.size(); ++e) entry_of[std::size_t(terms.triangles[e])] = int(e);
     for (Eigen::Index k = 0; k < K; ++k) {
       const auto& b = model.markers[std::size_t(k)];
       Eigen::Vector3d r = Eigen::Vector3d::Zero();
@@ -179,9 +187,7 @@ void build_marker_paths(SolverModel& model) {
         const auto& tris = incident[std::size_t(b.vertices[a])];
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
         for (int t : tris)
-          if (const int e = entry_of[std::size_t(t)]; e >= 0)
-            sum += Eigen::Vector3f(terms.log_rotation[3 * std::size_t(e)], terms.log_rotation[3 * std::size_t(e) + 1],
-                                   terms.log_rotation[3 * std::size_t(e) + 2]).cast<double>();
+          if (terms.covers(t)) sum += Eigen::Vector3d(terms.nonlinear_at(0, t), terms.nonlinear_at(1, t), terms.nonlinear_at(2, t));
         if (!tris.empty()) r += b.barycentric[a] * sum / double(tris.size());
       }
       const double theta = r.norm();
@@ -194,7 +200,6 @@ void build_marker_paths(SolverModel& model) {
                                        (Eigen::Matrix3d::Identity() - axis * axis.transpose()) + axis * axis.transpose();
       model.marker_paths.push_back({int(k), int(s), r, turn.inverse() * (delta - axial), axial});
     }
-    for (int t : terms.triangles) entry_of[std::size_t(t)] = -1;
   }
 }
 
@@ -320,7 +325,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
         for (Eigen::Index s = w; s < M; s += threads) model->shape_terms[std::size_t(s)] = build_shape_terms(rig, s, adjacency);
       });
     for (auto& t : pool) t.join();
-    for (const auto& terms : model->shape_terms) model->triangle_terms_kept += terms.triangles.size();
+    for (const auto& terms : model->shape_terms) model->triangle_terms_kept += std::size_t(terms.count);
     model->setup.gradients_s = seconds_since(t0);
   }
 

@@ -18,12 +18,19 @@ struct SparseShapeDeltas {
   std::vector<float> deltas;  // 3 per vertex
 };
 
-// One shape's per-triangle deformation, only where the triangle changes (Eq. 3).
+// One shape's per-triangle deformation (Eq. 3) over the contiguous range of triangles it
+// changes, as structure-of-arrays so the per-frame sums stream through vector units.
+// Component c of triangle first_triangle + i is at [c * count + i]; unchanged triangles
+// inside the range hold zeros.
 struct ShapeTriangleTerms {
-  std::vector<int> triangles;
-  std::vector<float> log_rotation;  // 3 per entry: axis * angle, branch chosen consistently
-  std::vector<float> stretch;       // 6 per entry: S - I as xx, yy, zz, xy, xz, yz
-  std::vector<float> gradient;      // 9 per entry: F - I column-major (deformation transfer)
+  int first_triangle = 0;
+  int count = 0;
+  std::vector<float> nonlinear;  // 9 x count: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
+  std::vector<float> gradient;   // 9 x count: F - I, column-major (deformation transfer)
+  bool covers(int triangle) const { return triangle >= first_triangle && triangle < first_triangle + count; }
+  float nonlinear_at(int component, int triangle) const {
+    return nonlinear[std::size_t(component) * std::size_t(count) + std::size_t(triangle - first_triangle)];
+  }
 };
 
 // How a marker moves with one shape's weight t under Eq. 4 where the shape turns the
@@ -49,6 +56,7 @@ class SolverModel {
 
   // Eq. 2 on marker rows: marker k's rows 3k..3k+2 of B~ and x0~.
   Eigen::MatrixXd marker_basis;     // 3K x M
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> marker_basis_rows;  // the same, row-major
   Eigen::VectorXd marker_neutral;   // 3K
   Eigen::MatrixXd gram_all;         // M x M: B~^T B~ over all markers
   Eigen::MatrixXd gram_per_marker;  // M x (M K): marker k's B_k^T B_k in columns kM..kM+M-1

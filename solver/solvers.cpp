@@ -44,8 +44,16 @@ class WeightsStage {
         previous_(Eigen::VectorXd::Zero(model.shape_count())), residual_(3 * model.marker_count()),
         present_(model.marker_count()) {
     if (refinements_ > 0) {
-      jacobian_.resize(3 * model.marker_count(), model.shape_count());
-      predicted_.resize(3 * model.marker_count());
+      gram_present_.resize(model.shape_count(), model.shape_count());
+      cross_.resize(model.shape_count(), model.shape_count());
+      path_difference_.resize(3, Eigen::Index(model.marker_paths.size()));
+      path_start_.assign(std::size_t(model.marker_count()) + 1, 0);
+      for (const auto& path : model.marker_paths) ++path_start_[std::size_t(path.marker) + 1];
+      for (std::size_t k = 0; k < std::size_t(model.marker_count()); ++k) path_start_[k + 1] += path_start_[k];
+      path_of_marker_.resize(model.marker_paths.size());
+      std::vector<int> fill(path_start_.begin(), path_start_.end() - 1);
+      for (std::size_t i = 0; i < model.marker_paths.size(); ++i)
+        path_of_marker_[std::size_t(fill[std::size_t(model.marker_paths[i].marker)]++)] = int(i);
     }
   }
 
@@ -66,6 +74,7 @@ class WeightsStage {
         H_ -= m.gram_per_marker.middleCols(k * M, M);
       }
     }
+    if (refinements_ > 0) gram_present_ = H_;
     H_.diagonal().array() += p.alpha + p.mu;
     g_.noalias() = m.marker_basis.transpose() * residual_;
     g_ += p.alpha * previous_;
@@ -84,33 +93,47 @@ class WeightsStage {
 
  private:
   // One Gauss-Newton step: linearise the marker model x0 + sum_i f_i(w_i) at w and solve
-  // the same box-constrained ridge problem for the new w.
+  // the same box-constrained ridge problem for the new w. The Jacobian is B~ plus a
+  // 3-vector D_p per marker path, so J^T J is the Gram matrix already built plus sparse
+  // corrections rather than a dense product.
   void refine(const Eigen::Matrix3Xd& targets, Eigen::VectorXd& w) noexcept {
     const SolverModel& m = model_;
     const Eigen::Index K = m.marker_count();
     const SolverParams& p = m.params;
-    jacobian_ = m.marker_basis;
-    predicted_.noalias() = m.marker_basis * w;
-    for (const MarkerPath& path : m.marker_paths) {
+    // c = m - x0 - f(w) + J w; start with the linear part, c = m - x0.
+    for (Eigen::Index k = 0; k < K; ++k)
+      residual_.segment<3>(3 * k) = present_[k] ? Eigen::Vector3d(targets.col(k) - m.marker_neutral.segment<3>(3 * k))
+                                                : Eigen::Vector3d::Zero();
+    H_ = gram_present_;
+    cross_.setZero();
+    const auto& paths = m.marker_paths;
+    for (std::size_t i = 0; i < paths.size(); ++i) {
+      const MarkerPath& path = paths[i];
+      if (!present_[path.marker]) { path_difference_.col(Eigen::Index(i)).setZero(); continue; }
       const double t = w[path.shape];
-      const Eigen::Matrix3d R = rotation_exp(t * path.rotation);
-      const Eigen::Vector3d turned = R * path.arm;
-      auto rows = predicted_.segment<3>(3 * path.marker);
-      rows += turned - path.arm + t * path.axial - t * m.marker_basis.block<3, 1>(3 * path.marker, path.shape);
-      jacobian_.block<3, 1>(3 * path.marker, path.shape) = path.rotation.cross(turned) + path.axial;
+      const Eigen::Vector3d turned = rotation_exp(t * path.rotation) * path.arm;
+      const Eigen::Vector3d linear_delta = m.marker_basis.block<3, 1>(3 * path.marker, path.shape);
+      const Eigen::Vector3d slope = path.rotation.cross(turned) + path.axial;
+      const Eigen::Vector3d difference = slope - linear_delta;  // D_p
+      path_difference_.col(Eigen::Index(i)) = difference;
+      // f(t) - t B~ replaced by its tangent: - (f(t) - t B~) + t D_p.
+      residual_.segment<3>(3 * path.marker) -= turned - path.arm + t * path.axial - t * linear_delta - t * difference;
+      // B~^T D_p into column `shape` of cross_ (mirrored into the row below).
+      cross_.col(path.shape).noalias() += m.marker_basis_rows.middleRows<3>(3 * path.marker).transpose() * difference;
     }
-    for (Eigen::Index k = 0; k < K; ++k) {
-      if (present_[k]) {
-        residual_.segment<3>(3 * k) = targets.col(k) - m.marker_neutral.segment<3>(3 * k) - predicted_.segment<3>(3 * k);
-      } else {
-        residual_.segment<3>(3 * k).setZero();
-        jacobian_.middleRows<3>(3 * k).setZero();
-      }
-    }
-    residual_.noalias() += jacobian_ * w;
-    H_.noalias() = jacobian_.transpose() * jacobian_;
+    H_ += cross_;
+    H_ += cross_.transpose();
+    // D_p^T D_q for the paths on each marker.
+    for (Eigen::Index k = 0; k < K; ++k)
+      for (int a = path_start_[std::size_t(k)]; a < path_start_[std::size_t(k) + 1]; ++a)
+        for (int b = path_start_[std::size_t(k)]; b < path_start_[std::size_t(k) + 1]; ++b) {
+          const int i = path_of_marker_[std::size_t(a)], j = path_of_marker_[std::size_t(b)];
+          H_(paths[std::size_t(i)].shape, paths[std::size_t(j)].shape) += path_difference_.col(i).dot(path_difference_.col(j));
+        }
     H_.diagonal().array() += p.alpha + p.mu;
-    g_.noalias() = jacobian_.transpose() * residual_;
+    g_.noalias() = m.marker_basis.transpose() * residual_;
+    for (std::size_t i = 0; i < paths.size(); ++i)
+      g_[paths[i].shape] += path_difference_.col(Eigen::Index(i)).dot(residual_.segment<3>(3 * paths[i].marker));
     g_ += p.alpha * previous_;
     qp_.solve(H_, g_, 0.0, 1.0, w);
   }
@@ -118,8 +141,10 @@ class WeightsStage {
   const SolverModel& model_;
   int refinements_;
   BoxQpSolver qp_;
-  Eigen::MatrixXd H_, jacobian_;
-  Eigen::VectorXd g_, previous_, residual_, predicted_;
+  Eigen::MatrixXd H_, gram_present_, cross_;
+  Eigen::VectorXd g_, previous_, residual_;
+  Eigen::Matrix3Xd path_difference_;
+  std::vector<int> path_start_, path_of_marker_;  // marker paths grouped by marker (CSR)
   Eigen::Array<bool, Eigen::Dynamic, 1> present_;
 };
 
@@ -182,14 +207,15 @@ class PoissonSolver : public FaceSolver {
       : FaceSolver(std::move(model)), blend_(blend), weights_(*model_, blend == Blend::kNonlinear) {
     const SolverModel& m = *model_;
     const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
-    blend_sum_.setZero(9, T);
-    touched_flag_.assign(std::size_t(T), 0);
-    touched_.reserve(std::size_t(T));
-    // G^T W G x0, the right-hand side of T = I everywhere.
+    sums_.assign(9 * std::size_t(T), 0.0f);
+    contribution_.assign(9 * std::size_t(T), 0.0);
+    operator_.resize(9 * std::size_t(T));
+    // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied component-major.
     identity_rhs_.setZero(3, N);
     for (Eigen::Index t = 0; t < T; ++t) {
       const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
       for (int k = 0; k < 3; ++k) identity_rhs_.col(m.rig.triangles(k, t)) += Q.col(k);
+      for (int c = 0; c < 9; ++c) operator_[std::size_t(c) * std::size_t(T) + std::size_t(t)] = Q.data()[c];
     }
     rhs_.resize(3, N);
     work_.resize(3, N);
@@ -232,12 +258,13 @@ class PoissonSolver : public FaceSolver {
     clock.lap(SolveStage::kBlend);
 
     rhs_ = identity_rhs_;
-    for (int t : touched_) {
-      const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
-      const Eigen::Map<const Eigen::Matrix3d> T_minus_I(blend_sum_.col(t).data());
-      const Eigen::Matrix3d contribution = T_minus_I * Q;
-      for (int k = 0; k < 3; ++k) rhs_.col(m.rig.triangles(k, t)) += contribution.col(k);
-    }
+    const Eigen::Index T = m.rig.triangle_count();
+    const double* C = contribution_.data();
+    for (Eigen::Index t = 0; t < T; ++t)
+      for (int k = 0; k < 3; ++k) {
+        double* column = rhs_.col(m.rig.triangles(k, t)).data();
+        for (int r = 0; r < 3; ++r) column[r] += C[(3 * k + r) * T + t];
+      }
     modification_count_ = 0;
     const double beta = m.params.beta;
     for (Eigen::Index k = 0; k < m.marker_count(); ++k) {
@@ -257,41 +284,77 @@ class PoissonSolver : public FaceSolver {
     clock.finish();
   }
 
-  // Sums the active shapes' per-triangle terms, then turns each touched triangle's sum
-  // into T_j - I: Eq. 4 for nonlinear, sum w_i (F_ij - I) for dt.
+  // Sums the active shapes' per-triangle terms, turns each sum into T_j - I (Eq. 4 for
+  // nonlinear, sum w_i (F_ij - I) for dt) and multiplies by Q_j into contribution_.
+  // Component-major arrays keep both loops in vector registers.
   void blend(const Eigen::VectorXd& w) noexcept {
     const SolverModel& m = *model_;
-    for (int t : touched_) { blend_sum_.col(t).setZero(); touched_flag_[std::size_t(t)] = 0; }
-    touched_.clear();
+    const std::size_t T = std::size_t(m.rig.triangle_count());
+    std::fill(sums_.begin(), sums_.end(), 0.0f);
     for (Eigen::Index s = 0; s < m.shape_count(); ++s) {
-      const double ws = w[s];
-      if (ws <= m.params.active_weight) continue;
+      if (w[s] <= m.params.active_weight) continue;
+      const float ws = float(w[s]);
       const auto& terms = m.shape_terms[std::size_t(s)];
-      const std::size_t n = terms.triangles.size();
-      for (std::size_t e = 0; e < n; ++e) {
-        const int t = terms.triangles[e];
-        if (!touched_flag_[std::size_t(t)]) { touched_flag_[std::size_t(t)] = 1; touched_.push_back(t); }
-        double* sum = blend_sum_.col(t).data();
-        if (blend_ == Blend::kNonlinear) {
-          const float* r = &terms.log_rotation[3 * e];
-          const float* st = &terms.stretch[6 * e];
-          for (int k = 0; k < 3; ++k) sum[k] += ws * r[k];
-          for (int k = 0; k < 6; ++k) sum[3 + k] += ws * st[k];
-        } else {
-          const float* g = &terms.gradient[9 * e];
-          for (int k = 0; k < 9; ++k) sum[k] += ws * g[k];
-        }
+      const std::size_t n = std::size_t(terms.count);
+      const float* source = blend_ == Blend::kNonlinear ? terms.nonlinear.data() : terms.gradient.data();
+      for (std::size_t c = 0; c < 9; ++c) {
+        float* __restrict dst = sums_.data() + c * T + std::size_t(terms.first_triangle);
+        const float* __restrict src = source + c * n;
+        for (std::size_t i = 0; i < n; ++i) dst[i] += ws * src[i];
       }
     }
-    if (blend_ == Blend::kDeformationTransfer) return;
-    for (int t : touched_) {
-      double* sum = blend_sum_.col(t).data();
-      const Eigen::Matrix3d R = rotation_exp(Eigen::Vector3d(sum[0], sum[1], sum[2]));
-      Eigen::Matrix3d S;
-      S << 1 + sum[3], sum[6], sum[7], sum[6], 1 + sum[4], sum[8], sum[7], sum[8], 1 + sum[5];
-      Eigen::Map<Eigen::Matrix3d> T_minus_I(sum);
-      T_minus_I = R * S - Eigen::Matrix3d::Identity();
+    const float* S = sums_.data();
+    const double* Q = operator_.data();
+    double* out = contribution_.data();
+    if (blend_ == Blend::kDeformationTransfer) {
+      for (std::size_t t = 0; t < T; ++t)
+        for (int r = 0; r < 3; ++r)
+          for (int k = 0; k < 3; ++k)
+            out[(3 * k + r) * T + t] = S[r * T + t] * Q[(3 * k) * T + t] + S[(3 + r) * T + t] * Q[(3 * k + 1) * T + t] +
+                                       S[(6 + r) * T + t] * Q[(3 * k + 2) * T + t];
+      return;
     }
+    for (std::size_t t = 0; t < T; ++t) {
+      const double rx = S[t], ry = S[T + t], rz = S[2 * T + t];
+      const double x = rx * rx + ry * ry + rz * rz;
+      // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to 1e-10
+      // for theta <= 2.5; larger turns are redone with sin and cos below.
+      double a = 1.0 / 6227020800.0, b = 1.0 / 87178291200.0;  // 1/13!, 1/14!
+      constexpr double kInvFactorial[] = {1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0, 1.0 / 6.0, 1.0};
+      constexpr double kInvFactorialEven[] = {1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5};
+      for (int i = 0; i < 6; ++i) {
+        a = kInvFactorial[i] - x * a;
+        b = kInvFactorialEven[i] - x * b;
+      }
+      finish_triangle(t, T, rx, ry, rz, x, a, b, S, Q, out);
+    }
+    for (std::size_t t = 0; t < T; ++t) {
+      const double rx = S[t], ry = S[T + t], rz = S[2 * T + t];
+      const double x = rx * rx + ry * ry + rz * rz;
+      if (x <= 6.25) continue;
+      const double theta = std::sqrt(x);
+      finish_triangle(t, T, rx, ry, rz, x, std::sin(theta) / theta, (1.0 - std::cos(theta)) / x, S, Q, out);
+    }
+  }
+
+  // out = (R (I + S) - I) Q for one triangle, R = I + a [r]x + b [r]x^2.
+  static void finish_triangle(std::size_t t, std::size_t T, double rx, double ry, double rz, double x, double a,
+                              double b, const float* S, const double* Q, double* out) noexcept {
+    double R[9];  // column-major
+    R[0] = 1 + b * (rx * rx - x); R[3] = -a * rz + b * rx * ry;  R[6] = a * ry + b * rx * rz;
+    R[1] = a * rz + b * rx * ry;  R[4] = 1 + b * (ry * ry - x);  R[7] = -a * rx + b * ry * rz;
+    R[2] = -a * ry + b * rx * rz; R[5] = a * rx + b * ry * rz;   R[8] = 1 + b * (rz * rz - x);
+    const double sxx = 1 + S[3 * T + t], syy = 1 + S[4 * T + t], szz = 1 + S[5 * T + t];
+    const double sxy = S[6 * T + t], sxz = S[7 * T + t], syz = S[8 * T + t];
+    const double Sm[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};
+    double M[9];  // R S - I
+    for (int c = 0; c < 3; ++c)
+      for (int r = 0; r < 3; ++r)
+        M[3 * c + r] = R[r] * Sm[3 * c] + R[3 + r] * Sm[3 * c + 1] + R[6 + r] * Sm[3 * c + 2] - (r == c ? 1.0 : 0.0);
+    for (int k = 0; k < 3; ++k)
+      for (int r = 0; r < 3; ++r)
+        out[(3 * k + r) * T + t] =
+            M[r] * Q[(3 * k) * T + t] + M[3 + r] * Q[(3 * k + 1) * T + t] + M[6 + r] * Q[(3 * k + 2) * T + t];
   }
 
   void add_modification(Eigen::Index column, double scale) noexcept {
@@ -350,9 +413,9 @@ class PoissonSolver : public FaceSolver {
 
   Blend blend_;
   WeightsStage weights_;
-  Eigen::Matrix<double, 9, Eigen::Dynamic> blend_sum_;  // per triangle; T_j - I after blend()
-  std::vector<uint8_t> touched_flag_;
-  std::vector<int> touched_;
+  std::vector<float> sums_;            // 9 x T component-major: summed shape terms
+  std::vector<double> operator_;       // 9 x T component-major copy of Q_j
+  std::vector<double> contribution_;   // 9 x T component-major: (T_j - I) Q_j
   Eigen::Matrix3Xd identity_rhs_, rhs_, work_;
   Eigen::VectorXi modification_;
   Eigen::VectorXd modification_scale_;

@@ -57,6 +57,18 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A) : n_(A.rows()) {
     }
   }
   col_start_[std::size_t(n_)] = int(row_.size());
+  row_start_.assign(std::size_t(n_) + 1, 0);
+  for (int r : row_) ++row_start_[std::size_t(r) + 1];
+  for (std::size_t r = 0; r < std::size_t(n_); ++r) row_start_[r + 1] += row_start_[r];
+  col_.resize(row_.size());
+  row_value_.resize(row_.size());
+  std::vector<int> fill(row_start_.begin(), row_start_.end() - 1);
+  for (Eigen::Index j = 0; j < n_; ++j)
+    for (int k = col_start_[std::size_t(j)]; k < col_start_[std::size_t(j) + 1]; ++k) {
+      const int at = fill[std::size_t(row_[std::size_t(k)])]++;
+      col_[std::size_t(at)] = int(j);
+      row_value_[std::size_t(at)] = value_[std::size_t(k)];
+    }
   cholmod_free_factor(&factor, &common);
   cholmod_finish(&common);
 }
@@ -70,13 +82,16 @@ void SparseLdlt::solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix3Xd& work) c
   }
   const int* rows = row_.data();
   const double* vals = value_.data();
-  for (Eigen::Index j = 0; j < n_; ++j) {  // L y = b
-    const double y0 = w[3 * j], y1 = w[3 * j + 1], y2 = w[3 * j + 2];
-    for (int k = col_start_[std::size_t(j)]; k < col_start_[std::size_t(j) + 1]; ++k) {
-      double* t = w + 3 * rows[k];
-      const double l = vals[k];
-      t[0] -= l * y0; t[1] -= l * y1; t[2] -= l * y2;
+  const int* cols = col_.data();
+  const double* row_vals = row_value_.data();
+  for (Eigen::Index i = 0; i < n_; ++i) {  // L y = b, row by row
+    double s0 = w[3 * i], s1 = w[3 * i + 1], s2 = w[3 * i + 2];
+    for (int k = row_start_[std::size_t(i)]; k < row_start_[std::size_t(i) + 1]; ++k) {
+      const double* t = w + 3 * cols[k];
+      const double l = row_vals[k];
+      s0 -= l * t[0]; s1 -= l * t[1]; s2 -= l * t[2];
     }
+    w[3 * i] = s0; w[3 * i + 1] = s1; w[3 * i + 2] = s2;
   }
   for (Eigen::Index j = n_ - 1; j >= 0; --j) {  // D z = y, L^T u = z
     const double d = inv_diagonal_[std::size_t(j)];

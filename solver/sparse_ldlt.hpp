@@ -29,9 +29,12 @@ class SparseLdlt {
  private:
   Eigen::Index n_ = 0;
   std::vector<int> perm_;            // factor row i is A's row perm_[i]
-  std::vector<int> col_start_;       // n+1, strictly-lower entries of unit L per column
-  std::vector<int> row_;
+  // Strictly-lower entries of the unit L, by column (for L^T) and by row (for L), so both
+  // triangular solves gather rather than scatter.
+  std::vector<int> col_start_, row_;
   std::vector<double> value_;
+  std::vector<int> row_start_, col_;
+  std::vector<double> row_value_;
   std::vector<double> inv_diagonal_; // 1 / D
 };
 

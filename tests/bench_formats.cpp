@@ -28,7 +28,8 @@ MarkerTake class_take() {
     for (std::size_t k = 0; k < kMarkers; ++k) {
       if ((f + k) % 50 == 0) continue;  // 2% missing
       frame.markers[k].flags = 0;
-      frame.markers[k].position = Eigen::Vector3d(100.0 + double(k) + 0.01 * double(f), 1500.25 - double(k), 42.0 * std::sin(0.01 * double(f)));
+      frame.markers[k].position =
+          Eigen::Vector3d(100.0 + double(k) + 0.01 * double(f), 1500.25 - double(k), 42.0 * std::sin(0.01 * double(f)));
     }
   }
   return take;
@@ -66,14 +67,18 @@ void BM_ReadSharedFile(benchmark::State& state, const char* relative) {
   }
   const bool csv = path.extension() == ".csv";
   for (auto _ : state) {
-    if (csv) benchmark::DoNotOptimize(read_livelinkface(path));
-    else benchmark::DoNotOptimize(read_take(path));
+    if (csv)
+      benchmark::DoNotOptimize(read_livelinkface(path));
+    else
+      benchmark::DoNotOptimize(read_take(path));
   }
   state.SetBytesProcessed(int64_t(state.iterations() * std::filesystem::file_size(path)));
 }
-BENCHMARK_CAPTURE(BM_ReadSharedFile, livelinkface_alex_rom_3, "livelinkface/alexdjulin_alex_rom_3.csv")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_ReadSharedFile, livelinkface_alex_rom_3, "livelinkface/alexdjulin_alex_rom_3.csv")
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_ReadSharedFile, trc_JawMoCap, "markers/animface/JawMoCap.trc")->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(BM_ReadSharedFile, c3d_s20_phasespace, "c3d/c3dorg_s20_phasespace_sample.c3d")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_ReadSharedFile, c3d_s20_phasespace, "c3d/c3dorg_s20_phasespace_sample.c3d")
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -106,10 +106,14 @@ TEST_CASE("Corrupted synthetic files of every format throw only Error", "[corrup
 
 TEST_CASE("Corrupted real files throw only Error", "[corruption][shared]") {
   const std::pair<const char*, Reader> files[] = {
-      {"c3d/Eb015pi.c3d", Reader::kTake},       {"c3d/Eb015vr.c3d", Reader::kTake},
-      {"c3d/Eb015sr.c3d", Reader::kTake},       {"c3d/c3dorg_s18_bad_parameter_section.c3d", Reader::kTake},
-      {"c3d/c3d_test_file_03.c3d", Reader::kTake}, {"trc/test_file_04.trc", Reader::kTake},
-      {"trc/test_file_01.trc", Reader::kTake},  {"livelinkface/jmtechart_MySlate_3_Jason_Millers_iPhone.csv", Reader::kLiveLinkFace},
+      {"c3d/Eb015pi.c3d", Reader::kTake},
+      {"c3d/Eb015vr.c3d", Reader::kTake},
+      {"c3d/Eb015sr.c3d", Reader::kTake},
+      {"c3d/c3dorg_s18_bad_parameter_section.c3d", Reader::kTake},
+      {"c3d/c3d_test_file_03.c3d", Reader::kTake},
+      {"trc/test_file_04.trc", Reader::kTake},
+      {"trc/test_file_01.trc", Reader::kTake},
+      {"livelinkface/jmtechart_MySlate_3_Jason_Millers_iPhone.csv", Reader::kLiveLinkFace},
   };
   uint32_t seed = 1000;
   for (const auto& [file, reader] : files) {

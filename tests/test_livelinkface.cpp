@@ -30,7 +30,8 @@ FaceTake small_take() {
     FaceFrame& f = take.frames.emplace_back();
     f.timecode = *parse_livelink_timecode(fmt::format("10:00:00:{:02}.250", 2 * i));
     f.tracked = i != 2;
-    for (std::size_t s = 0; s < kArkitShapeCount; ++s) f.weights[s] = f.tracked ? float(s) / 52.0f + 0.01f * float(i) : NAN;
+    for (std::size_t s = 0; s < kArkitShapeCount; ++s)
+      f.weights[s] = f.tracked ? float(s) / 52.0f + 0.01f * float(i) : NAN;
     for (std::size_t a = 0; a < kLiveLinkAngleCount; ++a) f.angles[a] = f.tracked ? -0.5f + 0.1f * float(a) : NAN;
   }
   take.frames[1].weights[shape("JawOpen")] = 1.0125f;  // the app writes slightly more than 1
@@ -58,7 +59,8 @@ TEST_CASE("ARKit names map to rig names and back, all 52", "[arkit]") {
     // _L/_R; jawLeft, mouthRight, ... name directions, not sides, and keep the word.
     std::string expected(s.arkit);
     expected[0] = char(std::tolower(expected[0]));
-    const bool direction = expected == "jawLeft" || expected == "jawRight" || expected == "mouthLeft" || expected == "mouthRight";
+    const bool direction =
+        expected == "jawLeft" || expected == "jawRight" || expected == "mouthLeft" || expected == "mouthRight";
     if (!direction && expected.ends_with("Left")) expected.replace(expected.size() - 4, 4, "_L");
     if (!direction && expected.ends_with("Right")) expected.replace(expected.size() - 5, 5, "_R");
     CHECK(s.rig == expected);
@@ -72,7 +74,8 @@ TEST_CASE("ARKit shapes bind to the ICT face's shapes", "[arkit][shared]") {
   FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
   std::vector<std::string> rig_shapes;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
-    if (entry.path().extension() == ".obj" && entry.path().stem() != "generic_neutral_mesh") rig_shapes.push_back(entry.path().stem().string());
+    if (entry.path().extension() == ".obj" && entry.path().stem() != "generic_neutral_mesh")
+      rig_shapes.push_back(entry.path().stem().string());
   }
   std::sort(rig_shapes.begin(), rig_shapes.end());
   REQUIRE(rig_shapes.size() == 57);
@@ -107,7 +110,8 @@ TEST_CASE("Live Link timecodes are HH:MM:SS:FF.fff on a 60 fps base", "[livelink
   CHECK(tc->rate_hz == 60);
   CHECK(format_livelink_timecode(*tc) == "12:27:47:47.169");
   CHECK(parse_livelink_timecode("00:32:09:07") != std::nullopt);
-  for (const char* bad : {"12:27:47:60.000", "12:61:00:00.0", "12:27:47", "1a:00:00:00.0", "12:27:47:47.", "12:27:47:47.1x"}) {
+  for (const char* bad :
+       {"12:27:47:60.000", "12:61:00:00.0", "12:27:47", "1a:00:00:00.0", "12:27:47:47.", "12:27:47:47.1x"}) {
     INFO(bad);
     CHECK(parse_livelink_timecode(bad) == std::nullopt);
   }
@@ -116,7 +120,7 @@ TEST_CASE("Live Link timecodes are HH:MM:SS:FF.fff on a 60 fps base", "[livelink
 TEST_CASE("Live Link Face writer output reads back; BlendShapeCount in either case", "[livelinkface]") {
   const FaceTake take = small_take();
   const std::string text = write_livelinkface(take);
-  CHECK(text.find("10:00:00:04.250,0\n") != std::string::npos);  // the lost row
+  CHECK(text.find("10:00:00:04.250,0\n") != std::string::npos);                    // the lost row
   CHECK(text.find(",JawForward,JawRight,JawLeft,JawOpen,") != std::string::npos);  // the app's order
   for (const std::string& variant : {text, replace_first(text, "BlendShapeCount", "blendShapeCount")}) {
     const FaceTake back = read_livelinkface(variant, "written.csv");
@@ -156,19 +160,22 @@ TEST_CASE("Live Link Face errors name line, column and cause", "[livelinkface]")
   expect_error(replace_first(text, "10:00:00:02.250", "10:00:00:72.250"), "bad.csv:3:1", "timecode '10:00:00:72.250'");
   expect_error(replace_first(text, ",JawOpen,", ",JawOpened,"), "bad.csv:1", "lacks the JawOpen column");
   expect_error(replace_first(text, "Timecode,", "Time,"), "bad.csv:1", "not a Live Link Face CSV");
-  expect_error(replace_first(text, ",61,0.0000000000,", ",61,0.0x,"), "bad.csv:2:20", "EyeBlinkLeft value '0.0x' is not a number");
+  expect_error(replace_first(text, ",61,0.0000000000,", ",61,0.0x,"), "bad.csv:2:20",
+               "EyeBlinkLeft value '0.0x' is not a number");
   expect_error(text.substr(0, text.size() - 30), "bad.csv:5:", "row has");
 }
 
-TEST_CASE("Live Link Face: every CSV in ../shared/data/livelinkface reads with its gaps counted", "[livelinkface][shared]") {
+TEST_CASE("Live Link Face: every CSV in ../shared/data/livelinkface reads with its gaps counted",
+          "[livelinkface][shared]") {
   struct Expected {
     const char* file;
     std::size_t frames, lost;
     double rate_hz;
   };
-  for (const Expected& e : {Expected{"alexdjulin_S07-001.csv", 2028, 0, 30}, Expected{"alexdjulin_S88-001.csv", 1939, 277, 30},
-                            Expected{"alexdjulin_alex_rom_3.csv", 4030, 0, 30},
-                            Expected{"jmtechart_MySlate_3_Jason_Millers_iPhone.csv", 328, 0, 60}}) {
+  for (const Expected& e :
+       {Expected{"alexdjulin_S07-001.csv", 2028, 0, 30}, Expected{"alexdjulin_S88-001.csv", 1939, 277, 30},
+        Expected{"alexdjulin_alex_rom_3.csv", 4030, 0, 30},
+        Expected{"jmtechart_MySlate_3_Jason_Millers_iPhone.csv", 328, 0, 60}}) {
     INFO(e.file);
     FACECAP_REQUIRE_SHARED_DATA(path, std::string("livelinkface/") + e.file);
     const FaceTake take = read_livelinkface(path);
@@ -193,7 +200,7 @@ TEST_CASE("Live Link Face: every CSV in ../shared/data/livelinkface reads with i
 
   FACECAP_REQUIRE_SHARED_DATA(s88, "livelinkface/alexdjulin_S88-001.csv");
   const FaceTake lost = read_livelinkface(s88);
-  CHECK(lost.frames[381].tracked);       // CSV line 383
+  CHECK(lost.frames[381].tracked);        // CSV line 383
   CHECK_FALSE(lost.frames[382].tracked);  // line 384: "16:48:52:29.134,0"
   CHECK(std::isnan(lost.frames[382].weights[0]));
   CHECK(lost.frames[382].source_time_ns - lost.frames[381].source_time_ns == Approx(2e9 / 60.0).margin(1e5));
@@ -201,6 +208,12 @@ TEST_CASE("Live Link Face: every CSV in ../shared/data/livelinkface reads with i
   FACECAP_REQUIRE_SHARED_DATA(rom, "livelinkface/alexdjulin_alex_rom_3.csv");
   const FaceTake rom_take = read_livelinkface(rom);
   CHECK(rom_take.frames[543].weights[shape("EyeLookInRight")] == Approx(1.0033375025));  // > 1 accepted
+
+  // The writer's header is the app's, column for column.
+  const auto s07_bytes = read_file_bytes(s07);
+  const std::string_view s07_text(s07_bytes.data(), s07_bytes.size());
+  const std::string written = write_livelinkface(first);
+  CHECK(written.substr(0, written.find('\n')) == s07_text.substr(0, s07_text.find('\n')));
 
   // And the writer reproduces what it read.
   const FaceTake again = read_livelinkface(write_livelinkface(lost), "rewritten.csv");

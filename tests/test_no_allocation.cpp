@@ -1,8 +1,7 @@
-// The solve thread's per-frame work must not allocate. This binary counts every
-// allocation made by the calling thread: global operator new is replaced, and so are
-// malloc and friends (Eigen allocates with malloc, not new), both forwarding to glibc.
+// The solve thread's per-frame work must not allocate. tests/alloc_counter.cpp replaces
+// global operator new and interposes malloc and friends (Eigen allocates with malloc),
+// counting the calling thread's allocations.
 #include <cstdlib>
-#include <new>
 #include <thread>
 
 #include <catch2/catch.hpp>
@@ -18,74 +17,8 @@
 #include "drivers/sim/sim_source.hpp"
 #include "formats/take.hpp"
 #include "solver/builtin_face.hpp"
+#include "tests/alloc_counter.hpp"
 #include "tests/test_support.hpp"
-
-extern "C" {
-void* __libc_malloc(std::size_t);
-void* __libc_calloc(std::size_t, std::size_t);
-void* __libc_realloc(void*, std::size_t);
-void* __libc_memalign(std::size_t, std::size_t);
-void __libc_free(void*);
-}
-
-namespace {
-// Initial-exec TLS in the executable: reading it never allocates (no recursion).
-__thread bool counting = false;
-__thread std::size_t allocations = 0;
-inline void count() noexcept {
-  if (counting) ++allocations;
-}
-}  // namespace
-
-extern "C" {
-void* malloc(std::size_t n) {
-  count();
-  return __libc_malloc(n);
-}
-void* calloc(std::size_t n, std::size_t size) {
-  count();
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, std::size_t n) {
-  count();
-  return __libc_realloc(p, n);
-}
-void free(void* p) { __libc_free(p); }
-int posix_memalign(void** out, std::size_t alignment, std::size_t n) {
-  count();
-  *out = __libc_memalign(alignment, n);
-  return *out ? 0 : ENOMEM;
-}
-void* aligned_alloc(std::size_t alignment, std::size_t n) {
-  count();
-  return __libc_memalign(alignment, n);
-}
-void* memalign(std::size_t alignment, std::size_t n) {
-  count();
-  return __libc_memalign(alignment, n);
-}
-}
-
-void* operator new(std::size_t n) {
-  count();
-  if (void* p = __libc_malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) { return operator new(n); }
-void* operator new(std::size_t n, std::align_val_t a) {
-  count();
-  if (void* p = __libc_memalign(std::size_t(a), n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n, std::align_val_t a) { return operator new(n, a); }
-void operator delete(void* p) noexcept { __libc_free(p); }
-void operator delete[](void* p) noexcept { __libc_free(p); }
-void operator delete(void* p, std::size_t) noexcept { __libc_free(p); }
-void operator delete[](void* p, std::size_t) noexcept { __libc_free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { __libc_free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { __libc_free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }
 
 using namespace facecap;
 using namespace facecap::daemon;
@@ -105,11 +38,12 @@ Counted run_ticks(SolveLoop& loop, uint64_t frames, int64_t period_ns) {
     deadline += period_ns;
     timespec ts{time_t(deadline / kNsPerSecond), long(deadline % kNsPerSecond)};
     clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
-    allocations = 0;
-    counting = true;
-    const bool solved = loop.tick(monotonic_now_ns());
-    counting = false;
-    c.allocations += allocations;
+    bool solved = false;
+    {
+      const test::CountAllocations counter;
+      solved = loop.tick(monotonic_now_ns());
+      c.allocations += std::size_t(counter.count());
+    }
     c.frames += solved ? 1 : 0;
   }
   return c;
@@ -118,13 +52,19 @@ Counted run_ticks(SolveLoop& loop, uint64_t frames, int64_t period_ns) {
 }  // namespace
 
 TEST_CASE("the counter sees allocations by new and by malloc") {
-  allocations = 0;
-  counting = true;
-  auto* p = new int(3);
-  void* q = std::malloc(16);
-  Eigen::VectorXd v(100);
-  counting = false;
-  CHECK(allocations == 3);
+  int64_t seen = 0;
+  int* p = nullptr;
+  void* q = nullptr;
+  {
+    const test::CountAllocations counter;
+    p = new int(3);
+    q = std::malloc(16);
+    Eigen::VectorXd v(100);
+    // Escapes, so the compiler may not elide the allocations.
+    asm volatile("" : : "g"(p), "g"(q), "g"(v.data()) : "memory");
+    seen = counter.count();
+  }
+  CHECK(seen == 3);
   delete p;
   std::free(q);
 }

@@ -225,7 +225,8 @@ TEST_CASE("Recording: flushed frames are readable while the writer is still open
 
 TEST_CASE("Recording: existing files are not overwritten unless asked", "[recording]") {
   const auto path = write_small_recording(facecap::test::scratch_dir("recording-exists"));
-  CHECK_THROWS_WITH(RecordingWriter(path, test_header()), Catch::Contains("cannot create recording") && Catch::Contains("exists"));
+  CHECK_THROWS_WITH(RecordingWriter(path, test_header()),
+                    Catch::Contains("cannot create recording") && Catch::Contains("exists"));
   RecordingWriter(path, test_header(), RecordingWriter::Options{.overwrite = true}).close();
   CHECK(RecordingReader(path).marker_frame_count() == 0);
 }

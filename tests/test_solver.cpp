@@ -177,3 +177,36 @@ TEST_CASE("too few markers hold the previous result and unknown solvers are reje
   CHECK_THROWS_WITH(make_solver("magic", model), Catch::Contains("unknown solver 'magic'"));
   CHECK_THROWS_WITH(build_solver_model(rig, {MarkerBinding::at_vertex("bad", 1 << 30)}), Catch::Contains("marker 'bad'"));
 }
+
+#include "tests/alloc_counter.hpp"
+
+TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers") {
+  const BuiltinFace& face = BuiltinFace::instance();
+  const Rig& rig = face.rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  for (const char* name : {"nonlinear", "linear", "dt"}) {
+    auto solver = make_solver(name, model);
+    SolveResult out = solver->make_result();
+    auto present = all_present(60);
+    std::vector<Eigen::Matrix3Xd> frames;
+    for (int f = 0; f < 30; ++f) frames.push_back(markers_of(face.articulated_pose(face.motion_weights(f * 0.05)), layout));
+    frames[5].col(3).setConstant(std::numeric_limits<double>::quiet_NaN());
+    int64_t allocations = 0;
+    {
+      test::CountAllocations counter;
+      for (int f = 0; f < 30; ++f) {
+        present[std::size_t(f % 60)] = f % 3 ? 1 : 0;  // some frames lose a marker
+        solver->solve(frames[std::size_t(f)], present, out);
+      }
+      allocations = counter.count();
+    }
+    INFO(name);
+    CHECK(allocations == 0);
+    CHECK_FALSE(out.held);
+  }
+  // The counter itself works.
+  test::CountAllocations counter;
+  std::vector<int> v(100);
+  CHECK(counter.count() >= 1);
+}

@@ -30,7 +30,8 @@ const char* const kSmallTrc =
     "3\t0.02\t1.75\t2.75\t3.75\n";
 
 std::string replace_all(std::string s, std::string_view from, std::string_view to) {
-  for (std::size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size())) s.replace(at, from.size(), to);
+  for (std::size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size()))
+    s.replace(at, from.size(), to);
   return s;
 }
 
@@ -42,19 +43,17 @@ void check_small_take(const MarkerTake& take) {
   REQUIRE(take.frames.size() == 3);
   CHECK(take.frames[0].markers[0].position == Eigen::Vector3d(1.5, 2.5, 3.5));
   CHECK(take.frames[0].markers[1].position == Eigen::Vector3d(4, 5, 6));
-  CHECK_FALSE(take.frames[1].markers[0].present());   // empty cells
+  CHECK_FALSE(take.frames[1].markers[0].present());  // empty cells
   CHECK(take.frames[1].markers[1].position == Eigen::Vector3d(4.25, 5.25, 6.25));
   CHECK(take.frames[2].markers[0].position == Eigen::Vector3d(1.75, 2.75, 3.75));
-  CHECK_FALSE(take.frames[2].markers[1].present());   // short row
+  CHECK_FALSE(take.frames[2].markers[1].present());  // short row
   CHECK(take.frames[2].source_time_ns == 20'000'000);
   CHECK(count_gaps(take).missing_samples == 2);
 }
 
 }  // namespace
 
-TEST_CASE("TRC: tabs, empty cells and short rows", "[trc]") {
-  check_small_take(read_trc(kSmallTrc, "small.trc"));
-}
+TEST_CASE("TRC: tabs, empty cells and short rows", "[trc]") { check_small_take(read_trc(kSmallTrc, "small.trc")); }
 
 TEST_CASE("TRC: CRLF, CR CR LF and bare CR line endings read the same", "[trc]") {
   for (const char* ending : {"\r\n", "\r\r\n", "\r"}) {
@@ -93,7 +92,8 @@ TEST_CASE("TRC: errors name the line, column and what was wrong", "[trc]") {
     }
   };
   expect_error(replace_all(kSmallTrc, "4.25", "4.2x5"), "bad.trc:8:11", "X of marker Chin is '4.2x5', not a number");
-  expect_error(replace_all(kSmallTrc, "PathFileType\t4", "PathFileType\t5"), "bad.trc:1:", "PathFileType '5' is not supported");
+  expect_error(replace_all(kSmallTrc, "PathFileType\t4", "PathFileType\t5"),
+               "bad.trc:1:", "PathFileType '5' is not supported");
   expect_error(replace_all(kSmallTrc, "\t3\t2\tm", "\t3\t900000000\tm"), "bad.trc:5", "NumMarkers is 900000000");
   expect_error("Frame#\tTime\n", "bad.trc:1", "not a TRC file");
   expect_error(std::string(kSmallTrc).substr(0, 174), "bad.trc:5", "file ends before the coordinate names");

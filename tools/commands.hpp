@@ -6,6 +6,7 @@
 namespace facecap::tools {
 
 // Each adds its subcommand to app; the callback runs it and sets exit_code.
+void add_demo_command(CLI::App& app, int& exit_code);
 void add_inspect_rig_command(CLI::App& app, int& exit_code);
 void add_inspect_command(CLI::App& app, int& exit_code);
 void add_convert_command(CLI::App& app, int& exit_code);

@@ -34,7 +34,8 @@ void add_convert_command(CLI::App& app, int& exit_code) {
     if (!opts->force && std::filesystem::exists(output)) {
       throw file_error(output.string(), "exists; pass --force to replace it");
     }
-    if (!formats::format_from_extension(output) || *formats::format_from_extension(output) == formats::TakeFormat::kLiveLinkFace) {
+    if (!formats::format_from_extension(output) ||
+        *formats::format_from_extension(output) == formats::TakeFormat::kLiveLinkFace) {
       throw file_error(output.string(), "output must end in .c3d, .trc or .fcrec");
     }
     const auto start = std::chrono::steady_clock::now();
@@ -45,9 +46,10 @@ void add_convert_command(CLI::App& app, int& exit_code) {
     formats::write_take(output, take, [&bar](std::size_t done, std::size_t total) { bar.update(done, total); });
     bar.finish();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    fmt::print("{} ({}) -> {} ({}): {} frames, {} markers, {:.3f} s\n", input.string(), formats::format_name(take.format),
-               output.string(), formats::format_name(*formats::format_from_extension(output)), take.frames.size(),
-               take.marker_count(), seconds);
+    fmt::print("{} ({}) -> {} ({}): {} frames, {} markers, {:.3f} s\n", input.string(),
+               formats::format_name(take.format), output.string(),
+               formats::format_name(*formats::format_from_extension(output)), take.frames.size(), take.marker_count(),
+               seconds);
     exit_code = 0;
   });
 }

@@ -103,7 +103,8 @@ nlohmann::json face_json(const std::filesystem::path& path, const FaceTake& take
     j["first_timecode"] = formats::format_livelink_timecode(f.timecode);
     if (f.tracked) {
       nlohmann::json weights = nlohmann::json::object();
-      for (std::size_t s = 0; s < formats::kArkitShapeCount; ++s) weights[std::string(formats::kArkitShapes[s].arkit)] = f.weights[s];
+      for (std::size_t s = 0; s < formats::kArkitShapeCount; ++s)
+        weights[std::string(formats::kArkitShapes[s].arkit)] = f.weights[s];
       j["first_weights"] = weights;
     } else {
       j["first_weights"] = nullptr;
@@ -128,7 +129,8 @@ void print_markers(const std::filesystem::path& path, const MarkerTake& take) {
   for (std::size_t k = 0; k < take.marker_count(); ++k) {
     const Marker& m = take.frames.front().markers[k];
     if (m.present()) {
-      fmt::print("  {:<24} {:12.4f} {:12.4f} {:12.4f}\n", take.labels[k], m.position.x(), m.position.y(), m.position.z());
+      fmt::print("  {:<24} {:12.4f} {:12.4f} {:12.4f}\n", take.labels[k], m.position.x(), m.position.y(),
+                 m.position.z());
     } else {
       fmt::print("  {:<24} missing\n", take.labels[k]);
     }
@@ -140,7 +142,8 @@ void print_face(const std::filesystem::path& path, const FaceTake& take) {
   fmt::print("format    {}\n", formats::format_name(TakeFormat::kLiveLinkFace));
   fmt::print("frames    {}\nrate_hz   {}\n", take.frames.size(), take.rate_hz);
   fmt::print("gaps      {} rows where tracking was lost\n", take.lost_frames());
-  fmt::print("shapes    {} ARKit weights + {} head/eye angles\n", formats::kArkitShapeCount, formats::kLiveLinkAngleCount);
+  fmt::print("shapes    {} ARKit weights + {} head/eye angles\n", formats::kArkitShapeCount,
+             formats::kLiveLinkAngleCount);
   for (const auto& w : take.warnings) fmt::print("warning   {}\n", w);
   if (take.frames.empty()) return;
   const auto& f = take.frames.front();
@@ -168,7 +171,9 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
   cmd->add_option("file", opts->file, "The file to inspect")->required()->check(CLI::ExistingFile);
   cmd->add_flag("--json", opts->json, "Print JSON: format, frames, rate_hz, markers, labels, units, gaps, first_frame");
   cmd->add_flag("--time", opts->time, "Also measure how long reading the file takes");
-  cmd->add_option("--repeat", opts->repeat, "Reads timed by --time")->check(CLI::Range(1, 10000))->capture_default_str();
+  cmd->add_option("--repeat", opts->repeat, "Reads timed by --time")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
   cmd->callback([opts, &exit_code] {
     const std::filesystem::path path(opts->file);
     const LoadedFile loaded = load(path);
@@ -180,8 +185,10 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
       // NaN has no JSON form; missing positions are already null.
       std::puts(j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
     } else {
-      if (loaded.markers) print_markers(path, *loaded.markers);
-      else print_face(path, *loaded.face);
+      if (loaded.markers)
+        print_markers(path, *loaded.markers);
+      else
+        print_face(path, *loaded.face);
       if (times) {
         fmt::print("\nread time min {:.3f} ms, median {:.3f} ms over {} reads ({} bytes)\n", times->min_ms,
                    times->median_ms, times->reads, std::filesystem::file_size(path));

@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
 
   int exit_code = 0;
   // The ordered command table.
+  facecap::tools::add_demo_command(app, exit_code);
   facecap::tools::add_inspect_rig_command(app, exit_code);
   facecap::tools::add_inspect_command(app, exit_code);
   facecap::tools::add_convert_command(app, exit_code);
