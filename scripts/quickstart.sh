@@ -42,7 +42,9 @@ case "$mode" in
   run)
     install_packages
     build
-    exec "$build_dir/tools/facecap" demo "$@"
+    # The product on its built-in default: facecapd solving simulated markers, watched
+    # through its shared memory, then stopped (facecap daemon-demo --help).
+    exec "$build_dir/tools/facecap" daemon-demo "$@"
     ;;
   test)
     install_packages

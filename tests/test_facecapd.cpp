@@ -280,3 +280,19 @@ TEST_CASE("a second facecapd on the same shared memory name fails and the first 
   ::kill(first.pid(), SIGTERM);
   CHECK(first.wait_exit(5 * kNsPerSecond) == 0);
 }
+
+TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working and stops it cleanly") {
+  const std::string command = std::string(FACECAP_BINARY_DIR) + "/tools/facecap daemon-demo --seconds 2 2>&1";
+  std::string out;
+  FILE* pipe = popen(command.c_str(), "r");
+  REQUIRE(pipe != nullptr);
+  char buffer[4096];
+  while (std::size_t n = fread(buffer, 1, sizeof buffer, pipe)) out.append(buffer, n);
+  const int status = pclose(pipe);
+  INFO(out);
+  CHECK(WEXITSTATUS(status) == 0);
+  CHECK_THAT(out, Contains("is READY") && Contains(" fps  publish->read p50 ") && Contains("exit status 0"));
+  const auto at = out.find("mean vertex error ");
+  REQUIRE(at != std::string::npos);
+  CHECK(std::stod(out.substr(at + 18)) < 1.0);  // mm
+}

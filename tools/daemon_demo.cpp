@@ -1,10 +1,12 @@
 // facecap daemon-demo: starts facecapd on its built-in default (simulated capture of the built-in
 // face, shared-memory output), waits for its READY=1 the way systemd would, subscribes
-// for a few seconds printing live figures, then stops it with SIGTERM.
+// for a few seconds printing live figures (and how close they are to the simulated
+// performance), then stops it with SIGTERM.
 #include <cerrno>
 #include <csignal>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <vector>
 
 #include <fmt/format.h>
@@ -12,9 +14,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "config/config_file.hpp"
 #include "core/error.hpp"
 #include "core/time.hpp"
 #include "daemon/notify_listener.hpp"
+#include "solver/builtin_face.hpp"
 #include "tools/commands.hpp"
 #include "tools/subscription.hpp"
 
@@ -48,9 +52,58 @@ struct DemoOptions {
   std::string config;
   std::vector<std::string> overrides;
   double seconds = 5.0;
+  std::optional<double> noise_mm;
 };
 
-int run_demo(const DemoOptions& options) {
+// How far the solved stream is from the sim's performance, when facecapd runs the sim on
+// the built-in face with the built-in motion (the truth is then known from frame numbers).
+class GroundTruth {
+ public:
+  static std::optional<GroundTruth> for_config(const config::DaemonConfig& c) {
+    if (c.source.driver != "sim" || c.rig.path != "builtin" || c.source.sim.motion != "builtin") return std::nullopt;
+    return GroundTruth(c.source.sim.rate_hz);
+  }
+  // Every 12th frame: the articulated pose costs a fraction of a millisecond.
+  void observe(const facecap_frame& f) {
+    if (f.frame_no % 12 != 0 || f.vertex_count == 0) return;
+    const BuiltinFace& face = BuiltinFace::instance();
+    const Eigen::VectorXd truth = face.motion_weights(double(f.frame_no) / rate_hz_);
+    if (Eigen::Index(f.shape_count) != truth.size()) return;
+    const Eigen::Map<const Eigen::VectorXf> weights(f.weights, f.shape_count);
+    const Eigen::Map<const Eigen::Matrix3Xf> vertices(f.vertices, 3, f.vertex_count);
+    window_weights_ += (weights.cast<double>() - truth).cwiseAbs().mean();
+    window_vertices_cm_ += (vertices.cast<double>() - face.articulated_pose(truth)).colwise().norm().mean();
+    ++window_count_;
+  }
+  std::string line_suffix() {
+    if (window_count_ == 0) return {};
+    const std::string text = fmt::format("  | vs truth: weights {:.3f}, vertices {:.2f} mm", window_weights_ / window_count_,
+                                         10.0 * window_vertices_cm_ / window_count_);
+    total_weights_ += window_weights_;
+    total_vertices_cm_ += window_vertices_cm_;
+    total_count_ += window_count_;
+    window_weights_ = window_vertices_cm_ = 0.0;
+    window_count_ = 0;
+    return text;
+  }
+  std::string summary() const {
+    if (total_count_ == 0) return "no frames compared with the truth";
+    return fmt::format("mean |weight - true weight| {:.3f}, mean vertex error {:.2f} mm ({} frames compared)",
+                       total_weights_ / total_count_, 10.0 * total_vertices_cm_ / total_count_, total_count_);
+  }
+
+ private:
+  explicit GroundTruth(double rate_hz) : rate_hz_(rate_hz) {}
+  double rate_hz_;
+  double window_weights_ = 0, window_vertices_cm_ = 0, total_weights_ = 0, total_vertices_cm_ = 0;
+  int window_count_ = 0, total_count_ = 0;
+};
+
+int run_demo(DemoOptions options) {
+  if (options.noise_mm) options.overrides.push_back(fmt::format("source.sim.noise_mm={}", *options.noise_mm));
+  // Validated here too, so that a bad option fails before anything starts.
+  const config::LoadedConfig effective = config::load_config(options.config, options.overrides);
+  std::optional<GroundTruth> truth = GroundTruth::for_config(effective.values);
   daemon::NotifyListener notify;
   const std::string shm_name = fmt::format("facecap-demo-{}", ::getpid());
   const std::string binary = options.facecapd.empty() ? find_facecapd() : options.facecapd;
@@ -95,7 +148,12 @@ int run_demo(const DemoOptions& options) {
 
   SubscriptionSummary summary;
   try {
-    summary = run_subscription({.shm_name = shm_name, .seconds = options.seconds});
+    SubscriptionOptions subscription{.shm_name = shm_name, .seconds = options.seconds};
+    if (truth) {
+      subscription.on_frame = [&](const facecap_frame& f) { truth->observe(f); };
+      subscription.line_suffix = [&] { return truth->line_suffix(); };
+    }
+    summary = run_subscription(subscription);
   } catch (...) {
     ::kill(pid, SIGTERM);
     ::waitpid(pid, nullptr, 0);
@@ -123,6 +181,7 @@ int run_demo(const DemoOptions& options) {
   fmt::print("received {} frames in {:.1f} s ({:.1f} fps), publish->read p50 {:.3f} ms p99 {:.3f} ms, {} dropped\n",
              summary.frames, summary.seconds, summary.seconds > 0 ? double(summary.frames) / summary.seconds : 0.0,
              double(summary.latency_p50_ns) / kNsPerMs, double(summary.latency_p99_ns) / kNsPerMs, summary.dropped);
+  if (truth) fmt::print("accuracy against the simulated performance: {}\n", truth->summary());
   return clean && summary.frames > 0 ? 0 : 1;
 }
 
@@ -135,6 +194,7 @@ void add_daemon_demo_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--facecapd", opts->facecapd, "The facecapd binary (default: beside facecap, or on PATH)");
   cmd->add_option("--config", opts->config, "A facecapd configuration file instead of the defaults");
   cmd->add_option("--set", opts->overrides, "Pass a key=value override to facecapd (repeatable)");
+  cmd->add_option("--noise", opts->noise_mm, "Marker noise of the simulated capture, mm (source.sim.noise_mm)");
   cmd->callback([opts, &exit_code] { exit_code = run_demo(*opts); });
 }
 

@@ -77,6 +77,7 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
       summary.dropped += frame.dropped;
       ++summary.frames;
       last_weights.assign(frame.weights, frame.weights + frame.shape_count);
+      if (options.on_frame) options.on_frame(frame);
     } else if (status == FACECAP_RESTARTED) {
       if (!options.json) fmt::print("writer restarted: now pid {}, {} shapes\n", sub.writer_pid(), sub.shape_count());
     } else if (status == FACECAP_ERR_WRITER_GONE) {
@@ -95,9 +96,9 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
                             {"latency_p99_ms", p99}, {"dropped", window_dropped}, {"frame_no", frame.frame_no}};
         fmt::print("{}\n", j.dump());
       } else {
-        fmt::print("{:5.1f} s  {:6.1f} fps  publish->read p50 {:.3f} ms p99 {:.3f} ms  dropped {}  frame {}{}\n",
+        fmt::print("{:5.1f} s  {:6.1f} fps  publish->read p50 {:.3f} ms p99 {:.3f} ms  dropped {}  frame {}{}{}\n",
                    double(now - start) / kNsPerSecond, fps, p50, p99, window_dropped, frame.frame_no,
-                   busiest_shapes(sub, last_weights));
+                   busiest_shapes(sub, last_weights), options.line_suffix ? options.line_suffix() : std::string());
       }
       std::fflush(stdout);
       window_latency.clear();

@@ -1,8 +1,11 @@
 #pragma once
 // Reading facecapd's shared memory and printing live figures once a second: the body of
-// `facecap subscribe`, which `facecap demo` reuses.
+// `facecap subscribe`, which `facecap daemon-demo` reuses.
 #include <cstdint>
+#include <functional>
 #include <string>
+
+#include "client/facecap_client.h"
 
 namespace facecap::tools {
 
@@ -11,6 +14,9 @@ struct SubscriptionOptions {
   double seconds = 0.0;        // 0: until the writer stops or Ctrl-C
   double open_timeout_s = 5.0; // keep retrying while facecapd starts
   bool json = false;           // one JSON object per second instead of text
+  // Optional: sees every frame read, and adds to each printed line.
+  std::function<void(const facecap_frame&)> on_frame;
+  std::function<std::string()> line_suffix;
 };
 
 struct SubscriptionSummary {
