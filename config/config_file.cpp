@@ -421,6 +421,29 @@ std::string render_effective_config(const LoadedConfig& config) {
   return out;
 }
 
+std::string render_markdown_reference() {
+  auto cell = [](std::string text) {
+    for (std::size_t at = text.find('|'); at != std::string::npos; at = text.find('|', at + 2)) text.replace(at, 1, "\\|");
+    return text;
+  };
+  std::string out;
+  std::string_view section = "\x01";
+  for (const KeySpec& key : config_schema()) {
+    if (key.section() != section) {
+      section = key.section();
+      out += fmt::format("\n### {}\n\n", section.empty() ? "top level" : fmt::format("[{}]", section));
+      if (const auto d = section_description(section); !d.empty()) out += fmt::format("{}\n\n", d);
+      out += "| key | type | default | allowed | SIGHUP | description |\n|---|---|---|---|---|---|\n";
+    }
+    std::string allowed = allowed_range(key);
+    if (allowed.empty() && !key.unit.empty()) allowed = std::string(key.unit);
+    const char* reload = key.reload == Reload::kLive ? "applied" : key.reload == Reload::kRebuild ? "rebuilds solver" : "restart";
+    out += fmt::format("| `{}` | {} | `{}` | {} | {} | {} |\n", key.name(), value_type_name(key.type()),
+                       cell(format_value(key.default_value)), cell(allowed), reload, cell(std::string(key.description)));
+  }
+  return out;
+}
+
 std::vector<const KeySpec*> changed_keys(const DaemonConfig& before, const DaemonConfig& after) {
   std::vector<const KeySpec*> changed;
   for (const KeySpec& key : config_schema())

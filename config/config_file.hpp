@@ -48,6 +48,9 @@ std::string render_effective_config(const LoadedConfig& config);
 // The shipped config/facecapd.toml: every key at its default with its documentation.
 std::string render_documented_defaults();
 
+// The key reference of docs/config.md: one Markdown table per section.
+std::string render_markdown_reference();
+
 // The keys whose values differ.
 std::vector<const KeySpec*> changed_keys(const DaemonConfig& before, const DaemonConfig& after);
 

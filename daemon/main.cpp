@@ -33,13 +33,14 @@ int main(int argc, char** argv) {
   CLI::App app{"facecapd: solves facial markers onto a blendshape rig in real time and publishes the face"};
   std::string config_file, check_file;
   std::vector<std::string> overrides;
-  bool print_config = false, print_defaults = false, list_drivers = false;
+  bool print_config = false, print_defaults = false, print_reference = false, list_drivers = false;
   app.add_option("-c,--config", config_file, "Configuration file (TOML); without one, every key has its default")
       ->check(CLI::ExistingFile);
   app.add_option("--set", overrides, "Override one key, e.g. --set loop.rate_hz=240 (repeatable)");
   app.add_option("--check-config", check_file, "Validate FILE and exit: 0 when valid, 1 with every problem listed");
   app.add_flag("--print-config", print_config, "Print the effective configuration and where each value came from");
   app.add_flag("--print-default-config", print_defaults, "Print the documented default configuration file");
+  app.add_flag("--print-config-reference", print_reference, "Print the key reference (Markdown, as in docs/config.md)");
   app.add_flag("--list-drivers", list_drivers, "List the marker source drivers");
   CLI11_PARSE(app, argc, argv);
 
@@ -47,6 +48,10 @@ int main(int argc, char** argv) {
 
   if (print_defaults) {
     std::fputs(config::render_documented_defaults().c_str(), stdout);
+    return 0;
+  }
+  if (print_reference) {
+    std::fputs(config::render_markdown_reference().c_str(), stdout);
     return 0;
   }
   if (list_drivers) {
