@@ -57,14 +57,20 @@ echo "soak: ICT rig at 240 Hz from a replay for $seconds s"
 stats="$work/stats.json"
 [ -s "$stats" ] || { echo "FAILED: facecapd wrote no figures"; exit 1; }
 field() { sed -n "s/^ *\"$1\": \([-0-9.e+]*\),\{0,1\}$/\1/p" "$stats" | head -1; }
+# The same, rounded to $2 decimals.
+num() { awk -v v="$(field "$1")" -v d="$2" 'BEGIN { printf "%.*f", d, v }'; }
 frames=$(field frames_solved)
 missed=$(field missed_deadlines)
 p50=$(field p50)
 p99=$(field p99)
-echo "frames solved $frames in $(field seconds) s ($(field solved_fps) fps), ticks skipped $(field skipped_ticks)"
-echo "missed deadlines $missed, worst wake-up after a deadline $(field max_wake_late_ms) ms"
-echo "latency received -> published: p50 $p50 ms, p99 $p99 ms, max $(field max) ms"
-echo "CPU $(field cpu_percent)% of one core (whole process)"
+echo "frames solved $frames in $(num seconds 1) s ($(num solved_fps 1) fps), ticks skipped $(field skipped_ticks)"
+echo "missed deadlines $missed, worst wake-up after a deadline $(num max_wake_late_ms 2) ms"
+echo "latency received -> published: p50 $(num p50 2) ms, p99 $(num p99 2) ms, max $(num max 2) ms"
+echo "CPU $(num cpu_percent 0)% of one core (whole process)"
+# Mean cost per frame of each stage that costs anything ("stages" in the stats file).
+awk '/"stages"/ { in_stages = 1 } in_stages && /": \{$/ { gsub(/[" :{]/, ""); stage = $0 }
+     in_stages && /"mean_ms"/ { gsub(/[",]/, ""); if ($2 >= 0.001) line = line sprintf("%s %.3f ms, ", stage, $2) }
+     END { sub(/, $/, "", line); print "per frame: " line }' "$stats"
 [ "${frames:-0}" -gt 0 ] || { echo "FAILED: nothing was solved"; exit 1; }
 goals_met=1
 if [ "$missed" -eq 0 ]; then echo "goal zero missed deadlines: met"; else echo "goal zero missed deadlines: NOT met"; goals_met=0; fi
