@@ -37,15 +37,17 @@ facecapd="$build_dir/daemon/facecapd"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
-# The replay: what the sim delivers for the ICT rig at 240 Hz (48 face and 4 head
-# markers, noise, dropouts, head sway), 20 s long and looped.
-"$facecap" sim-take "$work/ict-240.fcrec" --seconds 20 --force \
-  --set "rig.path=$rig" --set source.sim.rate_hz=240 >/dev/null
+# The replay: a synthetic take of the ICT rig at 240 Hz (the built-in motion, 48 markers
+# spread over the face as facecapd's default marker set places them, 0.1 mm noise, 0.5%
+# dropouts), 20 s long and looped. It has no head markers: head stabilisation is off.
+"$facecap" synth --rig "$rig" --rate 240 --frames 4800 --markers 48 --noise 0.1 --dropout 0.005 \
+  -o "$work/ict-240.fcrec" >/dev/null
 
 echo "soak: ICT rig at 240 Hz from a replay for $seconds s"
 "$facecapd" \
   --set "rig.path=$rig" \
   --set source.driver=replay --set "source.replay.file=$work/ict-240.fcrec" --set source.replay.loop=true \
+  --set calibration.head_markers=0 \
   --set loop.rate_hz=240 \
   --set "outputs.shm.name=facecap-soak-$$" \
   --set "control.run_seconds=$seconds" \

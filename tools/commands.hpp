@@ -10,9 +10,10 @@ void add_demo_command(CLI::App& app, int& exit_code);
 void add_inspect_rig_command(CLI::App& app, int& exit_code);
 void add_inspect_command(CLI::App& app, int& exit_code);
 void add_convert_command(CLI::App& app, int& exit_code);
-
+void add_synth_command(CLI::App& app, int& exit_code);
+void add_bench_command(CLI::App& app, int& exit_code);
+void add_eval_command(CLI::App& app, int& exit_code);
 void add_subscribe_command(CLI::App& app, int& exit_code);
 void add_daemon_demo_command(CLI::App& app, int& exit_code);
-void add_sim_take_command(CLI::App& app, int& exit_code);
 
 }  // namespace facecap::tools
