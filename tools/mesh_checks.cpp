@@ -89,9 +89,11 @@ bool closed_triangles_intersect(const V3& a0, const V3& a1, const V3& a2, const 
          segment_meets_triangle(b1, b2, a0, a1, a2) || segment_meets_triangle(b2, b0, a0, a1, a2);
 }
 
-int64_t count_intersecting_triangle_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& positions) {
+std::vector<std::pair<int, int>> intersecting_triangle_pairs(const Eigen::Matrix3Xi& triangles,
+                                                             const Eigen::Matrix3Xd& positions) {
+  std::vector<std::pair<int, int>> out;
   const Eigen::Index T = triangles.cols();
-  if (T < 2) return 0;
+  if (T < 2) return out;
   Eigen::Matrix3Xd lo(3, T), hi(3, T);
   for (Eigen::Index t = 0; t < T; ++t) {
     const V3 a = positions.col(triangles(0, t)), b = positions.col(triangles(1, t)), c = positions.col(triangles(2, t));
@@ -104,7 +106,6 @@ int64_t count_intersecting_triangle_pairs(const Eigen::Matrix3Xi& triangles, con
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(), [&](int a, int b) { return lo(axis, a) < lo(axis, b); });
   const int other0 = (axis + 1) % 3, other1 = (axis + 2) % 3;
-  int64_t count = 0;
   for (std::size_t a = 0; a < order.size(); ++a) {
     const int i = order[a];
     const Eigen::Vector3i ti = triangles.col(i);
@@ -121,10 +122,15 @@ int64_t count_intersecting_triangle_pairs(const Eigen::Matrix3Xi& triangles, con
       if (shared) continue;
       if (closed_triangles_intersect(positions.col(ti[0]), positions.col(ti[1]), positions.col(ti[2]),
                                      positions.col(tj[0]), positions.col(tj[1]), positions.col(tj[2])))
-        ++count;
+        out.emplace_back(std::min(i, j), std::max(i, j));
     }
   }
-  return count;
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+int64_t count_intersecting_triangle_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& positions) {
+  return int64_t(intersecting_triangle_pairs(triangles, positions).size());
 }
 
 int64_t count_flipped_triangles_against_rest(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
