@@ -13,6 +13,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "solver/collide.hpp"
 #include "solver/mesh_topology.hpp"
 
 namespace facecap {
@@ -203,47 +204,15 @@ void build_marker_paths(SolverModel& model) {
   }
 }
 
-// The mouth: the inner border loop (not the outer one) that jawOpen, or failing that
-// all shapes together, moves most. Candidates are vertices within a fraction of the
-// face's height of it.
-void choose_collision_region(SolverModel& model, const std::vector<std::vector<int>>& loops) {
+// Candidate triangles for the collision stage and the vertices it may pin.
+void choose_collision_region(SolverModel& model) {
   const Rig& rig = model.rig;
-  const Eigen::Index N = rig.vertex_count();
-  model.vertex_to_collision.assign(std::size_t(N), -1);
-  if (model.params.collision_region == CollisionRegion::kNone) return;
-  std::vector<uint8_t> candidate(std::size_t(N), 0);
-  if (model.params.collision_region == CollisionRegion::kFace) {
-    std::fill(candidate.begin(), candidate.end(), 1);
-  } else {
-    const auto jaw = rig.shape_index("jawOpen");
-    auto motion = [&](int v) {
-      if (jaw) return rig.deltas.col(*jaw).segment<3>(3 * v).norm();
-      double m = 0;
-      for (Eigen::Index s = 0; s < rig.shape_count(); ++s) m += rig.deltas.col(s).segment<3>(3 * v).norm();
-      return m;
-    };
-    std::size_t outer = 0;
-    for (std::size_t l = 1; l < loops.size(); ++l)
-      if (loops[l].size() > loops[outer].size()) outer = l;
-    int mouth = -1;
-    double best = 0;
-    for (std::size_t l = 0; l < loops.size(); ++l) {
-      if (l == outer) continue;
-      double m = 0;
-      for (int v : loops[l]) m += motion(v);
-      m /= double(loops[l].size());
-      if (m > best) { best = m; mouth = int(l); }
-    }
-    if (mouth < 0) return;  // no mouth opening: nothing to keep apart
-    const double radius = 0.06 * bounding_box(rig.neutral).size().y();
-    for (Eigen::Index v = 0; v < N; ++v)
-      for (int m : loops[std::size_t(mouth)])
-        if ((rig.neutral.col(v) - rig.neutral.col(m)).norm() < radius) { candidate[std::size_t(v)] = 1; break; }
+  model.vertex_to_collision.assign(std::size_t(rig.vertex_count()), -1);
+  switch (model.params.collision_region) {
+    case CollisionRegion::kNone: return;
+    case CollisionRegion::kFace: model.collision_triangles = all_triangles(rig.triangle_count()); break;
+    case CollisionRegion::kLips: model.collision_triangles = lip_region_triangles(rig); break;
   }
-  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
-    if (candidate[std::size_t(rig.triangles(0, t))] && candidate[std::size_t(rig.triangles(1, t))] &&
-        candidate[std::size_t(rig.triangles(2, t))])
-      model.collision_triangles.push_back(int(t));
   for (int t : model.collision_triangles)
     for (int k = 0; k < 3; ++k) {
       const int v = rig.triangles(k, t);
@@ -313,7 +282,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   build_marker_rows(*model);
   build_shape_deltas(*model);
 
-  const TriangleAdjacency adjacency(rig.triangles, rig.vertex_count());
+  const TriangleAdjacency adjacency(rig.triangles);
   {
     const auto t0 = Clock::now();
     const Eigen::Index M = rig.shape_count();
@@ -347,23 +316,19 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   }
   {
     const auto t0 = Clock::now();
-    choose_collision_region(*model, adjacency.border_loops());
-    const Eigen::Index C = Eigen::Index(model->collision_vertices.size());
-    Eigen::MatrixXd U = Eigen::MatrixXd::Zero(N, K + C);
+    choose_collision_region(*model);
+    // Beyond this many candidate vertices (a whole-face region) the columns would take
+    // too much memory; pins are then solved for per frame.
+    constexpr std::size_t kMaxPrecomputedPins = 3000;
+    const Eigen::Index C = model->collision_vertices.size() <= kMaxPrecomputedPins
+                               ? Eigen::Index(model->collision_vertices.size()) : 0;
+    Eigen::MatrixXd& Z = model->modification_solution;
+    Z.setZero(N, K + C);
     for (Eigen::Index k = 0; k < K; ++k)
-      for (int a = 0; a < 3; ++a) U(model->markers[std::size_t(k)].vertices[a], k) += model->markers[std::size_t(k)].barycentric[a];
-    for (Eigen::Index c = 0; c < C; ++c) U(model->collision_vertices[std::size_t(c)], K + c) = 1.0;
-    model->modification_solution = U;
+      for (int a = 0; a < 3; ++a) Z(model->markers[std::size_t(k)].vertices[a], k) += model->markers[std::size_t(k)].barycentric[a];
+    for (Eigen::Index c = 0; c < C; ++c) Z(model->collision_vertices[std::size_t(c)], K + c) = 1.0;
     Eigen::VectorXd work(N);
-    for (Eigen::Index i = 0; i < K + C; ++i) model->factor->solve_in_place(model->modification_solution.col(i), work);
-    // u_i has at most three non-zeros, so u_i^T Z is a sum of rows of Z.
-    model->modification_gram.setZero(K + C, K + C);
-    for (Eigen::Index k = 0; k < K; ++k)
-      for (int a = 0; a < 3; ++a)
-        model->modification_gram.row(k) += model->markers[std::size_t(k)].barycentric[a] *
-                                           model->modification_solution.row(model->markers[std::size_t(k)].vertices[a]);
-    for (Eigen::Index c = 0; c < C; ++c)
-      model->modification_gram.row(K + c) = model->modification_solution.row(model->collision_vertices[std::size_t(c)]);
+    for (Eigen::Index i = 0; i < K + C; ++i) model->factor->solve_in_place(Z.col(i), work);
     model->setup.modifications_s = seconds_since(t0);
   }
   model->setup.total_s = seconds_since(start);

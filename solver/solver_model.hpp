@@ -72,13 +72,17 @@ class SolverModel {
   std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
 
   // Low-rank modifications of A0 without refactoring: a marker dropping out removes
-  // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Columns 0..K-1 are the markers,
-  // K + i is candidate vertex collision_vertices[i].
-  std::vector<int> collision_vertices;   // vertices the collision stage may pin
-  std::vector<int> collision_triangles;  // triangles it checks
+  // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Columns 0..K-1 of
+  // modification_solution are A0^-1 c_k; column K + i is A0^-1 e_v for
+  // v = collision_vertices[i] when the region is small enough to precompute (the lips),
+  // otherwise pins are solved for as they occur.
+  std::vector<int> collision_triangles;  // triangles the collision stage checks
+  std::vector<int> collision_vertices;   // their vertices: the ones it may pin
   std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
-  Eigen::MatrixXd modification_solution;  // N x (K + C): A0^-1 u_i
-  Eigen::MatrixXd modification_gram;      // (K + C) x (K + C): u_i^T A0^-1 u_j
+  Eigen::MatrixXd modification_solution;  // N x (K + C) or N x K
+  bool collision_columns_precomputed() const {
+    return modification_solution.cols() == marker_count() + Eigen::Index(collision_vertices.size());
+  }
 
   SolverSetupTimes setup;
   std::size_t triangle_terms_kept = 0;  // (shape, triangle) entries stored

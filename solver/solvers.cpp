@@ -8,6 +8,7 @@
 #include "core/error.hpp"
 #include "core/time.hpp"
 #include "solver/box_qp.hpp"
+#include "solver/collide.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/solver_model.hpp"
 
@@ -16,6 +17,7 @@ namespace {
 
 constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear", "dt", "meshik"};
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
+constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds the stage to about a millisecond
 
 class StageClock {
  public:
@@ -219,12 +221,21 @@ class PoissonSolver : public FaceSolver {
     }
     rhs_.resize(3, N);
     work_.resize(3, N);
-    const Eigen::Index capacity = K + Eigen::Index(m.collision_vertices.size());
-    modification_.resize(capacity);
-    modification_scale_.resize(capacity);
+    if (!m.collision_triangles.empty()) {
+      ColliderConfig config;
+      config.epsilon = m.params.collision_epsilon;
+      config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
+      collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config);
+      collisions_ = collider_.make_result();
+    }
+    // Pins beyond capacity are left out (and counted); markers always fit.
+    pin_capacity_ = std::min<Eigen::Index>(Eigen::Index(m.collision_vertices.size()), kMaxPins);
+    const Eigen::Index capacity = K + pin_capacity_;
+    modifications_.resize(std::size_t(capacity));
     small_.resize(capacity, capacity);
     small_rhs_.resize(capacity, 3);
-    pivot_.resize(capacity);
+    if (!m.collision_columns_precomputed()) pin_columns_.resize(N, pin_capacity_);
+    pin_work_.resize(N);
   }
 
   std::string_view name() const noexcept override { return blend_ == Blend::kNonlinear ? "nonlinear" : "dt"; }
@@ -272,14 +283,15 @@ class PoissonSolver : public FaceSolver {
       if (present[std::size_t(k)] && targets.col(k).allFinite()) {
         for (int a = 0; a < 3; ++a) rhs_.col(b.vertices[a]) += beta * b.barycentric[a] * targets.col(k);
       } else {
-        add_modification(k, -beta);
+        add_modification({b.vertices, b.barycentric, m.modification_solution.col(k).data(), -beta});
       }
     }
     clock.lap(SolveStage::kRhs);
 
-    m.factor->solve_in_place(rhs_, work_);
+    m.factor->solve_in_place(rhs_, work_);  // rhs_ now holds y = A0^-1 r
     apply_modifications(rhs_, out.vertices);
     clock.lap(SolveStage::kBacksolve);
+    collide(out);
     clock.lap(SolveStage::kCollide);
     clock.finish();
   }
@@ -357,11 +369,49 @@ class PoissonSolver : public FaceSolver {
             M[r] * Q[(3 * k) * T + t] + M[3 + r] * Q[(3 * k + 1) * T + t] + M[6 + r] * Q[(3 * k + 2) * T + t];
   }
 
-  void add_modification(Eigen::Index column, double scale) noexcept {
-    modification_[modification_count_] = int(column);
-    modification_scale_[modification_count_] = scale;
-    ++modification_count_;
+  // Triangle pairs closer than epsilon pin their vertices to the linear blend
+  // (x0 + B w)_v: y gains beta A0^-1 e_v p_v^T, A0 gains beta e_v e_v^T, and the mesh is
+  // solved again through the same low-rank update.
+  void collide(SolveResult& out) noexcept {
+    const SolverModel& m = *model_;
+    if (!collider_.configured() || !collider_.detect(out.vertices, collisions_)) return;
+    out.collision_pairs = uint32_t(collisions_.pairs_found);
+    if (collisions_.vertex_count == 0) return;
+    const double beta = m.params.beta;
+    const Eigen::Index K = m.marker_count();
+    Eigen::Index pins = 0;
+    for (const int v : collisions_.valid_vertices()) {
+      if (pins == pin_capacity_) break;
+      const double* column = nullptr;
+      if (m.collision_columns_precomputed()) {
+        column = m.modification_solution.col(K + m.vertex_to_collision[std::size_t(v)]).data();
+      } else {
+        auto z = pin_columns_.col(pins);
+        z.setZero();
+        z[v] = 1.0;
+        m.factor->solve_in_place(z, pin_work_);
+        column = z.data();
+      }
+      Eigen::Vector3d target = m.rig.neutral.col(v);
+      for (Eigen::Index s = 0; s < m.shape_count(); ++s)
+        if (out.weights[s] > m.params.active_weight) target += out.weights[s] * m.rig.deltas.block<3, 1>(3 * v, s);
+      rhs_.noalias() += (beta * target) * Eigen::Map<const Eigen::RowVectorXd>(column, m.vertex_count());
+      add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, beta});
+      ++pins;
+    }
+    out.collision_constraints = uint32_t(pins);
+    apply_modifications(rhs_, out.vertices);
   }
+
+  // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; column = A0^-1 u.
+  struct Modification {
+    std::array<int, 3> vertices;
+    Eigen::Vector3d weights;
+    const double* column;
+    double scale;
+  };
+
+  void add_modification(const Modification& modification) noexcept { modifications_[std::size_t(modification_count_++)] = modification; }
 
   // x = y - Z_S (D^-1 + U_S^T Z_S)^-1 U_S^T y: A0 modified by sum d_i u_i u_i^T, solved
   // without refactoring (Woodbury). y: A0^-1 r, 3 x N.
@@ -370,18 +420,15 @@ class PoissonSolver : public FaceSolver {
     x = y;
     const Eigen::Index s = modification_count_;
     if (s == 0) return;
-    const Eigen::Index K = m.marker_count();
+    auto u_dot = [](const Modification& u, const double* z) {
+      return u.weights[0] * z[u.vertices[0]] + u.weights[1] * z[u.vertices[1]] + u.weights[2] * z[u.vertices[2]];
+    };
     for (Eigen::Index i = 0; i < s; ++i) {
-      const int ci = modification_[i];
-      for (Eigen::Index j = 0; j < s; ++j) small_(i, j) = m.modification_gram(ci, modification_[j]);
-      small_(i, i) += 1.0 / modification_scale_[i];
+      const Modification& mi = modifications_[std::size_t(i)];
+      for (Eigen::Index j = 0; j < s; ++j) small_(i, j) = u_dot(mi, modifications_[std::size_t(j)].column);
+      small_(i, i) += 1.0 / mi.scale;
       Eigen::Vector3d uy = Eigen::Vector3d::Zero();
-      if (ci < K) {
-        const auto& b = m.markers[std::size_t(ci)];
-        for (int a = 0; a < 3; ++a) uy += b.barycentric[a] * y.col(b.vertices[a]);
-      } else {
-        uy = y.col(m.collision_vertices[std::size_t(ci - K)]);
-      }
+      for (int a = 0; a < 3; ++a) uy += mi.weights[a] * y.col(mi.vertices[a]);
       small_rhs_.row(i) = uy.transpose();
     }
     // Gaussian elimination with partial pivoting (the system is symmetric indefinite).
@@ -405,9 +452,8 @@ class PoissonSolver : public FaceSolver {
       small_rhs_.row(c) = v / small_(c, c);
     }
     for (Eigen::Index i = 0; i < s; ++i) {
-      const auto z = m.modification_solution.col(modification_[i]);
-      const Eigen::Vector3d q = small_rhs_.row(i).transpose();
-      x.noalias() -= q * z.transpose();
+      const Eigen::Map<const Eigen::RowVectorXd> z(modifications_[std::size_t(i)].column, m.vertex_count());
+      x.noalias() -= small_rhs_.row(i).transpose() * z;
     }
   }
 
@@ -417,12 +463,15 @@ class PoissonSolver : public FaceSolver {
   std::vector<double> operator_;       // 9 x T component-major copy of Q_j
   std::vector<double> contribution_;   // 9 x T component-major: (T_j - I) Q_j
   Eigen::Matrix3Xd identity_rhs_, rhs_, work_;
-  Eigen::VectorXi modification_;
-  Eigen::VectorXd modification_scale_;
+  std::vector<Modification> modifications_;
   Eigen::Index modification_count_ = 0;
   Eigen::MatrixXd small_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> small_rhs_;
-  Eigen::VectorXi pivot_;
+  TriangleCollider collider_;
+  CollisionResult collisions_;
+  Eigen::Index pin_capacity_ = 0;
+  Eigen::MatrixXd pin_columns_;  // A0^-1 e_v solved per frame when not precomputed
+  Eigen::VectorXd pin_work_;
 };
 
 }  // namespace

@@ -210,3 +210,30 @@ TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers"
   std::vector<int> v(100);
   CHECK(counter.count() >= 1);
 }
+
+#include "solver/collide.hpp"
+
+TEST_CASE("collision handling removes the lip intersections the nonlinear blend makes") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  SolverParams without;
+  without.collision_region = CollisionRegion::kNone;
+  auto handled = make_solver("nonlinear", build_solver_model(rig, layout));
+  auto unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+  w[*rig.shape_index("mouthPucker")] = 1.0;
+  w[*rig.shape_index("mouthClose")] = 1.0;
+  const Eigen::Matrix3Xd targets = markers_of(rig.linear_blend(w), layout);
+  SolveResult a = handled->make_result(), b = unhandled->make_result();
+  handled->solve_with_weights(w, targets, all_present(60), a);
+  unhandled->solve_with_weights(w, targets, all_present(60), b);
+  const int64_t before = count_intersecting_pairs(rig.triangles, b.vertices);
+  const int64_t after = count_intersecting_pairs(rig.triangles, a.vertices);
+  INFO("intersecting pairs without handling " << before << ", with " << after << "; pins " << a.collision_constraints);
+  CHECK(count_intersecting_pairs(rig.triangles, rig.linear_blend(w)) == 0);  // the blend itself is clean
+  CHECK(before > 10);
+  CHECK(after == 0);
+  CHECK(a.collision_pairs > 0);
+  CHECK(a.collision_constraints > 0);
+  CHECK(b.collision_constraints == 0);
+}
