@@ -12,9 +12,9 @@
 
 #include "core/error.hpp"
 #include "formats/take.hpp"
+#include "solver/collide.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/commands.hpp"
-#include "tools/mesh_checks.hpp"
 #include "tools/synth_truth.hpp"
 #include "tools/tool_support.hpp"
 
@@ -128,10 +128,10 @@ void run_eval(const Options& o) {
 
   // Intersections are counted against the neutral's own (ICT's neutral already has some
   // at the lip corners): a pair counts when it intersects now and not at rest.
-  const auto rest_pairs = intersecting_triangle_pairs(rig.triangles, rig.neutral);
+  const std::vector<TrianglePair> rest_pairs = intersecting_pairs(rig.triangles, rig.neutral);
   auto new_intersections = [&](const Eigen::Matrix3Xd& positions) {
     int64_t count = 0;
-    for (const auto& p : intersecting_triangle_pairs(rig.triangles, positions))
+    for (const auto& p : intersecting_pairs(rig.triangles, positions))
       count += !std::binary_search(rest_pairs.begin(), rest_pairs.end(), p);
     return count;
   };
@@ -167,7 +167,7 @@ void run_eval(const Options& o) {
       const int64_t pairs = new_intersections(run.result.vertices);
       run.intersections += pairs;
       run.frames_with_intersections += pairs > 0;
-      run.flipped += count_flipped_triangles_against_rest(rig.triangles, rig.neutral, run.result.vertices);
+      run.flipped += count_flipped_triangles(rig.triangles, rig.neutral, run.result.vertices);
     }
   }
 
