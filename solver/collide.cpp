@@ -1051,14 +1051,34 @@ std::span<const TrianglePair> TriangleCollider::rest_contacts() const noexcept {
 
 // ---- Metrics ---------------------------------------------------------------------
 
-std::vector<TrianglePair> intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& positions) {
-  check_triangles(triangles, positions.cols());
+struct IntersectionCounter::State {
+  Bvh tree;
+  Eigen::Index vertex_count = 0;
+};
+
+IntersectionCounter::IntersectionCounter() = default;
+IntersectionCounter::~IntersectionCounter() = default;
+IntersectionCounter::IntersectionCounter(IntersectionCounter&&) noexcept = default;
+IntersectionCounter& IntersectionCounter::operator=(IntersectionCounter&&) noexcept = default;
+
+void IntersectionCounter::configure(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions) {
+  check_triangles(triangles, rest_positions.cols());
+  auto state = std::make_unique<State>();
+  state->vertex_count = rest_positions.cols();
   std::vector<int32_t> every(std::size_t(triangles.cols()));
   std::iota(every.begin(), every.end(), 0);
-  Bvh tree;
-  tree.build(triangles, positions, every);
-  tree.refit(positions, 0.0);
-  std::vector<TrianglePair> out;
+  state->tree.build(triangles, rest_positions, every);
+  state_ = std::move(state);
+}
+
+template <typename Found>
+void IntersectionCounter::for_each(const Eigen::Matrix3Xd& positions, Found&& found) {
+  if (!state_) throw Error("intersection counter used before configure()");
+  if (positions.cols() != state_->vertex_count)
+    throw Error(fmt::format("intersection counter configured for {} vertices, given {}", state_->vertex_count,
+                            positions.cols()));
+  Bvh& tree = state_->tree;
+  tree.refit(positions, 0.0);  // touching boxes still overlap
   const auto slot_triangles = tree.slot_triangles();
   tree.for_each_overlapping_pair([&](int32_t slot_a, int32_t slot_b) {
     const auto& va = tree.slot_vertices(slot_a);
@@ -1067,14 +1087,33 @@ std::vector<TrianglePair> intersecting_pairs(const Eigen::Matrix3Xi& triangles, 
     const Vec3 b[3] = {positions.col(vb[0]), positions.col(vb[1]), positions.col(vb[2])};
     if (!intersect_impl(a, b)) return;
     const int32_t ta = slot_triangles[std::size_t(slot_a)], tb = slot_triangles[std::size_t(slot_b)];
-    out.push_back({std::min(ta, tb), std::max(ta, tb)});
+    found(TrianglePair{std::min(ta, tb), std::max(ta, tb)});
   });
+}
+
+int64_t IntersectionCounter::count(const Eigen::Matrix3Xd& positions) {
+  int64_t n = 0;
+  for_each(positions, [&](const TrianglePair&) { ++n; });
+  return n;
+}
+
+std::vector<TrianglePair> IntersectionCounter::pairs(const Eigen::Matrix3Xd& positions) {
+  std::vector<TrianglePair> out;
+  for_each(positions, [&](const TrianglePair& p) { out.push_back(p); });
   std::sort(out.begin(), out.end());
   return out;
 }
 
+std::vector<TrianglePair> intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& positions) {
+  IntersectionCounter counter;
+  counter.configure(triangles, positions);
+  return counter.pairs(positions);
+}
+
 int64_t count_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& positions) {
-  return int64_t(intersecting_pairs(triangles, positions).size());
+  IntersectionCounter counter;
+  counter.configure(triangles, positions);
+  return counter.count(positions);
 }
 
 int64_t count_new_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
@@ -1082,8 +1121,10 @@ int64_t count_new_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Ei
   if (rest_positions.cols() != positions.cols())
     throw Error(fmt::format("new intersections: rest has {} vertices, positions {}", rest_positions.cols(),
                             positions.cols()));
-  const auto now = intersecting_pairs(triangles, positions);
-  const auto at_rest = intersecting_pairs(triangles, rest_positions);
+  IntersectionCounter counter;
+  counter.configure(triangles, rest_positions);
+  const auto now = counter.pairs(positions);
+  const auto at_rest = counter.pairs(rest_positions);
   std::vector<TrianglePair> fresh;
   std::set_difference(now.begin(), now.end(), at_rest.begin(), at_rest.end(), std::back_inserter(fresh));
   return int64_t(fresh.size());

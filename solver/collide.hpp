@@ -166,9 +166,33 @@ class TriangleCollider {
 
 // ---- Evaluation metrics (not real-time: allocate) --------------------------------
 
-// Pairs of triangles sharing no vertex that touch or cross (triangles_intersect), over
-// the whole mesh. triangles: 3 x T; positions: 3 x N. Pairs that share a vertex are not
-// counted: they always touch.
+// The "intersections" metric frame after frame on one mesh: the tree over every
+// triangle is built once and refitted per call. Counts pairs of triangles sharing no
+// vertex that touch or cross (triangles_intersect); pairs sharing a vertex always touch
+// and are not counted. Not real-time: count() does not allocate, but it is not bounded
+// and throws Error on misuse.
+class IntersectionCounter {
+ public:
+  IntersectionCounter();
+  ~IntersectionCounter();
+  IntersectionCounter(IntersectionCounter&&) noexcept;
+  IntersectionCounter& operator=(IntersectionCounter&&) noexcept;
+
+  // triangles: 3 x T; rest_positions: 3 x N, where the tree is built. Allocates.
+  void configure(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions);
+  // positions: 3 x N.
+  int64_t count(const Eigen::Matrix3Xd& positions);
+  std::vector<TrianglePair> pairs(const Eigen::Matrix3Xd& positions);  // sorted
+
+ private:
+  template <typename Found>
+  void for_each(const Eigen::Matrix3Xd& positions, Found&& found);
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+// One-off IntersectionCounter::count over the whole mesh (builds a tree per call).
+// triangles: 3 x T; positions: 3 x N.
 int64_t count_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& positions);
 
 // The pairs themselves, sorted; the same set count_intersecting_pairs counts.

@@ -165,14 +165,13 @@ struct MeshIkSolver::State {
     const Eigen::Index s = Eigen::Index(missing.size());
     if (s == 0) return;
     Eigen::MatrixXd small(s, s);
-    for (Eigen::Index i = 0; i < s; ++i) {  // c_i^T A0^-1 c_j from the precomputed columns
-      const auto& marker = m.markers[std::size_t(missing[std::size_t(i)])];
+    for (Eigen::Index i = 0; i < s; ++i)
       for (Eigen::Index j = 0; j < s; ++j) {
+        const auto& marker = m.markers[std::size_t(missing[std::size_t(i)])];  // c_i^T A0^-1 c_j
         const auto z = m.modification_solution.col(missing[std::size_t(j)]);
-        small(i, j) = 0.0;
-        for (int a = 0; a < 3; ++a) small(i, j) += marker.barycentric[a] * z[marker.vertices[a]];
+        small(i, j) = marker.barycentric[0] * z[marker.vertices[0]] + marker.barycentric[1] * z[marker.vertices[1]] +
+                      marker.barycentric[2] * z[marker.vertices[2]];
       }
-    }
     small.diagonal().array() -= 1.0 / m.params.beta;
     woodbury.compute(small);
     small_rhs.resize(s, 3);

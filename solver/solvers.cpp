@@ -10,6 +10,7 @@
 #include "solver/box_qp.hpp"
 #include "solver/collide.hpp"
 #include "solver/face_solver.hpp"
+#include "solver/meshik.hpp"
 #include "solver/solver_model.hpp"
 
 namespace facecap {
@@ -490,6 +491,7 @@ std::unique_ptr<FaceSolver> make_solver(std::string_view name, std::shared_ptr<c
   if (name == "nonlinear") return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kNonlinear);
   if (name == "dt") return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kDeformationTransfer);
   if (name == "linear") return std::make_unique<LinearSolver>(std::move(model));
+  if (name == "meshik") return make_meshik_solver(std::move(model));
   throw Error(fmt::format("unknown solver '{}': choose nonlinear, linear, dt or meshik", name));
 }
 

@@ -305,19 +305,25 @@ TEST_CASE("degenerate triangles are measured as segments") {
 
 // ---- The collider on the built-in face ------------------------------------------------
 
-TEST_CASE("the built-in face: neutral intersects nowhere and mouthClose brings the lips within 0.03 cm") {
+TEST_CASE("the built-in face: neutral intersects nowhere and mouthClose brings the lips within 1 mm") {
   const Rig& rig = face().rig();
   CHECK(count_intersecting_pairs(rig.triangles, rig.neutral) == 0);
   CHECK(count_flipped_triangles(rig.triangles, rig.neutral, rig.neutral) == 0);
 
   // mouthClose = 1 slides the lower lip up behind the upper one: the lips come within
-  // 0.022 cm but do not cross (the linear blend stays intersection-free).
+  // a millimetre but do not cross (the linear blend stays intersection-free).
   const Eigen::Matrix3Xd closed = rig.shape_positions(*rig.shape_index("mouthClose"));
   CHECK(count_intersecting_pairs(rig.triangles, closed) == 0);
+  const std::vector<int> lips = lip_region_triangles(rig);
+  double closest = std::numeric_limits<double>::infinity();
+  for (const auto& p : brute_force_pairs(rig.triangles, closed, lips, 0.2))
+    closest = std::min(closest, tri_distance(corners(rig.triangles, closed, p.first), corners(rig.triangles, closed, p.second)));
+  CHECK(closest > 0.0);
+  CHECK(closest < 0.1);
   TriangleCollider collider;
   ColliderConfig config;
-  config.epsilon = 0.03;
-  collider.configure(rig.triangles, rig.neutral, lip_region_triangles(rig), config);
+  config.epsilon = closest + 0.01;
+  collider.configure(rig.triangles, rig.neutral, lips, config);
   CollisionResult result = collider.make_result();
   REQUIRE(collider.detect(rig.neutral, result));
   CHECK(result.pairs_found == 0);
@@ -326,8 +332,8 @@ TEST_CASE("the built-in face: neutral intersects nowhere and mouthClose brings t
   CHECK_FALSE(result.overflowed());
   for (const auto& p : result.valid_pairs()) {
     const double d = tri_distance(corners(rig.triangles, closed, p.first), corners(rig.triangles, closed, p.second));
-    CHECK(d > 0.02);
-    CHECK(d < 0.03);
+    CHECK(d >= closest);
+    CHECK(d < config.epsilon);
   }
 
   // Pushed further, or with the lower lip shrugged up too, the lips cross.
@@ -353,7 +359,7 @@ TEST_CASE("the collider finds exactly the brute-force pairs on perturbed built-i
     double epsilon;
   };
   std::vector<Case> cases;
-  cases.push_back({"mouthClose", rig.shape_positions(*rig.shape_index("mouthClose")), 0.05});
+  cases.push_back({"mouthClose", rig.shape_positions(*rig.shape_index("mouthClose")), 0.1});
   cases.push_back({"mouthClose+mouthShrugLower", pose(rig, {{"mouthClose", 1.0}, {"mouthShrugLower", 1.0}}), 0.02});
   for (uint32_t seed = 1; seed <= 4; ++seed) {
     const double amplitude = 0.04 * seed;
@@ -427,7 +433,7 @@ TEST_CASE("overflow is counted and flagged, and the vertex set stays complete") 
   const std::vector<int> lips = lip_region_triangles(rig);
   const Eigen::Matrix3Xd closed = rig.shape_positions(*rig.shape_index("mouthClose"));
   ColliderConfig config;
-  config.epsilon = 0.05;
+  config.epsilon = 0.1;
   TriangleCollider full;
   full.configure(rig.triangles, rig.neutral, lips, config);
   CollisionResult all = full.make_result();
@@ -646,6 +652,31 @@ TEST_CASE("flipped triangles are counted against the rest normals") {
   }
   CHECK(expected > rig.triangle_count() / 2);
   CHECK(count_flipped_triangles(rig.triangles, rig.neutral, mirrored) == expected);
+}
+
+TEST_CASE("the intersection counter is reusable frame after frame") {
+  const Rig& rig = face().rig();
+  IntersectionCounter counter;
+  counter.configure(rig.triangles, rig.neutral);
+  const Eigen::Matrix3Xd shrugged = pose(rig, {{"mouthClose", 1.0}, {"mouthShrugLower", 1.0}});
+  const Eigen::Matrix3Xd overclosed = pose(rig, {{"mouthClose", 2.0}});
+  const auto expected = intersecting_pairs(rig.triangles, shrugged);  // a tree built on that pose
+  CHECK(expected.size() == 78);
+  CHECK(counter.pairs(shrugged) == expected);
+  CHECK(counter.count(overclosed) == count_intersecting_pairs(rig.triangles, overclosed));
+  long allocations = 0;
+  int64_t total = 0;
+  {
+    AllocationCounter allocation_counter;
+    for (const Eigen::Matrix3Xd* x : {&rig.neutral, &shrugged, &overclosed}) total += counter.count(*x);
+    allocations = allocation_counter.count();
+  }
+  CHECK(allocations == 0);
+  CHECK(total == int64_t(expected.size()) + count_intersecting_pairs(rig.triangles, overclosed));
+  IntersectionCounter unconfigured;
+  CHECK_THROWS_AS(unconfigured.count(rig.neutral), Error);
+  const Eigen::Matrix3Xd too_few = rig.neutral.leftCols(3);
+  CHECK_THROWS_AS(counter.count(too_few), Error);
 }
 
 // ---- ICT FaceKit, when ../shared/data is present ------------------------------------------
