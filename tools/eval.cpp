@@ -121,17 +121,19 @@ void run_eval(const Options& o) {
   for (const auto& name : solver_list) {
     SolverRun run;
     run.name = name;
-    run.solver = create_solver(name, model);
+    run.solver = make_solver(name, model);
     run.result = run.solver->make_result();
     runs.push_back(std::move(run));
   }
 
   // Intersections are counted against the neutral's own (ICT's neutral already has some
   // at the lip corners): a pair counts when it intersects now and not at rest.
-  const std::vector<TrianglePair> rest_pairs = intersecting_pairs(rig.triangles, rig.neutral);
+  IntersectionCounter intersections;  // one tree, refitted per pose
+  intersections.configure(rig.triangles, rig.neutral);
+  const std::vector<TrianglePair> rest_pairs = intersections.pairs(rig.neutral);
   auto new_intersections = [&](const Eigen::Matrix3Xd& positions) {
     int64_t count = 0;
-    for (const auto& p : intersecting_pairs(rig.triangles, positions))
+    for (const auto& p : intersections.pairs(positions))
       count += !std::binary_search(rest_pairs.begin(), rest_pairs.end(), p);
     return count;
   };
