@@ -17,6 +17,7 @@ packages=(
   libtomlplusplus-dev libtinygltf-dev nlohmann-json3-dev
   libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev
   catch2 libbenchmark-dev
+  systemd  # systemd-analyze: the test that checks systemd/facecapd.service
 )
 
 install_packages() {
@@ -41,7 +42,9 @@ case "$mode" in
   run)
     install_packages
     build
-    exec "$build_dir/tools/facecap" demo "$@"
+    # The product on its built-in default: facecapd solving simulated markers, watched
+    # through its shared memory, then stopped (facecap daemon-demo --help).
+    exec "$build_dir/tools/facecap" daemon-demo "$@"
     ;;
   test)
     install_packages

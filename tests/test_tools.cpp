@@ -13,7 +13,6 @@
 #include "formats/take.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/test_support.hpp"
-#include "tools/mesh_checks.hpp"
 #include "tools/synth_truth.hpp"
 #include "tools/tool_support.hpp"
 
@@ -194,39 +193,6 @@ TEST_CASE("eval on a jaw and blink take reports nonlinear truth error below line
   const double linear = report["solvers"]["linear"]["truth_vertex_mm"]["mean"].get<double>();
   INFO("mean truth vertex error: nonlinear " << nonlinear << " mm, linear " << linear << " mm");
   CHECK(nonlinear < linear);
-}
-
-TEST_CASE("the triangle intersection test handles crossing touching separate and coplanar triangles") {
-  using V = Eigen::Vector3d;
-  const V a0(0, 0, 0), a1(2, 0, 0), a2(0, 2, 0);
-  // Crossing: a vertical triangle piercing the first.
-  CHECK(tools::closed_triangles_intersect(a0, a1, a2, V(0.5, 0.5, -1), V(0.5, 0.5, 1), V(1.5, 0.2, 1)));
-  // Separate: the same one lifted above.
-  CHECK_FALSE(tools::closed_triangles_intersect(a0, a1, a2, V(0.5, 0.5, 0.1), V(0.5, 0.5, 2), V(1.5, 0.2, 2)));
-  // Touching at one point (a vertex on the face) counts.
-  CHECK(tools::closed_triangles_intersect(a0, a1, a2, V(0.5, 0.5, 0), V(0.5, 0.5, 1), V(1.5, 0.2, 1)));
-  // Coplanar, overlapping and disjoint.
-  CHECK(tools::closed_triangles_intersect(a0, a1, a2, V(0.5, 0.5, 0), V(3, 0.5, 0), V(0.5, 3, 0)));
-  CHECK_FALSE(tools::closed_triangles_intersect(a0, a1, a2, V(3, 3, 0), V(4, 3, 0), V(3, 4, 0)));
-  // Near miss over an edge.
-  CHECK_FALSE(tools::closed_triangles_intersect(a0, a1, a2, V(1.1, 1.1, -1), V(1.1, 1.1, 1), V(3, 3, 0)));
-
-  const Rig& rig = BuiltinFace::instance().rig();
-  CHECK(tools::count_intersecting_triangle_pairs(rig.triangles, rig.neutral) == 0);
-  CHECK(tools::count_flipped_triangles_against_rest(rig.triangles, rig.neutral, rig.neutral) == 0);
-  // Mirroring z takes a normal n to (-nx, -ny, nz): it flips exactly the triangles that
-  // face sideways more than forwards.
-  Eigen::Matrix3Xd mirrored = rig.neutral;
-  mirrored.row(2) = -mirrored.row(2);
-  int64_t sideways = 0;
-  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t) {
-    const Eigen::Vector3d a = rig.neutral.col(rig.triangles(0, t)), b = rig.neutral.col(rig.triangles(1, t)),
-                          c = rig.neutral.col(rig.triangles(2, t));
-    const Eigen::Vector3d n = (b - a).cross(c - a);
-    sideways += n.z() * n.z() < n.x() * n.x() + n.y() * n.y();
-  }
-  CHECK(sideways > 100);
-  CHECK(tools::count_flipped_triangles_against_rest(rig.triangles, rig.neutral, mirrored) == sideways);
 }
 
 TEST_CASE("Live Link Face weights drive the ICT rig by ARKit name") {

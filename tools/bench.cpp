@@ -98,7 +98,7 @@ void run_bench(const Options& o) {
 
   std::vector<std::string> lines;
   for (const auto& name : solver_list) {
-    auto solver = create_solver(name, model);
+    auto solver = make_solver(name, model);
     SolveResult result = solver->make_result();
     const std::size_t frames = name == "meshik" ? std::min<std::size_t>(F, std::size_t(std::max(1L, o.meshik_frames))) : F;
     std::vector<double> total_us(frames), cpu_us(frames);

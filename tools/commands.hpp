@@ -15,5 +15,7 @@ void add_bench_command(CLI::App& app, int& exit_code);
 void add_calibrate_command(CLI::App& app, int& exit_code);
 void add_solve_command(CLI::App& app, int& exit_code);
 void add_eval_command(CLI::App& app, int& exit_code);
+void add_subscribe_command(CLI::App& app, int& exit_code);
+void add_daemon_demo_command(CLI::App& app, int& exit_code);
 
 }  // namespace facecap::tools

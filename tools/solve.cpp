@@ -61,7 +61,7 @@ void run_solve(const Options& o) {
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
 
   auto setup = make_calibrated_setup(rig, cal, take.labels);
-  const auto solver_ptr = create_solver(o.solver, setup.model);
+  const auto solver_ptr = make_solver(o.solver, setup.model);
   FaceSolver& solver = *solver_ptr;
   SolveResult result = solver.make_result();
   auto mapped = setup.mapper->make_output();

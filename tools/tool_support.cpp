@@ -9,7 +9,6 @@
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
 #include "solver/builtin_face.hpp"
-#include "solver/meshik.hpp"
 
 namespace facecap::tools {
 namespace {
@@ -151,11 +150,6 @@ std::vector<std::string> select_solvers(const std::string& option) {
     start = comma + 1;
   }
   return out;
-}
-
-std::unique_ptr<FaceSolver> create_solver(const std::string& name, std::shared_ptr<const SolverModel> model) {
-  if (name == "meshik") return make_meshik_solver(std::move(model));
-  return make_solver(name, std::move(model));
 }
 
 double percentile(std::vector<double>& values, double p) {

@@ -59,9 +59,6 @@ Eigen::Matrix3Xd marker_positions(const Eigen::Matrix3Xd& pose, const std::vecto
 // naming an unknown solver.
 std::vector<std::string> select_solvers(const std::string& option);
 
-// make_solver(name, model); "meshik" comes from make_meshik_solver (solver/meshik.hpp).
-std::unique_ptr<FaceSolver> create_solver(const std::string& name, std::shared_ptr<const SolverModel> model);
-
 // Nearest-rank percentile p (0..100) of values; reorders them. 0 for no values.
 double percentile(std::vector<double>& values, double p);
 

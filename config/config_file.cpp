@@ -1,0 +1,454 @@
+#include "config/config_file.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <set>
+#include <tuple>
+
+#include <fmt/format.h>
+#include <toml++/toml.h>
+
+#include "client/facecap_shm_layout.hpp"
+#include "drivers/registry.hpp"
+
+namespace facecap::config {
+namespace fs = std::filesystem;
+namespace {
+
+std::size_t key_index(const KeySpec& key) { return std::size_t(&key - config_schema().data()); }
+
+// Line and column only where they mean something (not for --set overrides).
+ErrorLocation location_of(const toml::node& node, const std::string& file, std::string_view key_path) {
+  const auto& begin = node.source().begin;
+  const bool positioned = file != "--set" && begin.line > 0;
+  return ErrorLocation{.file = file, .line = positioned ? int64_t(begin.line) : -1,
+                       .column = positioned ? int64_t(begin.column) : -1, .key = std::string(key_path)};
+}
+
+// "string \"fast\"", "integer 5", ... for messages.
+std::string describe_node(const toml::node& node) {
+  if (auto s = node.value<std::string>()) return fmt::format("string \"{}\"", *s);
+  if (node.is_integer()) return fmt::format("integer {}", node.as_integer()->get());
+  if (node.is_floating_point()) return fmt::format("number {}", node.as_floating_point()->get());
+  if (node.is_boolean()) return fmt::format("boolean {}", node.as_boolean()->get());
+  if (node.is_array()) return "an array";
+  if (node.is_table()) return "a table";
+  return "a date or time";
+}
+
+// Parent sections of every key ("outputs", "outputs.shm", ...).
+const std::set<std::string, std::less<>>& section_paths() {
+  static const std::set<std::string, std::less<>> sections = [] {
+    std::set<std::string, std::less<>> out;
+    for (const KeySpec& key : config_schema())
+      for (std::string_view s = key.section(); !s.empty();) {
+        out.emplace(s);
+        const auto dot = s.rfind('.');
+        s = dot == std::string_view::npos ? std::string_view() : s.substr(0, dot);
+      }
+    return out;
+  }();
+  return sections;
+}
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t substitution = diagonal + (a[i - 1] == b[j - 1] ? 0 : 1);
+      diagonal = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, substitution});
+    }
+  }
+  return row[b.size()];
+}
+
+class Loader {
+ public:
+  explicit Loader(LoadedConfig& out) : out_(out) {}
+
+  void apply_table(const toml::table& table, const std::string& prefix, Origin origin, const std::string& file,
+                   const fs::path& base_dir) {
+    for (const auto& [name, node] : table) {
+      const std::string path = prefix.empty() ? std::string(name.str()) : prefix + "." + std::string(name.str());
+      const ErrorLocation where = location_of(node, file, path);
+      if (const KeySpec* key = find_key(path)) {
+        apply_value(*key, node, origin, where, base_dir);
+      } else if (section_paths().count(path)) {
+        if (const toml::table* sub = node.as_table()) apply_table(*sub, path, origin, file, base_dir);
+        else problem(where, fmt::format("[{}] is a section and must be a table, not {}", path, describe_node(node)));
+      } else {
+        unknown_key(path, prefix, std::string(name.str()), where);
+      }
+    }
+  }
+
+  // Every input file named must exist (checked even when other keys have problems).
+  void check_input_files() {
+    for (const KeySpec& key : config_schema()) {
+      if (!key.names_input_file) continue;
+      const std::string value = std::get<std::string>(get_value(key, out_.values));
+      if (value.empty() || value == "builtin") continue;
+      std::error_code ec;
+      if (!fs::exists(value, ec)) problem(where(key), fmt::format("\"{}\" does not exist", value));
+    }
+  }
+
+  // Rules that involve more than one key.
+  void check_across_keys() {
+    const DaemonConfig& c = out_.values;
+    const drivers::DriverEntry* driver = drivers::find_driver(c.source.driver);
+    if (c.source.driver == "replay" && c.source.replay.file.empty())
+      problem(where("source.replay.file"), "source.driver is \"replay\" but no file is given");
+    if (c.source.replay.end_s != 0.0 && c.source.replay.end_s <= c.source.replay.start_s)
+      problem(where("source.replay.end_s"),
+              fmt::format("{} must be after source.replay.start_s ({}) or 0 for the end of the take",
+                          format_value(c.source.replay.end_s), format_value(c.source.replay.start_s)));
+    if (c.loop.mode == "lockstep" && driver && !driver->supports_lockstep)
+      problem(where("loop.mode"), fmt::format("lockstep needs a source that can hand every frame on request; the {} "
+                                              "driver runs on its own clock (use mode = \"fixed\")", c.source.driver));
+    if (c.calibration.file.empty() && (c.calibration.head_markers == 1 || c.calibration.head_markers == 2))
+      problem(where("calibration.head_markers"),
+              fmt::format("{} head markers cannot fix a rigid pose: use 0 (no stabilisation) or at least 3",
+                          c.calibration.head_markers));
+    if (c.outputs.shm.enabled && !shm::valid_name(c.outputs.shm.name))
+      problem(where("outputs.shm.name"), fmt::format("\"{}\" is not a valid name (1 to 200 of A-Z a-z 0-9 - _ .)",
+                                                     c.outputs.shm.name));
+    if (c.recording.enabled && c.recording.directory.empty())
+      problem(where("recording.directory"), "recording is enabled but no directory is given");
+  }
+
+  void problem(ErrorLocation where, std::string what) { problems_.emplace_back(std::move(what), std::move(where)); }
+  std::vector<Error>& problems() { return problems_; }
+
+ private:
+  ErrorLocation where(const KeySpec& key) const {
+    ErrorLocation loc = out_.origins[key_index(key)].where;
+    loc.key = std::string(key.path);
+    if (loc.file.empty()) loc.file = out_.file.empty() ? "defaults" : out_.file + " (default)";
+    return loc;
+  }
+  ErrorLocation where(std::string_view path) const { return where(*find_key(path)); }
+
+  void unknown_key(const std::string& path, const std::string& prefix, const std::string& name, ErrorLocation where) {
+    // Siblings first (a typo inside the right section), then every key and section path.
+    std::vector<std::string> siblings, everything;
+    for (const KeySpec& key : config_schema()) {
+      if (key.section() == prefix) siblings.emplace_back(key.name());
+      everything.emplace_back(key.path);
+    }
+    for (const auto& s : section_paths()) {
+      everything.push_back(s);
+      const auto dot = s.rfind('.');
+      if ((dot == std::string::npos ? std::string() : s.substr(0, dot)) == prefix)
+        siblings.push_back(dot == std::string::npos ? s : s.substr(dot + 1));
+    }
+    const std::string where_text = prefix.empty() ? "at the top level" : fmt::format("in [{}]", prefix);
+    std::string hint;
+    if (auto near = closest_match(name, siblings); !near.empty()) hint = fmt::format("; did you mean '{}'?", near);
+    else if (auto near_path = closest_match(path, everything); !near_path.empty())
+      hint = fmt::format("; did you mean '{}'?", near_path);
+    problem(std::move(where), fmt::format("unknown key '{}' {}{}", name, where_text, hint));
+  }
+
+  void apply_value(const KeySpec& key, const toml::node& node, Origin origin, const ErrorLocation& where,
+                   const fs::path& base_dir) {
+    std::optional<Value> value = convert(key, node, where);
+    if (!value) return;
+    if (key.names_input_file && origin == Origin::kFile) {
+      auto& text = std::get<std::string>(*value);
+      if (!text.empty() && text != "builtin" && fs::path(text).is_relative()) text = (base_dir / text).lexically_normal().string();
+    }
+    set_value(key, out_.values, *value);
+    out_.origins[key_index(key)] = KeyOrigin{origin, where};
+  }
+
+  std::optional<Value> convert(const KeySpec& key, const toml::node& node, const ErrorLocation& where) {
+    auto wrong_type = [&] {
+      const std::string_view type = value_type_name(key.type());
+      const char* article = type.front() == 'a' || type.front() == 'i' ? "an" : "a";
+      problem(where, fmt::format("expected {} {}, got {}", article, type, describe_node(node)));
+      return std::nullopt;
+    };
+    switch (key.type()) {
+      case ValueType::kBool:
+        if (auto v = node.value_exact<bool>()) return Value(*v);
+        return wrong_type();
+      case ValueType::kInt:
+        if (auto v = node.value_exact<int64_t>()) {
+          if (!check_range(key, double(*v), fmt::format("{}", *v), where)) return std::nullopt;
+          return Value(*v);
+        }
+        return wrong_type();
+      case ValueType::kFloat: {
+        std::optional<double> v;
+        if (node.is_floating_point()) v = node.as_floating_point()->get();
+        else if (node.is_integer()) v = double(node.as_integer()->get());  // `rate_hz = 120` is fine
+        if (!v) return wrong_type();
+        if (!std::isfinite(*v)) {
+          problem(where, fmt::format("{} is not a finite number (allowed: {})", *v, allowed_range(key)));
+          return std::nullopt;
+        }
+        if (!check_range(key, *v, format_value(*v), where)) return std::nullopt;
+        return Value(*v);
+      }
+      case ValueType::kString: {
+        auto v = node.value_exact<std::string>();
+        if (!v) return wrong_type();
+        if (key.choices) {
+          const auto choices = key.choices();
+          if (std::find(choices.begin(), choices.end(), *v) == choices.end()) {
+            const std::string near = closest_match(*v, choices);
+            problem(where, fmt::format("\"{}\" is not allowed (allowed: {}){}", *v, allowed_range(key),
+                                       near.empty() ? "" : fmt::format("; did you mean \"{}\"?", near)));
+            return std::nullopt;
+          }
+        }
+        return Value(*v);
+      }
+      case ValueType::kIntList: {
+        const toml::array* array = node.as_array();
+        if (!array) return wrong_type();
+        std::vector<int64_t> out;
+        for (const toml::node& element : *array) {
+          auto v = element.value_exact<int64_t>();
+          if (!v) {
+            problem(location_of(element, where.file, where.key),
+                    fmt::format("expected an integer in the array, got {}", describe_node(element)));
+            return std::nullopt;
+          }
+          if (!check_range(key, double(*v), fmt::format("{}", *v), location_of(element, where.file, where.key)))
+            return std::nullopt;
+          out.push_back(*v);
+        }
+        return Value(std::move(out));
+      }
+    }
+    return std::nullopt;
+  }
+
+  bool check_range(const KeySpec& key, double v, const std::string& text, const ErrorLocation& where) {
+    if (v >= key.min && v <= key.max) return true;
+    problem(where, fmt::format("{} is out of range (allowed: {})", text, allowed_range(key)));
+    return false;
+  }
+
+  LoadedConfig& out_;
+  std::vector<Error> problems_;
+};
+
+std::string compose(const std::vector<Error>& problems) {
+  std::string text;
+  for (const Error& e : problems) text += (text.empty() ? "" : "\n") + std::string(e.what());
+  return text;
+}
+
+// A --set override as TOML ("loop.rate_hz=240"); a string key's value may lack quotes.
+toml::table parse_override(const std::string& text, Loader& loader) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos) {
+    loader.problem({.file = "--set"}, fmt::format("override \"{}\" must look like key=value", text));
+    return {};
+  }
+  std::string key = text.substr(0, eq), value = text.substr(eq + 1);
+  auto trim = [](std::string& s) {
+    s.erase(0, s.find_first_not_of(" \t"));
+    s.erase(s.find_last_not_of(" \t") + 1);
+  };
+  trim(key);
+  trim(value);
+  try {
+    return toml::parse(std::string_view(key + " = " + value), std::string_view("--set"));
+  } catch (const toml::parse_error&) {
+    const KeySpec* spec = find_key(key);
+    if (spec && spec->type() == ValueType::kString) {
+      // The same nesting TOML gives a dotted key.
+      toml::table table;
+      toml::table* at = &table;
+      std::size_t start = 0;
+      for (std::size_t dot = key.find('.'); dot != std::string::npos; start = dot + 1, dot = key.find('.', start))
+        at = at->emplace<toml::table>(key.substr(start, dot - start)).first->second.as_table();
+      at->insert_or_assign(key.substr(start), value);
+      return table;
+    }
+    loader.problem({.file = "--set", .key = key}, fmt::format("cannot parse the value of override \"{}\"", text));
+    return {};
+  }
+}
+
+}  // namespace
+
+const KeyOrigin& LoadedConfig::origin_of(std::string_view key_path) const {
+  const KeySpec* key = find_key(key_path);
+  if (!key) throw Error(fmt::format("no config key '{}'", key_path));
+  return origins.at(key_index(*key));
+}
+
+ConfigError::ConfigError(std::vector<Error> problems) : Error(compose(problems)), problems_(std::move(problems)) {}
+
+std::string closest_match(std::string_view word, const std::vector<std::string>& candidates) {
+  std::string best;
+  std::size_t best_distance = std::string::npos;
+  for (const auto& c : candidates) {
+    const std::size_t d = edit_distance(word, c);
+    if (d < best_distance) {
+      best_distance = d;
+      best = c;
+    }
+  }
+  // Close enough to be a typo: at most a third of the word, and at least 1 edit allowed.
+  const std::size_t limit = std::max<std::size_t>(1, (word.size() + 2) / 3);
+  return best_distance <= limit ? best : std::string();
+}
+
+LoadedConfig load_config(const std::string& file, const std::vector<std::string>& overrides) {
+  LoadedConfig out;
+  out.values = default_config();
+  out.origins.resize(config_schema().size());
+  out.file = file;
+  Loader loader(out);
+  if (!file.empty()) {
+    try {
+      const toml::table table = toml::parse_file(file);
+      loader.apply_table(table, "", Origin::kFile, file, fs::path(file).parent_path());
+    } catch (const toml::parse_error& e) {
+      const auto& begin = e.source().begin;
+      const bool missing = !fs::exists(file);
+      loader.problem({.file = file, .line = missing ? -1 : int64_t(begin.line), .column = missing ? -1 : int64_t(begin.column)},
+                     missing ? "cannot open the configuration file" : std::string(e.description()));
+    }
+  }
+  for (const std::string& text : overrides)
+    loader.apply_table(parse_override(text, loader), "", Origin::kCommandLine, "--set", fs::current_path());
+  loader.check_input_files();
+  if (loader.problems().empty()) loader.check_across_keys();
+  if (!loader.problems().empty()) {
+    auto& problems = loader.problems();
+    std::stable_sort(problems.begin(), problems.end(), [](const Error& a, const Error& b) {
+      return std::tie(a.where().file, a.where().line) < std::tie(b.where().file, b.where().line);
+    });
+    throw ConfigError(std::move(problems));
+  }
+  return out;
+}
+
+namespace {
+
+// Comment lines of at most `width` columns.
+std::string comment_block(std::string_view text, std::size_t width = 88) {
+  std::string out, line = "#";
+  std::size_t start = 0;
+  while (start < text.size()) {
+    std::size_t end = text.find(' ', start);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string_view word = text.substr(start, end - start);
+    if (line.size() + 1 + word.size() > width && line != "#") {
+      out += line + "\n";
+      line = "#";
+    }
+    line += " ";
+    line += word;
+    start = end + 1;
+  }
+  return out + line + "\n";
+}
+
+// The description, then one line with the allowed values and what SIGHUP does.
+std::string key_notes(const KeySpec& key) {
+  std::string facts;
+  if (const std::string range = allowed_range(key); !range.empty()) facts = fmt::format("Allowed: {}.", range);
+  else if (!key.unit.empty()) facts = fmt::format("Unit: {}.", key.unit);
+  switch (key.reload) {
+    case Reload::kLive: facts += " SIGHUP applies a change at once."; break;
+    case Reload::kRebuild: facts += " SIGHUP rebuilds the solver with a change."; break;
+    case Reload::kRestart: break;
+  }
+  std::string out = comment_block(key.description);
+  if (!facts.empty()) out += comment_block(facts.front() == ' ' ? facts.substr(1) : facts);
+  return out;
+}
+
+std::string_view section_description(std::string_view path) {
+  for (const SectionSpec& s : config_sections())
+    if (s.path == path) return s.description;
+  return {};
+}
+
+}  // namespace
+
+std::string render_documented_defaults() {
+  std::string out =
+      "# facecapd configuration: every key at its default, with what it does.\n"
+      "# Generated from the schema in config/schema.cpp by `facecapd --print-default-config`;\n"
+      "# tests check that this file matches it. Keys marked \"SIGHUP ...\" can change while\n"
+      "# running (systemctl reload facecapd); any other change needs a restart.\n"
+      "# Check a file with `facecapd --check-config FILE`; see its effective values with\n"
+      "# `facecapd --config FILE --print-config`.\n";
+  const DaemonConfig defaults = default_config();
+  std::string_view section = "\x01";
+  for (const KeySpec& key : config_schema()) {
+    if (key.section() != section) {
+      section = key.section();
+      out += "\n";
+      if (!section.empty()) out += comment_block(section_description(section)) + fmt::format("[{}]\n", section);
+    }
+    out += key_notes(key);
+    out += fmt::format("{} = {}\n", key.name(), format_value(get_value(key, defaults)));
+  }
+  return out;
+}
+
+std::string render_effective_config(const LoadedConfig& config) {
+  std::string out = fmt::format("# facecapd effective configuration{}\n",
+                                config.file.empty() ? " (defaults only)" : fmt::format(" from {}", config.file));
+  std::string_view section = "\x01";
+  for (const KeySpec& key : config_schema()) {
+    if (key.section() != section) {
+      section = key.section();
+      if (!section.empty()) out += fmt::format("\n[{}]\n", section);
+    }
+    const KeyOrigin& origin = config.origins[key_index(key)];
+    std::string from = "default";
+    if (origin.origin == Origin::kFile) from = fmt::format("file {}:{}", origin.where.file, origin.where.line);
+    if (origin.origin == Origin::kCommandLine) from = "--set";
+    const std::string line = fmt::format("{} = {}", key.name(), format_value(get_value(key, config.values)));
+    out += fmt::format("{:<48} # {}\n", line, from);
+  }
+  return out;
+}
+
+std::string render_markdown_reference() {
+  auto cell = [](std::string text) {
+    for (std::size_t at = text.find('|'); at != std::string::npos; at = text.find('|', at + 2)) text.replace(at, 1, "\\|");
+    return text;
+  };
+  std::string out;
+  std::string_view section = "\x01";
+  for (const KeySpec& key : config_schema()) {
+    if (key.section() != section) {
+      section = key.section();
+      out += fmt::format("\n### {}\n\n", section.empty() ? "top level" : fmt::format("[{}]", section));
+      if (const auto d = section_description(section); !d.empty()) out += fmt::format("{}\n\n", d);
+      out += "| key | type | default | allowed | SIGHUP | description |\n|---|---|---|---|---|---|\n";
+    }
+    std::string allowed = allowed_range(key);
+    if (allowed.empty() && !key.unit.empty()) allowed = std::string(key.unit);
+    const char* reload = key.reload == Reload::kLive ? "applied" : key.reload == Reload::kRebuild ? "rebuilds solver" : "restart";
+    out += fmt::format("| `{}` | {} | `{}` | {} | {} | {} |\n", key.name(), value_type_name(key.type()),
+                       cell(format_value(key.default_value)), cell(allowed), reload, cell(std::string(key.description)));
+  }
+  return out;
+}
+
+std::vector<const KeySpec*> changed_keys(const DaemonConfig& before, const DaemonConfig& after) {
+  std::vector<const KeySpec*> changed;
+  for (const KeySpec& key : config_schema())
+    if (get_value(key, before) != get_value(key, after)) changed.push_back(&key);
+  return changed;
+}
+
+}  // namespace facecap::config

@@ -1,0 +1,89 @@
+#pragma once
+// facecapd's effective configuration. Member paths are the TOML key paths
+// (config.loop.rate_hz is `[loop] rate_hz`): config/schema.cpp declares each key's type,
+// default, unit, range and description from the member itself, so the two cannot drift.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "drivers/source_config.hpp"
+
+namespace facecap::config {
+
+struct RigSection {
+  std::string path;
+  bool cache = true;
+};
+
+struct CalibrationSection {
+  std::string file;
+  int64_t face_markers = 0;
+  int64_t head_markers = 0;
+  bool stabilise_head = true;
+};
+
+struct SolverSection {
+  std::string method;
+  double alpha = 0.0;
+  double mu = 0.0;
+  double beta = 0.0;
+  int64_t weight_refinements = 0;
+  std::string collisions;
+  double collision_epsilon = 0.0;
+  double active_weight = 0.0;
+};
+
+struct LoopSection {
+  double rate_hz = 0.0;
+  std::string mode;
+  int64_t phase_margin_us = 0;
+  bool realtime = true;
+  int64_t priority = 0;
+  bool lock_memory = false;
+  std::vector<int64_t> cpu_affinity;
+};
+
+struct ShmSection {
+  bool enabled = true;
+  std::string name;
+  int64_t slots = 0;
+  bool vertices = true;
+};
+
+struct OutputsSection {
+  ShmSection shm;
+};
+
+struct RecordingSection {
+  bool enabled = false;
+  std::string directory;
+  bool markers = true;
+  bool solved = true;
+  int64_t queue_frames = 0;
+};
+
+struct ControlSection {
+  double status_interval_s = 0.0;
+  double run_seconds = 0.0;
+};
+
+struct LoggingSection {
+  std::string level;
+  double stats_interval_s = 0.0;
+  std::string stats_file;
+};
+
+struct DaemonConfig {
+  int64_t version = 0;
+  drivers::SourceConfig source;
+  RigSection rig;
+  CalibrationSection calibration;
+  SolverSection solver;
+  LoopSection loop;
+  OutputsSection outputs;
+  RecordingSection recording;
+  ControlSection control;
+  LoggingSection logging;
+};
+
+}  // namespace facecap::config

@@ -1,0 +1,292 @@
+#include "config/schema.hpp"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "drivers/registry.hpp"
+#include "solver/face_solver.hpp"
+
+namespace facecap::config {
+namespace {
+
+std::vector<std::string> driver_names() {
+  std::vector<std::string> names;
+  for (const auto& d : drivers::driver_table()) names.emplace_back(d.name);
+  return names;
+}
+std::vector<std::string> solver_method_names() {
+  std::vector<std::string> names;
+  for (const auto name : solver_names()) names.emplace_back(name);
+  return names;
+}
+std::vector<std::string> collision_names() { return {"none", "lips", "face"}; }
+std::vector<std::string> loop_mode_names() { return {"fixed", "lockstep"}; }
+std::vector<std::string> log_level_names() { return {"trace", "debug", "info", "warn", "error", "off"}; }
+
+// The key path is the member path, so a key and the field it sets cannot disagree.
+#define FACECAP_KEY(member) .path = #member, .field = +[](DaemonConfig& c) -> auto& { return c.member; }
+
+const std::vector<KeySpec>& schema_rows() {
+  static const std::vector<KeySpec> rows = {
+      {FACECAP_KEY(version), .default_value = int64_t{1}, .min = 1, .max = 1,
+       .description = "Version of this file's format; this facecapd reads version 1."},
+
+      {FACECAP_KEY(source.driver), .default_value = std::string("sim"), .choices = &driver_names,
+       .description = "Where marker frames come from: sim simulates a capture of the rig, replay plays a C3D, TRC or "
+                      "facecapd recording."},
+
+      {FACECAP_KEY(source.sim.rate_hz), .default_value = 120.0, .unit = "Hz", .min = 1, .max = 2000,
+       .description = "Frames per second the simulated capture system delivers."},
+      {FACECAP_KEY(source.sim.motion), .default_value = std::string("builtin"),
+       .names_input_file = true,
+       .description = "The performance: \"builtin\" (smooth curves over jaw, blinks, smiles, brows and lips) or the "
+                      "path of a Live Link Face CSV whose ARKit weights drive the rig's shapes of the same names "
+                      "(looped)."},
+      {FACECAP_KEY(source.sim.noise_mm), .default_value = 0.1, .unit = "mm", .min = 0, .max = 10,
+       .description = "Gaussian noise added to every marker coordinate (standard deviation)."},
+      {FACECAP_KEY(source.sim.dropout_probability), .default_value = 0.005, .min = 0, .max = 1,
+       .description = "Chance that a marker is missing from a frame, as if occluded."},
+      {FACECAP_KEY(source.sim.head_motion_degrees), .default_value = 4.0, .unit = "degrees", .min = 0, .max = 45,
+       .description = "Amplitude of the head's sway (yaw; pitch and roll are smaller)."},
+      {FACECAP_KEY(source.sim.head_motion_mm), .default_value = 8.0, .unit = "mm", .min = 0, .max = 200,
+       .description = "Amplitude of the head's drift."},
+      {FACECAP_KEY(source.sim.seed), .default_value = int64_t{1}, .min = 0, .max = 4294967295.0,
+       .description = "Seed of the noise and dropouts: the same seed gives the same frames."},
+
+      {FACECAP_KEY(source.replay.file), .default_value = std::string(),
+       .names_input_file = true,
+       .description = "Take to play: .c3d, .trc or .fcrec (a facecapd recording). Required when source.driver is "
+                      "\"replay\"."},
+      {FACECAP_KEY(source.replay.speed), .default_value = 1.0, .min = 0, .max = 100,
+       .description = "Playback speed relative to real time; 0 hands frames as fast as the loop takes them."},
+      {FACECAP_KEY(source.replay.loop), .default_value = false,
+       .description = "Start again at the window's beginning after its end; otherwise facecapd stops cleanly when "
+                      "the take ends."},
+      {FACECAP_KEY(source.replay.start_s), .default_value = 0.0, .unit = "s", .min = 0, .max = 1e7,
+       .description = "Start of the window into the take, in seconds after its first frame."},
+      {FACECAP_KEY(source.replay.end_s), .default_value = 0.0, .unit = "s", .min = 0, .max = 1e7,
+       .description = "End of the window, in seconds after the take's first frame; 0 plays to the end."},
+      {FACECAP_KEY(source.replay.source_timestamps), .default_value = true,
+       .description = "Pace frames by the file's own timestamps (gaps stay gaps); false paces them at the take's "
+                      "nominal rate."},
+
+      {FACECAP_KEY(rig.path), .default_value = std::string("builtin"),
+       .names_input_file = true,
+       .description = "The rig to solve: \"builtin\" (the synthetic face), an OBJ directory (ICT FaceKit layout or "
+                      "with rig.toml), a .toml manifest, or a .gltf/.glb file."},
+      {FACECAP_KEY(rig.cache), .default_value = true,
+       .description = "Keep a binary cache of parsed rigs ($FACECAP_CACHE_DIR, else ~/.cache/facecap) so that "
+                      "restarts load the rig in milliseconds."},
+
+      {FACECAP_KEY(calibration.file), .default_value = std::string(),
+       .reload = Reload::kRebuild, .names_input_file = true,
+       .description = "Marker calibration (TOML, see docs/config.md): which rig point each marker sits on, the head "
+                      "markers, and the transform from marker space to rig space. Empty: the default marker set, in "
+                      "rig space, which the sim produces."},
+      {FACECAP_KEY(calibration.face_markers), .default_value = int64_t{48}, .min = 3, .max = 1000,
+       .description = "Face markers of the default marker set, spread evenly over the rig (labels M000, M001, ...)."},
+      {FACECAP_KEY(calibration.head_markers), .default_value = int64_t{4}, .min = 0, .max = 16,
+       .description = "Markers on a rigid headband in the default marker set (labels H0, H1, ...); 0 for none, else "
+                      "at least 3."},
+      {FACECAP_KEY(calibration.stabilise_head), .default_value = true, .reload = Reload::kRebuild,
+       .description = "Fit the head's rigid motion to the head markers every frame and solve the face in head space "
+                      "(needs 3 head markers present; otherwise the last pose is held)."},
+
+      {FACECAP_KEY(solver.method), .default_value = std::string("nonlinear"), .choices = &solver_method_names,
+       .reload = Reload::kRebuild,
+       .description = "nonlinear: the paper's non-linear blendshape interpolation; linear: direct manipulation "
+                      "(x0 + B w); dt: deformation transfer; meshik: MeshIK, an offline baseline far too slow for "
+                      "the loop."},
+      {FACECAP_KEY(solver.alpha), .default_value = 0.1, .min = 0, .max = 1000, .reload = Reload::kRebuild,
+       .description = "Temporal smoothing of the weights: alpha |w - w_prev|^2 in Eq. 2."},
+      {FACECAP_KEY(solver.mu), .default_value = 0.001, .min = 0, .max = 1000, .reload = Reload::kRebuild,
+       .description = "Regularisation of the weights' size: mu |w|^2 in Eq. 2."},
+      {FACECAP_KEY(solver.beta), .default_value = 100.0, .min = 0.001, .max = 1e6, .reload = Reload::kRebuild,
+       .description = "How strongly markers pin the mesh in Eq. 5."},
+      {FACECAP_KEY(solver.weight_refinements), .default_value = int64_t{2}, .min = 0, .max = 10,
+       .reload = Reload::kRebuild,
+       .description = "Gauss-Newton refinements of the weights along the paths rotations move markers (nonlinear "
+                      "solver); 0 gives the paper's linear fit."},
+      {FACECAP_KEY(solver.collisions), .default_value = std::string("lips"), .choices = &collision_names,
+       .reload = Reload::kRebuild,
+       .description = "Collision handling: none, lips (the lip region) or face (every triangle, slower)."},
+      {FACECAP_KEY(solver.collision_epsilon), .default_value = 0.01, .unit = "rig units", .min = 0, .max = 10,
+       .reload = Reload::kRebuild,
+       .description = "Triangle pairs closer than this are held apart at their linear-blend positions."},
+      {FACECAP_KEY(solver.active_weight), .default_value = 1e-4, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
+       .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
+
+      {FACECAP_KEY(loop.rate_hz), .default_value = 120.0, .unit = "Hz", .min = 1, .max = 2000,
+       .description = "Ticks per second of the fixed-rate solve loop."},
+      {FACECAP_KEY(loop.mode), .default_value = std::string("fixed"), .choices = &loop_mode_names,
+       .description = "fixed: at every tick, solve the newest frame; lockstep: solve every frame of the source in "
+                      "order as fast as possible (replay only)."},
+      {FACECAP_KEY(loop.phase_margin_us), .default_value = int64_t{300}, .unit = "us", .min = 0, .max = 100000,
+       .description = "With a source on its own clock (sim, live devices) the loop shifts its ticks to fall this "
+                      "long after frames arrive, so frames wait as little as possible; 0 keeps the ticks fixed."},
+      {FACECAP_KEY(loop.realtime), .default_value = true,
+       .description = "Try SCHED_FIFO for the solve thread (needs CAP_SYS_NICE or RLIMIT_RTPRIO); a failure is "
+                      "reported, never fatal."},
+      {FACECAP_KEY(loop.priority), .default_value = int64_t{0}, .min = 0, .max = 99,
+       .description = "SCHED_FIFO priority; 0 picks the middle of the range. Clamped to RLIMIT_RTPRIO."},
+      {FACECAP_KEY(loop.lock_memory), .default_value = false,
+       .description = "mlockall() so that the solve thread never waits for a page fault (needs CAP_IPC_LOCK or a "
+                      "large RLIMIT_MEMLOCK)."},
+      {FACECAP_KEY(loop.cpu_affinity), .default_value = std::vector<int64_t>{}, .unit = "CPU numbers", .min = 0,
+       .max = 1023, .description = "CPUs the solve thread may run on; empty for any."},
+
+      {FACECAP_KEY(outputs.shm.enabled), .default_value = true,
+       .description = "Publish solved frames in a shared-memory ring (docs/shm-format.md)."},
+      {FACECAP_KEY(outputs.shm.name), .default_value = std::string("facecap"),
+       .description = "Name of the ring (/dev/shm/<name>): letters, digits, '-', '_', '.'. Readers open it by this "
+                      "name."},
+      {FACECAP_KEY(outputs.shm.slots), .default_value = int64_t{8}, .min = 2, .max = 1024,
+       .description = "Frames the ring holds: a reader can fall this far behind before it loses frames."},
+      {FACECAP_KEY(outputs.shm.vertices), .default_value = true,
+       .description = "Publish the solved vertex positions as well as the weights."},
+
+      {FACECAP_KEY(recording.enabled), .default_value = false,
+       .description = "Record raw marker frames and solved frames while running."},
+      {FACECAP_KEY(recording.directory), .default_value = std::string("recordings"),
+       .description = "Where recordings go, one facecapd-<date>-<time>.fcrec per run (relative to the working "
+                      "directory; the systemd unit runs in /var/lib/facecap)."},
+      {FACECAP_KEY(recording.markers), .default_value = true, .description = "Record the raw marker frames."},
+      {FACECAP_KEY(recording.solved), .default_value = true, .description = "Record the solved frames."},
+      {FACECAP_KEY(recording.queue_frames), .default_value = int64_t{512}, .unit = "frames", .min = 8, .max = 65536,
+       .description = "How far the recorder may fall behind before frames are dropped (and counted) rather than "
+                      "slowing the loop."},
+
+      {FACECAP_KEY(control.status_interval_s), .default_value = 1.0, .unit = "s", .min = 0.1, .max = 60,
+       .reload = Reload::kLive,
+       .description = "How often facecapd updates systemd's STATUS= line (rate, overruns, latency)."},
+      {FACECAP_KEY(control.run_seconds), .default_value = 0.0, .unit = "s", .min = 0, .max = 1e7,
+       .description = "Stop cleanly after this long (benchmarks, tests); 0 runs until stopped."},
+
+      {FACECAP_KEY(logging.level), .default_value = std::string("info"), .choices = &log_level_names,
+       .reload = Reload::kLive, .description = "Least severe log level written."},
+      {FACECAP_KEY(logging.stats_interval_s), .default_value = 10.0, .unit = "s", .min = 0, .max = 86400,
+       .reload = Reload::kLive, .description = "How often the loop's figures are logged; 0 never."},
+      {FACECAP_KEY(logging.stats_file), .default_value = std::string(),
+       .description = "When facecapd stops, write its final figures as JSON to this file (benchmarks)."},
+  };
+  return rows;
+}
+
+#undef FACECAP_KEY
+
+const SectionSpec kSections[] = {
+    {"", ""},
+    {"source", "Where marker frames come from."},
+    {"source.sim", "The simulated capture system (source.driver = \"sim\")."},
+    {"source.replay", "Playing a recorded take (source.driver = \"replay\")."},
+    {"rig", "The blendshape rig the markers are solved onto."},
+    {"calibration", "How markers relate to the rig."},
+    {"solver", "The per-frame face solve (the paper's Eq. 2-5)."},
+    {"loop", "The real-time solve loop."},
+    {"outputs.shm", "The shared-memory output renderers read (docs/shm-format.md)."},
+    {"recording", "Recording what the daemon receives and solves (.fcrec, docs/recording-format.md)."},
+    {"control", "Supervision by systemd and run control."},
+    {"logging", "Logs and figures."},
+};
+
+}  // namespace
+
+std::string_view value_type_name(ValueType type) noexcept {
+  switch (type) {
+    case ValueType::kBool: return "boolean";
+    case ValueType::kInt: return "integer";
+    case ValueType::kFloat: return "number";
+    case ValueType::kString: return "string";
+    case ValueType::kIntList: return "array of integers";
+  }
+  return "?";
+}
+
+std::string_view KeySpec::section() const noexcept {
+  const auto dot = path.rfind('.');
+  return dot == std::string_view::npos ? std::string_view() : path.substr(0, dot);
+}
+
+std::string_view KeySpec::name() const noexcept {
+  const auto dot = path.rfind('.');
+  return dot == std::string_view::npos ? path : path.substr(dot + 1);
+}
+
+std::span<const KeySpec> config_schema() { return schema_rows(); }
+std::span<const SectionSpec> config_sections() { return kSections; }
+
+const KeySpec* find_key(std::string_view path) noexcept {
+  for (const KeySpec& key : schema_rows())
+    if (key.path == path) return &key;
+  return nullptr;
+}
+
+Value get_value(const KeySpec& key, const DaemonConfig& config) {
+  auto& mutable_config = const_cast<DaemonConfig&>(config);  // the accessors only read here
+  return std::visit([&](auto field) -> Value { return field(mutable_config); }, key.field);
+}
+
+void set_value(const KeySpec& key, DaemonConfig& config, const Value& value) {
+  std::visit(
+      [&](auto field) {
+        using T = std::remove_reference_t<decltype(field(config))>;
+        field(config) = std::get<T>(value);
+      },
+      key.field);
+}
+
+DaemonConfig default_config() {
+  DaemonConfig config;
+  for (const KeySpec& key : schema_rows()) set_value(key, config, key.default_value);
+  return config;
+}
+
+namespace {
+
+std::string quote(std::string_view text) {
+  std::string out = "\"";
+  for (const char c : text) {
+    switch (c) {
+      case '"': out += "\\\""; break;
+      case '\\': out += "\\\\"; break;
+      case '\n': out += "\\n"; break;
+      case '\t': out += "\\t"; break;
+      default:
+        if ((unsigned char)c < 0x20) out += fmt::format("\\u{:04x}", unsigned(c));
+        else out += c;
+    }
+  }
+  return out + "\"";
+}
+
+std::string format_number(double v) {
+  std::string text = fmt::format("{}", v);
+  if (text.find_first_of(".eEin") == std::string::npos) text += ".0";  // stays a TOML float
+  return text;
+}
+
+}  // namespace
+
+std::string format_value(const Value& value) {
+  struct Formatter {
+    std::string operator()(bool v) const { return v ? "true" : "false"; }
+    std::string operator()(int64_t v) const { return fmt::format("{}", v); }
+    std::string operator()(double v) const { return format_number(v); }
+    std::string operator()(const std::string& v) const { return quote(v); }
+    std::string operator()(const std::vector<int64_t>& v) const { return fmt::format("[{}]", fmt::join(v, ", ")); }
+  };
+  return std::visit(Formatter{}, value);
+}
+
+std::string allowed_range(const KeySpec& key) {
+  if (key.choices) return fmt::format("one of: {}", fmt::join(key.choices(), ", "));
+  const bool numeric = key.type() == ValueType::kInt || key.type() == ValueType::kFloat || key.type() == ValueType::kIntList;
+  if (!numeric || (std::isinf(key.min) && std::isinf(key.max))) return {};
+  const std::string unit = key.unit.empty() ? "" : fmt::format(" {}", key.unit);
+  const std::string prefix = key.type() == ValueType::kIntList ? "each " : "";
+  if (key.min == key.max) return fmt::format("{}exactly {}", prefix, key.min);
+  return fmt::format("{}{} to {}{}", prefix, key.min, key.max, unit);
+}
+
+}  // namespace facecap::config

@@ -1,0 +1,44 @@
+#pragma once
+// Real-time setup as a reported try: each step that fails leaves its errno and an
+// actionable hint in the report, and the caller keeps running without it. Used by the
+// solve thread and by drivers whose threads stand in for hardware timing.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace facecap {
+
+// Middle of the SCHED_FIFO range, below the kernel's threaded interrupts (50).
+inline constexpr int kDefaultRealtimePriority = 40;
+
+struct RealtimeRequest {
+  bool fifo = true;                 // SCHED_FIFO for the calling thread
+  int priority = 0;                 // 0: kDefaultRealtimePriority
+  std::vector<int64_t> cpus;        // affinity of the calling thread; empty: leave it
+};
+
+struct RealtimeReport {
+  bool fifo_applied = false;
+  int priority = 0;                 // what was applied or tried
+  int fifo_errno = 0;
+  bool priority_clamped = false;    // lowered to RLIMIT_RTPRIO
+  bool affinity_applied = false;
+  int affinity_errno = 0;
+  // For the log, produced off the real-time thread.
+  std::vector<std::string> describe(const RealtimeRequest& request) const;
+};
+
+// Applies the request to the calling thread. Uses only system calls and does not log;
+// call it on the thread itself before its loop starts. RT-safe.
+RealtimeReport apply_realtime(const RealtimeRequest& request) noexcept;
+
+struct MemoryLockReport {
+  bool locked = false;
+  int error = 0;
+  std::string describe() const;
+};
+
+// mlockall(MCL_CURRENT | MCL_FUTURE) for the whole process. Not RT-safe (call at start).
+MemoryLockReport lock_memory() noexcept;
+
+}  // namespace facecap

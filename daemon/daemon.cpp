@@ -1,0 +1,415 @@
+#include "daemon/daemon.hpp"
+
+#include <cerrno>
+#include <csignal>
+#include <fstream>
+#include <utility>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <sys/resource.h>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+#include "core/log.hpp"
+#include "core/time.hpp"
+#include "drivers/registry.hpp"
+#include "solver/builtin_face.hpp"
+
+namespace facecap::daemon {
+namespace {
+
+// The supervisor wakes at least this often (stop requests, READY, deadlines).
+constexpr int64_t kSuperviseSliceNs = 20 * kNsPerMs;
+
+int64_t process_cpu_ns() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return (int64_t(usage.ru_utime.tv_sec) + usage.ru_stime.tv_sec) * kNsPerSecond +
+         (int64_t(usage.ru_utime.tv_usec) + usage.ru_stime.tv_usec) * kNsPerUs;
+}
+
+double ms(int64_t ns) { return double(ns) / kNsPerMs; }
+
+// Waits up to timeout for SIGTERM, SIGINT or SIGHUP (blocked by main()); 0 on timeout.
+int wait_for_signal(int64_t timeout_ns) {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGTERM);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGHUP);
+  timespec timeout{time_t(timeout_ns / kNsPerSecond), long(timeout_ns % kNsPerSecond)};
+  const int signal = sigtimedwait(&set, nullptr, &timeout);
+  return signal > 0 ? signal : 0;
+}
+
+std::shared_ptr<const Rig> load_configured_rig(const config::RigSection& section) {
+  if (section.path == "builtin") {
+    // The process-wide instance: no copy of its 6,000 vertices and 45 shapes.
+    return std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
+  }
+  RigLoadOptions options;
+  options.use_cache = section.cache;
+  RigLoadReport report;
+  auto rig = std::make_shared<const Rig>(load_rig(section.path, options, &report));
+  spdlog::info("rig {} loaded in {:.2f} s{}", section.path, report.seconds, report.from_cache ? " (from cache)" : "");
+  return rig;
+}
+
+}  // namespace
+
+// Counters at one moment, for figures over a window.
+struct Daemon::Sample {
+  int64_t time_ns = 0;
+  int64_t cpu_ns = 0;
+  uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed = 0, skipped = 0;
+  drivers::SourceHealth source;
+  uint64_t recorder_dropped = 0;
+  LatencyHistogram::Snapshot latency;
+};
+
+Daemon::Daemon(DaemonOptions options, config::LoadedConfig config)
+    : options_(std::move(options)), config_(std::move(config)) {}
+
+Daemon::~Daemon() {
+  if (loop_) shutdown("destroyed");
+}
+
+void Daemon::start() {
+  const config::DaemonConfig& c = config_.values;
+  apply_live_settings();
+  spdlog::info("configuration: {}", config_.file.empty() ? "defaults" : config_.file);
+  if (c.loop.lock_memory) {
+    const MemoryLockReport report = lock_memory();
+    (report.locked ? spdlog::info("{}", report.describe()) : spdlog::warn("{}", report.describe()));
+  }
+
+  rig_ = load_configured_rig(c.rig);
+  calibration_ = load_calibration(c.calibration, *rig_);
+  source_ = drivers::make_source(c.source, {.rig = rig_, .markers = &calibration_.markers});
+  source_->open();
+  spdlog::info("source {}", source_->description());
+
+  const int64_t build_start = monotonic_now_ns();
+  auto pipeline = std::make_unique<SolvePipeline>(*rig_, calibration_, source_->info(), c.solver, c.calibration.stabilise_head);
+  const MarkerMapper& mapper = pipeline->mapper();
+  spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes) built in {:.2f} s; {} of {} face markers matched "
+               "({}), head stabilisation {}, marker scale {:g}", pipeline->method(), rig_->name, rig_->vertex_count(),
+               rig_->shape_count(), ms(monotonic_now_ns() - build_start) / 1000.0, mapper.matched_face_markers(),
+               mapper.face_marker_count(), calibration_.origin,
+               mapper.stabilising() ? fmt::format("on ({} head markers)", mapper.head_marker_count()) : "off",
+               pipeline->marker_scale());
+  if (mapper.matched_face_markers() < mapper.face_marker_count())
+    spdlog::warn("the source lacks {} of the calibration's face markers; they count as missing in every frame",
+                 mapper.face_marker_count() - mapper.matched_face_markers());
+
+  if (c.outputs.shm.enabled) {
+    ShmOutputSpec spec;
+    spec.name = c.outputs.shm.name;
+    spec.shape_names = rig_->shape_names;
+    spec.vertex_count = c.outputs.shm.vertices ? uint32_t(rig_->vertex_count()) : 0;
+    spec.slot_count = uint32_t(c.outputs.shm.slots);
+    spec.nominal_rate_hz = c.loop.rate_hz;
+    spec.rig_name = rig_->name;
+    spec.rig_hash = rig_->content_hash();
+    shm_ = std::make_unique<ShmWriter>(spec);
+    spdlog::info("shared memory {} ({} slots{})", shm_->name(), spec.slot_count, spec.vertex_count ? ", with vertices" : "");
+  }
+
+  if (c.recording.enabled) {
+    RecorderOptions r;
+    r.file = new_recording_path(c.recording.directory);
+    r.queue_frames = std::size_t(c.recording.queue_frames);
+    r.markers = c.recording.markers;
+    r.solved = c.recording.solved;
+    r.header.rig_name = rig_->name;
+    r.header.rig_hash = rig_->content_hash();
+    r.header.source_description = source_->description();
+    r.header.units = source_->info().units;
+    r.header.rate_hz = c.loop.mode == "lockstep" ? source_->info().nominal_rate_hz : c.loop.rate_hz;
+    r.header.marker_labels = source_->info().labels;
+    r.header.shape_names = rig_->shape_names;
+    if (!c.calibration.file.empty()) {
+      const auto bytes = read_file_bytes(c.calibration.file);
+      r.header.calibration.assign(bytes.begin(), bytes.end());
+    }
+    recorder_ = std::make_unique<Recorder>(r, drivers::make_marker_frame(source_->info().labels), rig_->shape_count());
+    recording_file_ = recorder_->file();
+    spdlog::info("recording to {}", recorder_->file().string());
+  }
+
+  LoopOptions loop_options;
+  loop_options.rate_hz = c.loop.rate_hz;
+  loop_options.lockstep = c.loop.mode == "lockstep";
+  loop_options.phase_margin_ns = c.loop.phase_margin_us * kNsPerUs;
+  loop_options.realtime = {.fifo = c.loop.realtime, .priority = int(c.loop.priority), .cpus = c.loop.cpu_affinity};
+  loop_ = std::make_unique<SolveLoop>(loop_options, *source_, std::move(pipeline), shm_.get(), recorder_.get(),
+                                      c.outputs.shm.vertices);
+  loop_->start();
+  start_ns_ = monotonic_now_ns();
+  start_sample_ = std::make_unique<Sample>(take_sample());
+  status_sample_ = std::make_unique<Sample>(*start_sample_);
+  stats_sample_ = std::make_unique<Sample>(*start_sample_);
+  next_status_ns_ = start_ns_ + int64_t(c.control.status_interval_s * kNsPerSecond);
+  next_stats_ns_ = start_ns_ + int64_t(c.logging.stats_interval_s * kNsPerSecond);
+  next_watchdog_ns_ = start_ns_;
+  spdlog::info("solve loop {} at {:g} Hz{}", loop_options.lockstep ? "in lockstep" : "running", c.loop.rate_hz,
+               loop_options.lockstep ? " nominal" : "");
+}
+
+Daemon::Sample Daemon::take_sample() const {
+  Sample s;
+  s.time_ns = monotonic_now_ns();
+  s.cpu_ns = process_cpu_ns();
+  const LoopCounters& counters = loop_->counters();
+  s.ticks = counters.ticks.load();
+  s.frames_solved = counters.frames_solved.load();
+  s.idle_ticks = counters.idle_ticks.load();
+  s.missed = counters.missed_deadlines.load();
+  s.skipped = counters.skipped_ticks.load();
+  s.source = source_->health();
+  s.recorder_dropped = recorder_ ? recorder_->counters().dropped : 0;
+  s.latency = loop_->latency();
+  return s;
+}
+
+Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
+  Figures f;
+  f.seconds = double(to.time_ns - from.time_ns) / kNsPerSecond;
+  f.ticks = to.ticks - from.ticks;
+  f.frames_solved = to.frames_solved - from.frames_solved;
+  f.idle_ticks = to.idle_ticks - from.idle_ticks;
+  f.missed_deadlines = to.missed - from.missed;
+  f.skipped_ticks = to.skipped - from.skipped;
+  f.solved_fps = f.seconds > 0 ? double(f.frames_solved) / f.seconds : 0.0;
+  const LatencyHistogram::Snapshot latency = to.latency.since(from.latency);
+  f.latency_p50_ns = latency.quantile_ns(0.50);
+  f.latency_p99_ns = latency.quantile_ns(0.99);
+  f.latency_max_ns = latency.quantile_ns(1.0);
+  f.cpu_percent = f.seconds > 0 ? 100.0 * double(to.cpu_ns - from.cpu_ns) / (f.seconds * kNsPerSecond) : 0.0;
+  f.source_overwritten = to.source.frames_overwritten - from.source.frames_overwritten;
+  f.source_late = to.source.frames_late - from.source.frames_late;
+  f.recorder_dropped = to.recorder_dropped - from.recorder_dropped;
+  return f;
+}
+
+Figures Daemon::figures_since_start() const { return figures_between(*start_sample_, take_sample()); }
+
+std::string Daemon::status_line(const Figures& w) const {
+  std::string line = fmt::format("{:.1f} fps, latency p50 {:.2f} ms p99 {:.2f} ms, {} overruns", w.solved_fps,
+                                 ms(w.latency_p50_ns), ms(w.latency_p99_ns), loop_->counters().missed_deadlines.load());
+  if (w.source_overwritten + w.source_late > 0)
+    line += fmt::format(", source frames lost {}", w.source_overwritten + w.source_late);
+  if (recorder_) line += fmt::format(", recorder dropped {}", recorder_->counters().dropped);
+  return line;
+}
+
+void Daemon::apply_live_settings() {
+  if (!set_log_level(config_.values.logging.level)) spdlog::warn("unknown log level {}", config_.values.logging.level);
+}
+
+bool Daemon::reload() {
+  notifier_.reloading();
+  spdlog::info("reloading {}", options_.config_file.empty() ? "(defaults)" : options_.config_file);
+  config::LoadedConfig fresh;
+  try {
+    fresh = config::load_config(options_.config_file, options_.overrides);
+  } catch (const Error& e) {
+    spdlog::error("reload rejected; the running configuration stays:\n{}", e.what());
+    notifier_.ready(last_status_ + " (reload rejected: invalid configuration)");
+    reloads_rejected_.fetch_add(1, std::memory_order_release);
+    return false;
+  }
+  bool rebuild = false;
+  for (const config::KeySpec* key : config::changed_keys(config_.values, fresh.values)) {
+    const config::Value value = config::get_value(*key, fresh.values);
+    switch (key->reload) {
+      case config::Reload::kRestart:
+        spdlog::warn("{} changed to {}: takes effect after a restart", key->path, config::format_value(value));
+        continue;
+      case config::Reload::kRebuild: rebuild = true; break;
+      case config::Reload::kLive: break;
+    }
+    config::set_value(*key, config_.values, value);
+    config_.origins[std::size_t(key - config::config_schema().data())] =
+        fresh.origins[std::size_t(key - config::config_schema().data())];
+    spdlog::info("{} = {}", key->path, config::format_value(value));
+  }
+  apply_live_settings();
+  if (rebuild) start_rebuild();
+  notifier_.ready(last_status_);
+  reloads_accepted_.fetch_add(1, std::memory_order_release);
+  return true;
+}
+
+// The new calibration and solver are built on another thread (seconds for a large rig);
+// the loop adopts the result between two frames.
+void Daemon::start_rebuild() {
+  if (rebuild_.valid()) {
+    rebuild_again_ = true;  // after the one in flight, with the configuration as it is then
+    return;
+  }
+  spdlog::info("rebuilding the solver aside");
+  rebuild_ = std::async(std::launch::async, [rig = rig_, info = source_->info(), solver = config_.values.solver,
+                                             section = config_.values.calibration] {
+    MarkerCalibration calibration = load_calibration(section, *rig);
+    auto pipeline = std::make_unique<SolvePipeline>(*rig, calibration, info, solver, section.stabilise_head);
+    return Rebuilt{std::move(pipeline), std::move(calibration)};
+  });
+}
+
+void Daemon::adopt_rebuilt_pipeline() {
+  if (!rebuild_.valid() || rebuild_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
+  try {
+    Rebuilt rebuilt = rebuild_.get();
+    calibration_ = std::move(rebuilt.calibration);
+    loop_->offer_pipeline(std::move(rebuilt.pipeline));
+    spdlog::info("new solver handed to the loop ({}, {})", config_.values.solver.method, calibration_.origin);
+  } catch (const std::exception& e) {
+    spdlog::error("rebuilding the solver failed; the running one stays: {}", e.what());
+  }
+  if (std::exchange(rebuild_again_, false)) start_rebuild();
+}
+
+void Daemon::supervise_once(int64_t now_ns) {
+  const config::DaemonConfig& c = config_.values;
+  if (!realtime_logged_ && loop_->realtime_ready()) {
+    realtime_logged_ = true;
+    const RealtimeReport& report = loop_->realtime_report();
+    for (const std::string& line : report.describe(loop_->options().realtime))
+      ((report.fifo_applied || !c.loop.realtime) ? spdlog::info("{}", line) : spdlog::warn("{}", line));
+  }
+  if (!ready_sent_ && loop_->first_frame_solved()) {
+    ready_sent_ = true;
+    last_status_ = "first frame solved";
+    notifier_.ready(last_status_);
+    spdlog::info("ready: first frame solved {:.0f} ms after the loop started", ms(now_ns - start_ns_));
+  }
+  // The watchdog is fed only while the loop keeps ticking: a stuck solve thread lets it expire.
+  if (ready_sent_ && notifier_.watchdog_interval_ns() > 0 && now_ns >= next_watchdog_ns_) {
+    const uint64_t ticks = loop_->counters().ticks.load(std::memory_order_relaxed);
+    if (ticks != ticks_at_last_watchdog_) {
+      notifier_.watchdog();
+      ticks_at_last_watchdog_ = ticks;
+    }
+    next_watchdog_ns_ = now_ns + notifier_.watchdog_interval_ns();
+  }
+  if (now_ns >= next_status_ns_) {
+    const Sample sample = take_sample();
+    last_status_ = status_line(figures_between(*status_sample_, sample));
+    if (ready_sent_) notifier_.status(last_status_);
+    *status_sample_ = sample;
+    next_status_ns_ = now_ns + int64_t(c.control.status_interval_s * kNsPerSecond);
+  }
+  if (c.logging.stats_interval_s > 0 && now_ns >= next_stats_ns_) {
+    const Sample sample = take_sample();
+    const Figures f = figures_between(*stats_sample_, sample);
+    spdlog::info("{:.1f} fps over {:.0f} s, latency p50 {:.2f} p99 {:.2f} max {:.2f} ms, {} missed deadlines, "
+                 "{} idle ticks, CPU {:.0f}%", f.solved_fps, f.seconds, ms(f.latency_p50_ns), ms(f.latency_p99_ns),
+                 ms(f.latency_max_ns), f.missed_deadlines, f.idle_ticks, f.cpu_percent);
+    *stats_sample_ = sample;
+    next_stats_ns_ = now_ns + int64_t(c.logging.stats_interval_s * kNsPerSecond);
+  }
+  adopt_rebuilt_pipeline();
+  loop_->collect_retired();
+}
+
+int Daemon::run() {
+  const double run_seconds = config_.values.control.run_seconds;
+  std::string reason;
+  int status = 0;
+  while (reason.empty()) {
+    if (options_.handle_signals) {
+      switch (wait_for_signal(kSuperviseSliceNs)) {
+        case SIGTERM: reason = "SIGTERM"; break;
+        case SIGINT: reason = "SIGINT"; break;
+        case SIGHUP: reload(); break;
+        default: break;
+      }
+    } else {
+      timespec slice{0, long(kSuperviseSliceNs)};
+      nanosleep(&slice, nullptr);
+    }
+    if (reload_requested_.exchange(false, std::memory_order_acq_rel)) reload();
+    const int64_t now = monotonic_now_ns();
+    supervise_once(now);
+    if (stop_requested_.load(std::memory_order_acquire)) reason = "stop requested";
+    else if (loop_->source_finished()) reason = "the source ended";
+    else if (run_seconds > 0 && now - start_ns_ >= int64_t(run_seconds * kNsPerSecond)) reason = "run time reached";
+    else if (!loop_->running()) {
+      reason = "the solve loop exited unexpectedly";
+      status = 1;
+    }
+  }
+  shutdown(reason);
+  return status;
+}
+
+void Daemon::shutdown(const std::string& reason) {
+  if (!loop_) return;
+  const int64_t begin = monotonic_now_ns();
+  notifier_.stopping();
+  spdlog::info("stopping: {}", reason);
+  loop_->request_stop();
+  loop_->join();
+  source_->stop();
+  if (shm_) shm_->mark_stopped();
+  if (recorder_) {
+    try {
+      recorder_->stop();
+      const RecorderCounters r = recorder_->counters();
+      spdlog::info("recording {} closed: {} marker frames, {} solved frames, {} dropped", recorder_->file().string(),
+                   r.marker_frames, r.solved_frames, r.dropped);
+    } catch (const std::exception& e) {
+      spdlog::error("recording {}: {}", recorder_->file().string(), e.what());
+    }
+  }
+  const Figures run = figures_since_start();
+  spdlog::info("run: {} frames solved in {:.1f} s ({:.1f} fps), latency p50 {:.2f} p99 {:.2f} max {:.2f} ms, "
+               "{} missed deadlines ({} ticks skipped), CPU {:.0f}%", run.frames_solved, run.seconds, run.solved_fps,
+               ms(run.latency_p50_ns), ms(run.latency_p99_ns), ms(run.latency_max_ns), run.missed_deadlines,
+               run.skipped_ticks, run.cpu_percent);
+  write_stats_file(run);
+  loop_.reset();
+  recorder_.reset();
+  shm_.reset();
+  source_.reset();
+  spdlog::info("stopped in {:.0f} ms", ms(monotonic_now_ns() - begin));
+}
+
+void Daemon::write_stats_file(const Figures& f) const {
+  const std::string& path = config_.values.logging.stats_file;
+  if (path.empty()) return;
+  nlohmann::json j;
+  j["seconds"] = f.seconds;
+  j["rate_hz"] = config_.values.loop.rate_hz;
+  j["mode"] = config_.values.loop.mode;
+  j["rig"] = rig_->name;
+  j["solver"] = config_.values.solver.method;
+  j["ticks"] = f.ticks;
+  j["frames_solved"] = f.frames_solved;
+  j["solved_fps"] = f.solved_fps;
+  j["idle_ticks"] = f.idle_ticks;
+  j["missed_deadlines"] = f.missed_deadlines;
+  j["skipped_ticks"] = f.skipped_ticks;
+  j["max_wake_late_ms"] = ms(loop_->counters().max_wake_late_ns.load());
+  j["latency_ms"] = {{"p50", ms(f.latency_p50_ns)}, {"p99", ms(f.latency_p99_ns)}, {"max", ms(f.latency_max_ns)}};
+  j["cpu_percent"] = f.cpu_percent;
+  j["source"] = {{"overwritten", f.source_overwritten}, {"late", f.source_late}};
+  j["recorder_dropped"] = f.recorder_dropped;
+  nlohmann::json stages;
+  const LoopCounters& counters = loop_->counters();
+  const double frames = f.frames_solved > 0 ? double(f.frames_solved) : 1.0;
+  for (std::size_t s = 0; s < kLoopStageCount; ++s)
+    stages[std::string(loop_stage_name(LoopStage(s)))] = {{"mean_ms", ms(counters.stage_total_ns[s].load()) / frames},
+                                                           {"max_ms", ms(counters.stage_max_ns[s].load())}};
+  for (std::size_t s = 0; s < kSolveStageCount; ++s)
+    stages["solver." + std::string(solve_stage_name(SolveStage(s)))] = {
+        {"mean_ms", ms(counters.solver_stage_total_ns[s].load()) / frames}};
+  j["stages"] = stages;
+  std::ofstream out(path, std::ios::trunc);
+  out << j.dump(2) << "\n";
+  if (!out) spdlog::error("cannot write the stats file {}", path);
+}
+
+}  // namespace facecap::daemon

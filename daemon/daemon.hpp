@@ -1,0 +1,120 @@
+#pragma once
+// facecapd's supervisor, on the main thread: builds everything from a validated
+// configuration (configure), starts the solve loop (activate), then handles signals,
+// sd_notify (READY, WATCHDOG, STATUS, STOPPING), figures, SIGHUP reloads and a clean stop.
+// Nothing here is real-time code; the solve thread is SolveLoop.
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <future>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "config/config_file.hpp"
+#include "daemon/calibration.hpp"
+#include "daemon/recorder.hpp"
+#include "daemon/shm_writer.hpp"
+#include "daemon/solve_loop.hpp"
+#include "daemon/systemd_notify.hpp"
+#include "drivers/marker_source.hpp"
+
+namespace facecap::daemon {
+
+// A window's or a whole run's figures.
+struct Figures {
+  double seconds = 0.0;
+  uint64_t ticks = 0;
+  uint64_t frames_solved = 0;
+  uint64_t idle_ticks = 0;
+  uint64_t missed_deadlines = 0;
+  uint64_t skipped_ticks = 0;
+  double solved_fps = 0.0;
+  int64_t latency_p50_ns = 0;  // source frame received -> slot published
+  int64_t latency_p99_ns = 0;
+  int64_t latency_max_ns = 0;
+  double cpu_percent = 0.0;    // whole process, of one CPU
+  uint64_t source_overwritten = 0;
+  uint64_t source_late = 0;
+  uint64_t recorder_dropped = 0;
+};
+
+struct DaemonOptions {
+  std::string config_file;                // re-read on SIGHUP; empty: defaults
+  std::vector<std::string> overrides;     // --set key=value, re-applied on reload
+  bool handle_signals = true;             // SIGTERM/SIGINT/SIGHUP are blocked and awaited here
+};
+
+class Daemon {
+ public:
+  Daemon(DaemonOptions options, config::LoadedConfig config);
+  ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  // Loads the rig and calibration, opens the source, builds the solver, creates the shared
+  // memory and the recording, and starts the solve loop. Throws Error.
+  void start();
+  // Supervises until SIGTERM/SIGINT, request_stop(), control.run_seconds or the end of a
+  // replay; then stops cleanly. Returns the process exit status.
+  int run();
+  // Any thread.
+  void request_stop() noexcept { stop_requested_.store(true, std::memory_order_release); }
+  // Asks the supervising thread to reload, as SIGHUP does. Any thread.
+  void request_reload() noexcept { reload_requested_.store(true, std::memory_order_release); }
+  uint64_t reloads_accepted() const noexcept { return reloads_accepted_.load(std::memory_order_acquire); }
+  uint64_t reloads_rejected() const noexcept { return reloads_rejected_.load(std::memory_order_acquire); }
+
+  const config::DaemonConfig& config() const noexcept { return config_.values; }
+  const SolveLoop* loop() const noexcept { return loop_.get(); }
+  drivers::MarkerSource* source() noexcept { return source_.get(); }
+  const Rig& rig() const noexcept { return *rig_; }
+  const MarkerCalibration& calibration() const noexcept { return calibration_; }
+  // The run's recording (empty when not recording); still known after the run.
+  const std::filesystem::path& recording_file() const noexcept { return recording_file_; }
+  Figures figures_since_start() const;
+  std::string status_line(const Figures& window) const;
+
+ private:
+  struct Sample;
+  // Re-reads the configuration: an invalid one is rejected and the running one kept.
+  bool reload();
+  Sample take_sample() const;
+  Figures figures_between(const Sample& from, const Sample& to) const;
+  void supervise_once(int64_t now_ns);
+  void start_rebuild();
+  void adopt_rebuilt_pipeline();
+  void apply_live_settings();
+  void shutdown(const std::string& reason);
+  void write_stats_file(const Figures& run) const;
+
+  DaemonOptions options_;
+  config::LoadedConfig config_;
+  SystemdNotifier notifier_;
+  std::shared_ptr<const Rig> rig_;
+  MarkerCalibration calibration_;
+  std::unique_ptr<drivers::MarkerSource> source_;
+  std::unique_ptr<ShmWriter> shm_;
+  std::unique_ptr<Recorder> recorder_;
+  std::filesystem::path recording_file_;
+  std::unique_ptr<SolveLoop> loop_;  // last: it borrows the members above
+  struct Rebuilt {
+    std::unique_ptr<SolvePipeline> pipeline;
+    MarkerCalibration calibration;
+  };
+  std::future<Rebuilt> rebuild_;  // in flight
+  bool rebuild_again_ = false;    // a reload arrived while one was in flight
+
+  std::atomic<bool> stop_requested_{false};
+  std::atomic<bool> reload_requested_{false};
+  std::atomic<uint64_t> reloads_accepted_{0}, reloads_rejected_{0};
+  bool ready_sent_ = false;
+  bool realtime_logged_ = false;
+  std::unique_ptr<Sample> start_sample_, status_sample_, stats_sample_;
+  int64_t start_ns_ = 0;
+  int64_t next_status_ns_ = 0, next_stats_ns_ = 0, next_watchdog_ns_ = 0;
+  uint64_t ticks_at_last_watchdog_ = 0;
+  std::string last_status_;
+};
+
+}  // namespace facecap::daemon

@@ -1,0 +1,96 @@
+// facecapd: the real-time facial capture daemon. See docs/daemon.md.
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include "config/config_file.hpp"
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "daemon/daemon.hpp"
+#include "drivers/registry.hpp"
+
+namespace {
+
+// Blocked in every thread (threads inherit the mask) and awaited by the supervisor with
+// sigtimedwait: no asynchronous handlers anywhere.
+void block_control_signals() {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGTERM);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  block_control_signals();
+  using namespace facecap;
+  CLI::App app{"facecapd: solves facial markers onto a blendshape rig in real time and publishes the face"};
+  std::string config_file, check_file;
+  std::vector<std::string> overrides;
+  bool print_config = false, print_defaults = false, print_reference = false, list_drivers = false;
+  app.add_option("-c,--config", config_file, "Configuration file (TOML); without one, every key has its default")
+      ->check(CLI::ExistingFile);
+  app.add_option("--set", overrides, "Override one key, e.g. --set loop.rate_hz=240 (repeatable)");
+  app.add_option("--check-config", check_file, "Validate FILE and exit: 0 when valid, 1 with every problem listed");
+  app.add_flag("--print-config", print_config, "Print the effective configuration and where each value came from");
+  app.add_flag("--print-default-config", print_defaults, "Print the documented default configuration file");
+  app.add_flag("--print-config-reference", print_reference, "Print the key reference (Markdown, as in docs/config.md)");
+  app.add_flag("--list-drivers", list_drivers, "List the marker source drivers");
+  CLI11_PARSE(app, argc, argv);
+
+  if (std::getenv("JOURNAL_STREAM")) spdlog::set_pattern("%l: %v");  // journald adds time and unit
+
+  if (print_defaults) {
+    std::fputs(config::render_documented_defaults().c_str(), stdout);
+    return 0;
+  }
+  if (print_reference) {
+    std::fputs(config::render_markdown_reference().c_str(), stdout);
+    return 0;
+  }
+  if (list_drivers) {
+    for (const auto& d : drivers::driver_table())
+      fmt::print("{:<8} {}{}\n", d.name, d.summary, d.supports_lockstep ? " (lockstep capable)" : "");
+    return 0;
+  }
+  if (!check_file.empty()) {
+    try {
+      config::load_config(check_file, overrides);
+      fmt::print("{}: valid\n", check_file);
+      return 0;
+    } catch (const Error& e) {
+      fmt::print(stderr, "{}\n", e.what());
+      return 1;
+    }
+  }
+
+  config::LoadedConfig loaded;
+  try {
+    loaded = config::load_config(config_file, overrides);
+  } catch (const Error& e) {
+    fmt::print(stderr, "facecapd: invalid configuration, nothing started:\n{}\n", e.what());
+    return 1;
+  }
+  if (print_config) {
+    std::fputs(config::render_effective_config(loaded).c_str(), stdout);
+    return 0;
+  }
+
+  try {
+    daemon::Daemon d({.config_file = config_file, .overrides = overrides, .handle_signals = true}, std::move(loaded));
+    d.start();
+    return d.run();
+  } catch (const Error& e) {
+    spdlog::critical("{}", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    spdlog::critical("unexpected error: {}", e.what());
+    return 1;
+  }
+}

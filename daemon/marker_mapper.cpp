@@ -1,0 +1,96 @@
+#include "daemon/marker_mapper.hpp"
+
+#include <unordered_map>
+
+#include <Eigen/SVD>
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+
+namespace facecap::daemon {
+namespace {
+
+bool slot_present(const MarkerFrame& frame, int slot) noexcept {
+  return slot >= 0 && std::size_t(slot) < frame.markers.size() && frame.markers[std::size_t(slot)].present();
+}
+
+}  // namespace
+
+MarkerMapper::MarkerMapper(const MarkerCalibration& calibration, const std::vector<std::string>& source_labels,
+                           double scale, bool stabilise_head)
+    : scale_(scale), T_rig_marker_(calibration.T_rig_marker) {
+  std::unordered_map<std::string, int> slot_of;
+  for (std::size_t i = 0; i < source_labels.size(); ++i) slot_of.emplace(source_labels[i], int(i));
+  auto slot = [&](const std::string& label) {
+    const auto it = slot_of.find(label);
+    return it == slot_of.end() ? -1 : it->second;
+  };
+  for (const auto& binding : calibration.markers.face) {
+    face_slot_.push_back(slot(binding.label));
+    matched_face_ += face_slot_.back() >= 0 ? 1 : 0;
+  }
+  if (matched_face_ == 0)
+    throw Error(fmt::format("none of the {} face markers of the {} ({}, ...) is among the source's {} markers ({}, ...)",
+                            calibration.markers.face.size(), calibration.origin, calibration.markers.face.front().label,
+                            source_labels.size(), source_labels.empty() ? "none" : source_labels.front()));
+  head_reference_.resize(3, Eigen::Index(calibration.markers.head.size()));
+  for (std::size_t h = 0; h < calibration.markers.head.size(); ++h) {
+    head_slot_.push_back(slot(calibration.markers.head[h].label));
+    head_reference_.col(Eigen::Index(h)) = calibration.markers.head[h].position;
+  }
+  stabilise_ = stabilise_head && head_slot_.size() >= 3;
+}
+
+bool MarkerMapper::fit_head(const MarkerFrame& frame, Eigen::Isometry3d& T_world_head) noexcept {
+  // Centroids, then the cross-covariance of the matched pairs (fixed-size: no allocation).
+  Eigen::Vector3d reference_centroid = Eigen::Vector3d::Zero(), observed_centroid = Eigen::Vector3d::Zero();
+  int count = 0;
+  for (std::size_t h = 0; h < head_slot_.size(); ++h) {
+    const int s = head_slot_[h];
+    if (!slot_present(frame, s)) continue;
+    reference_centroid += head_reference_.col(Eigen::Index(h));
+    observed_centroid += T_rig_marker_ * (scale_ * frame.markers[std::size_t(s)].position);
+    ++count;
+  }
+  if (count < 3) return false;
+  reference_centroid /= count;
+  observed_centroid /= count;
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  for (std::size_t h = 0; h < head_slot_.size(); ++h) {
+    const int s = head_slot_[h];
+    if (!slot_present(frame, s)) continue;
+    const Eigen::Vector3d observed = T_rig_marker_ * (scale_ * frame.markers[std::size_t(s)].position);
+    covariance += (head_reference_.col(Eigen::Index(h)) - reference_centroid) * (observed - observed_centroid).transpose();
+  }
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d correction = Eigen::Matrix3d::Identity();
+  correction(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;  // no reflections
+  const Eigen::Matrix3d rotation = svd.matrixV() * correction * svd.matrixU().transpose();
+  T_world_head.linear() = rotation;
+  T_world_head.translation() = observed_centroid - rotation * reference_centroid;
+  return true;
+}
+
+MappedFrame MarkerMapper::map(const MarkerFrame& frame, Eigen::Matrix3Xd& targets, std::span<uint8_t> present) noexcept {
+  MappedFrame out;
+  for (const int s : head_slot_) out.head_markers_present += slot_present(frame, s) ? 1 : 0;
+  if (stabilise_) {
+    Eigen::Isometry3d fitted;
+    if (fit_head(frame, fitted)) last_head_ = fitted;
+    else out.head_pose_held = true;
+    out.T_world_head = last_head_;
+  }
+  // Face markers into head space: T_head_world * T_rig_marker * scale * p.
+  const Eigen::Isometry3d T_head_marker = out.T_world_head.inverse() * T_rig_marker_;
+  for (std::size_t k = 0; k < face_slot_.size(); ++k) {
+    const int s = face_slot_[k];
+    const bool here = slot_present(frame, s);
+    present[k] = here ? 1 : 0;
+    if (!here) continue;
+    targets.col(Eigen::Index(k)) = T_head_marker * (scale_ * frame.markers[std::size_t(s)].position);
+    ++out.face_markers_present;
+  }
+  return out;
+}
+
+}  // namespace facecap::daemon

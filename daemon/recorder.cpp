@@ -1,0 +1,145 @@
+#include "daemon/recorder.hpp"
+
+#include <ctime>
+
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+#include "core/log.hpp"
+#include "core/time.hpp"
+
+namespace facecap::daemon {
+namespace {
+
+// The writer thread polls the queue; at 120-1000 Hz this batches a few frames per wake.
+constexpr int64_t kPollNs = 2 * kNsPerMs;
+// Buffered chunks reach the kernel at least this often, bounding what a crash loses.
+constexpr int64_t kFlushIntervalNs = kNsPerSecond;
+
+// Everything but the vertices, into storage of the same shape count. RT-safe.
+void copy_without_vertices(const SolvedFrame& from, SolvedFrame& to) noexcept {
+  to.frame_no = from.frame_no;
+  to.source_time_ns = from.source_time_ns;
+  to.receive_time_ns = from.receive_time_ns;
+  to.solve_start_ns = from.solve_start_ns;
+  to.solve_end_ns = from.solve_end_ns;
+  to.timecode = from.timecode;
+  to.head_rotation = from.head_rotation;
+  to.head_translation = from.head_translation;
+  if (to.weights.size() == from.weights.size()) to.weights = from.weights;
+  to.stage_ns = from.stage_ns;
+  to.collision_constraints = from.collision_constraints;
+  to.markers_used = from.markers_used;
+  to.flags = from.flags;
+}
+
+SolvedFrame weights_only_frame(Eigen::Index shape_count) {
+  SolvedFrame frame;
+  frame.resize(shape_count, 0);
+  return frame;
+}
+
+}  // namespace
+
+Recorder::Recorder(RecorderOptions options, const MarkerFrame& marker_prototype, Eigen::Index shape_count)
+    : options_(std::move(options)),
+      queue_(options_.queue_frames, Entry{false, false, marker_prototype, weights_only_frame(shape_count)}) {
+  std::filesystem::create_directories(options_.file.parent_path().empty() ? "." : options_.file.parent_path());
+  writer_ = std::make_unique<formats::RecordingWriter>(options_.file, options_.header);
+  thread_ = std::thread([this] { run(); });
+}
+
+Recorder::~Recorder() {
+  try {
+    stop();
+  } catch (const std::exception& e) {
+    spdlog::error("recording {}: {}", options_.file.string(), e.what());
+  }
+}
+
+bool Recorder::offer(const MarkerFrame* markers, const SolvedFrame* solved) noexcept {
+  const bool want_markers = markers && options_.markers;
+  const bool want_solved = solved && options_.solved;
+  if (!want_markers && !want_solved) return true;
+  Entry* slot = queue_.begin_push();
+  if (!slot) {
+    dropped_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  // Slots were sized like these frames, so the copies reuse their storage.
+  slot->has_markers = want_markers;
+  slot->has_solved = want_solved;
+  if (want_markers) slot->markers = *markers;
+  if (want_solved) copy_without_vertices(*solved, slot->solved);
+  queue_.commit_push();
+  return true;
+}
+
+// The writer thread. Not RT-safe (encodes, allocates, writes).
+void Recorder::run() {
+  int64_t last_flush_ns = monotonic_now_ns();
+  for (;;) {
+    const bool stopping = stop_requested_.load(std::memory_order_acquire);
+    while (Entry* entry = queue_.front()) {
+      if (writer_ && writer_->is_open()) {
+        try {
+          if (entry->has_markers) {
+            writer_->append_marker_frame(entry->markers);
+            marker_frames_.fetch_add(1, std::memory_order_relaxed);
+          }
+          if (entry->has_solved) {
+            writer_->append_solved_frame(entry->solved);
+            solved_frames_.fetch_add(1, std::memory_order_relaxed);
+          }
+        } catch (const std::exception& e) {
+          // Disk full or similar: keep the run going, stop recording, say so once.
+          errors_.fetch_add(1, std::memory_order_relaxed);
+          spdlog::error("recording {} stopped: {}", options_.file.string(), e.what());
+          try {
+            writer_->close();
+          } catch (const std::exception&) {
+          }
+        }
+      }
+      queue_.pop();
+    }
+    if (stopping) break;
+    const int64_t now = monotonic_now_ns();
+    if (now - last_flush_ns >= kFlushIntervalNs && writer_ && writer_->is_open()) {
+      try {
+        writer_->flush();
+      } catch (const std::exception& e) {
+        errors_.fetch_add(1, std::memory_order_relaxed);
+        spdlog::error("recording {}: flush failed: {}", options_.file.string(), e.what());
+      }
+      last_flush_ns = now;
+    }
+    timespec ts{0, long(kPollNs)};
+    nanosleep(&ts, nullptr);
+  }
+}
+
+void Recorder::stop() {
+  if (!thread_.joinable()) return;
+  stop_requested_.store(true, std::memory_order_release);
+  thread_.join();
+  if (writer_ && writer_->is_open()) writer_->close();
+}
+
+RecorderCounters Recorder::counters() const noexcept {
+  return {marker_frames_.load(std::memory_order_relaxed), solved_frames_.load(std::memory_order_relaxed),
+          dropped_.load(std::memory_order_relaxed), errors_.load(std::memory_order_relaxed)};
+}
+
+std::filesystem::path new_recording_path(const std::filesystem::path& directory) {
+  const std::time_t now = std::time(nullptr);
+  std::tm local{};
+  localtime_r(&now, &local);
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &local);
+  std::filesystem::path path = directory / fmt::format("facecapd-{}.fcrec", stamp);
+  for (int n = 2; std::filesystem::exists(path); ++n) path = directory / fmt::format("facecapd-{}-{}.fcrec", stamp, n);
+  return path;
+}
+
+}  // namespace facecap::daemon

@@ -1,0 +1,210 @@
+#include "daemon/solve_loop.hpp"
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <ctime>
+
+#include "core/time.hpp"
+
+namespace facecap::daemon {
+namespace {
+
+// The first tick comes this long after start(): time for the source to get going.
+constexpr int64_t kStartDelayNs = 20 * kNsPerMs;
+// Phase lock: fraction of the measured phase error corrected per tick, and the largest
+// correction per tick as a fraction of the period (keeps the rate steady).
+constexpr double kPhaseGain = 0.1;
+constexpr int64_t kMaxPhaseStepDivisor = 16;
+// A source whose rate differs from the loop's by more than this is not phase-locked to.
+constexpr double kPhaseLockRateTolerance = 0.01;
+// Lockstep with nothing to do (replay ended, recorder queue full): re-check this often.
+constexpr int64_t kLockstepIdleNs = 200 * kNsPerUs;
+// Pre-faulted so that the solve thread's stack never page-faults in the loop.
+constexpr std::size_t kStackPrefaultBytes = 256 * 1024;
+
+void sleep_until(int64_t deadline_ns) noexcept {
+  timespec ts{time_t(deadline_ns / kNsPerSecond), long(deadline_ns % kNsPerSecond)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {}
+}
+
+void sleep_for(int64_t ns) noexcept { sleep_until(monotonic_now_ns() + ns); }
+
+[[gnu::noinline]] void prefault_stack() noexcept {
+  volatile unsigned char stack[kStackPrefaultBytes];
+  for (std::size_t i = 0; i < kStackPrefaultBytes; i += 4096) stack[i] = 0;
+}
+
+void store_max(std::atomic<int64_t>& slot, int64_t value) noexcept {
+  if (value > slot.load(std::memory_order_relaxed)) slot.store(value, std::memory_order_relaxed);
+}
+
+void add(std::atomic<uint64_t>& counter, uint64_t n = 1) noexcept {
+  counter.store(counter.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
+}
+
+}  // namespace
+
+std::string_view loop_stage_name(LoopStage stage) noexcept {
+  switch (stage) {
+    case LoopStage::kTake: return "take";
+    case LoopStage::kSolve: return "solve";
+    case LoopStage::kPublish: return "publish";
+    case LoopStage::kRecord: return "record";
+    case LoopStage::kCount: break;
+  }
+  return "?";
+}
+
+SolveLoop::SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::unique_ptr<SolvePipeline> pipeline,
+                     ShmWriter* shm, Recorder* recorder, bool publish_vertices)
+    : options_(std::move(options)),
+      source_(source),
+      pipeline_(std::move(pipeline)),
+      shm_(shm),
+      recorder_(recorder),
+      period_ns_(int64_t(std::llround(double(kNsPerSecond) / options_.rate_hz))),
+      marker_frame_(drivers::make_marker_frame(source.info().labels)),
+      solved_frame_(pipeline_->make_solved_frame(publish_vertices && shm != nullptr)) {
+  const double source_rate = source.info().nominal_rate_hz;
+  phase_lock_ = !options_.lockstep && options_.phase_margin_ns > 0 && source.info().own_clock && source_rate > 0.0 &&
+                std::abs(source_rate - options_.rate_hz) <= kPhaseLockRateTolerance * options_.rate_hz;
+}
+
+SolveLoop::~SolveLoop() {
+  request_stop();
+  join();
+  collect_retired();
+  delete offered_.exchange(nullptr);
+}
+
+void SolveLoop::start() {
+  epoch_ns_ = monotonic_now_ns() + kStartDelayNs;
+  // Simulated devices run just below the solve thread, as real ones are outside the host.
+  const int loop_priority = options_.realtime.priority > 0 ? options_.realtime.priority : kDefaultRealtimePriority;
+  source_.start({.epoch_ns = epoch_ns_, .lockstep = options_.lockstep,
+                 .thread_priority = options_.realtime.fifo ? std::max(1, loop_priority - 1) : 0});
+  thread_ = std::thread([this] { run(); });
+}
+
+void SolveLoop::join() {
+  if (thread_.joinable()) thread_.join();
+}
+
+void SolveLoop::offer_pipeline(std::unique_ptr<SolvePipeline> pipeline) {
+  collect_retired();
+  delete offered_.exchange(pipeline.release(), std::memory_order_acq_rel);  // an offer not yet taken
+}
+
+void SolveLoop::collect_retired() { delete retired_.exchange(nullptr, std::memory_order_acq_rel); }
+
+void SolveLoop::adopt_offered_pipeline() noexcept {
+  if (!offered_.load(std::memory_order_relaxed)) return;
+  // Only hand the old one back once the main thread has collected the previous one.
+  if (retired_.load(std::memory_order_acquire)) return;
+  SolvePipeline* offered = offered_.exchange(nullptr, std::memory_order_acq_rel);
+  if (!offered) return;
+  retired_.store(pipeline_.release(), std::memory_order_release);
+  pipeline_.reset(offered);
+  add(counters_.pipeline_swaps);
+}
+
+void SolveLoop::record_stage(LoopStage stage, int64_t ns) noexcept {
+  auto& total = counters_.stage_total_ns[std::size_t(stage)];
+  total.store(total.load(std::memory_order_relaxed) + ns, std::memory_order_relaxed);
+  store_max(counters_.stage_max_ns[std::size_t(stage)], ns);
+}
+
+// Moves the next deadline so that ticks fall phase_margin after frames arrive: the
+// error is the wait beyond the margin, wrapped into (-period/2, period/2]; a frame that
+// waited too long pulls the ticks earlier. RT-safe.
+void SolveLoop::follow_source_phase(int64_t waited_ns) noexcept {
+  int64_t error = (waited_ns - options_.phase_margin_ns) % period_ns_;
+  if (error < 0) error += period_ns_;
+  if (error > period_ns_ / 2) error -= period_ns_;
+  const int64_t limit = period_ns_ / kMaxPhaseStepDivisor;
+  phase_correction_ns_ = std::clamp(int64_t(-kPhaseGain * double(error)), -limit, limit);
+}
+
+bool SolveLoop::tick(int64_t now_ns) noexcept {
+  add(counters_.ticks);
+  if (shm_) shm_->beat(now_ns);
+  adopt_offered_pipeline();
+
+  const bool got = source_.take_frame(now_ns, marker_frame_);
+  const int64_t taken_ns = monotonic_now_ns();
+  record_stage(LoopStage::kTake, taken_ns - now_ns);
+  if (!got) {
+    add(counters_.idle_ticks);
+    if (source_.finished()) source_finished_.store(true, std::memory_order_release);
+    return false;
+  }
+
+  pipeline_->process(marker_frame_, solved_frame_);
+  const int64_t solved_ns = monotonic_now_ns();
+  record_stage(LoopStage::kSolve, solved_ns - taken_ns);
+  for (std::size_t s = 0; s < kSolveStageCount; ++s) {
+    auto& total = counters_.solver_stage_total_ns[s];
+    total.store(total.load(std::memory_order_relaxed) + solved_frame_.stage_ns[s], std::memory_order_relaxed);
+  }
+
+  const int64_t published_ns = shm_ ? shm_->publish(solved_frame_) : monotonic_now_ns();
+  record_stage(LoopStage::kPublish, published_ns - solved_ns);
+  latency_.record(published_ns - marker_frame_.receive_time_ns);
+
+  if (recorder_) {
+    // Lockstep is not real time: there the recorder may hold the loop back instead of
+    // dropping frames.
+    while (options_.lockstep && !recorder_->has_room() && !stop_requested_.load(std::memory_order_relaxed))
+      sleep_for(kLockstepIdleNs);
+    recorder_->offer(&marker_frame_, &solved_frame_);
+    record_stage(LoopStage::kRecord, monotonic_now_ns() - published_ns);
+  }
+
+  if (phase_lock_) follow_source_phase(now_ns - marker_frame_.receive_time_ns);
+  counters_.frames_solved.store(counters_.frames_solved.load(std::memory_order_relaxed) + 1, std::memory_order_release);
+  add(counters_.solved_sequence);
+  return true;
+}
+
+void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
+  int64_t deadline_ns = epoch_ns;
+  while (!stop_requested_.load(std::memory_order_acquire)) {
+    sleep_until(deadline_ns);
+    const int64_t wake_ns = monotonic_now_ns();
+    store_max(counters_.max_wake_late_ns, wake_ns - deadline_ns);
+    tick(wake_ns);
+    if (source_finished_.load(std::memory_order_relaxed)) break;
+
+    deadline_ns += period_ns_ + phase_correction_ns_;
+    phase_correction_ns_ = 0;
+    // Overrun: the work ran past the next deadline. Skip the slots already gone and
+    // stay on the grid rather than running late ticks back to back.
+    const int64_t end_ns = monotonic_now_ns();
+    if (end_ns > deadline_ns) {
+      const int64_t skipped = (end_ns - deadline_ns) / period_ns_ + 1;
+      add(counters_.missed_deadlines);
+      add(counters_.skipped_ticks, uint64_t(skipped));
+      deadline_ns += skipped * period_ns_;
+    }
+  }
+}
+
+void SolveLoop::run_lockstep() noexcept {
+  while (!stop_requested_.load(std::memory_order_acquire)) {
+    if (tick(monotonic_now_ns())) continue;
+    if (source_finished_.load(std::memory_order_relaxed)) break;
+    sleep_for(kLockstepIdleNs);
+  }
+}
+
+void SolveLoop::run() noexcept {
+  realtime_report_ = apply_realtime(options_.realtime);
+  realtime_ready_.store(true, std::memory_order_release);
+  prefault_stack();
+  if (options_.lockstep) run_lockstep();
+  else run_fixed_rate(epoch_ns_);
+  exited_.store(true, std::memory_order_release);
+}
+
+}  // namespace facecap::daemon

@@ -1,0 +1,123 @@
+#pragma once
+// The solve thread: a fixed-rate loop on absolute CLOCK_MONOTONIC deadlines (or
+// lockstep: every frame of a replay, as fast as possible). Each tick takes the newest
+// frame from the source, solves it, publishes it to shared memory and queues it for the
+// recorder. The loop reports through counters and a histogram only; the main thread
+// turns them into logs and STATUS= lines.
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+
+#include "core/frame.hpp"
+#include "daemon/latency_histogram.hpp"
+#include "daemon/recorder.hpp"
+#include "core/realtime.hpp"
+#include "daemon/shm_writer.hpp"
+#include "daemon/solve_pipeline.hpp"
+#include "drivers/marker_source.hpp"
+
+namespace facecap::daemon {
+
+struct LoopOptions {
+  double rate_hz = 120.0;
+  bool lockstep = false;
+  // > 0: shift ticks to fall this long after frames of a source on its own clock arrive.
+  int64_t phase_margin_ns = 0;
+  RealtimeRequest realtime;
+};
+
+// Loop stages timed besides the solver's own (SolvedFrame::stage_ns).
+enum class LoopStage : uint8_t { kTake, kSolve, kPublish, kRecord, kCount };
+inline constexpr std::size_t kLoopStageCount = std::size_t(LoopStage::kCount);
+std::string_view loop_stage_name(LoopStage stage) noexcept;
+
+// Written by the solve thread only; read by anyone.
+struct LoopCounters {
+  std::atomic<uint64_t> ticks{0};
+  std::atomic<uint64_t> frames_solved{0};
+  std::atomic<uint64_t> idle_ticks{0};          // no new frame at the tick
+  std::atomic<uint64_t> missed_deadlines{0};    // ticks whose work ran past the next deadline
+  std::atomic<uint64_t> skipped_ticks{0};       // ticks given up to get back on the grid
+  std::atomic<int64_t> max_wake_late_ns{0};     // worst wake-up after a deadline
+  std::atomic<uint64_t> pipeline_swaps{0};
+  std::array<std::atomic<int64_t>, kLoopStageCount> stage_total_ns{};
+  std::array<std::atomic<int64_t>, kLoopStageCount> stage_max_ns{};
+  std::array<std::atomic<int64_t>, kSolveStageCount> solver_stage_total_ns{};
+  std::atomic<uint64_t> solved_sequence{0};     // bumps per solved frame; the watchdog checks it moves
+};
+
+class SolveLoop {
+ public:
+  // The loop borrows the source, shm writer and recorder (either may be null); they
+  // must outlive it. Not RT-safe.
+  SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::unique_ptr<SolvePipeline> pipeline,
+            ShmWriter* shm, Recorder* recorder, bool publish_vertices);
+  ~SolveLoop();  // request_stop() and join()
+  SolveLoop(const SolveLoop&) = delete;
+  SolveLoop& operator=(const SolveLoop&) = delete;
+
+  // Starts the source and the solve thread; the first tick is a few ms from now. Not RT-safe.
+  void start();
+  // Any thread. RT-safe.
+  void request_stop() noexcept { stop_requested_.store(true, std::memory_order_release); }
+  // Waits for the solve thread. Not RT-safe.
+  void join();
+
+  // Hands a newly built pipeline to the loop, which adopts it between two frames.
+  // A pipeline offered before the loop took the previous offer replaces it. Not RT-safe.
+  void offer_pipeline(std::unique_ptr<SolvePipeline> pipeline);
+  // Deletes pipelines the loop has let go of (off the solve thread). Not RT-safe.
+  void collect_retired();
+
+  const LoopCounters& counters() const noexcept { return counters_; }
+  LatencyHistogram::Snapshot latency() const noexcept { return latency_.snapshot(); }
+  bool first_frame_solved() const noexcept { return counters_.frames_solved.load(std::memory_order_acquire) > 0; }
+  bool source_finished() const noexcept { return source_finished_.load(std::memory_order_acquire); }
+  bool running() const noexcept { return thread_.joinable() && !exited_.load(std::memory_order_acquire); }
+  // Valid once realtime_ready() (the solve thread applied its request).
+  bool realtime_ready() const noexcept { return realtime_ready_.load(std::memory_order_acquire); }
+  const RealtimeReport& realtime_report() const noexcept { return realtime_report_; }
+  const LoopOptions& options() const noexcept { return options_; }
+  int64_t period_ns() const noexcept { return period_ns_; }
+
+  // One tick's work at time now_ns; public so tests can drive the loop by hand. RT-safe.
+  // Returns true when a frame was solved.
+  bool tick(int64_t now_ns) noexcept;
+
+ private:
+  void run() noexcept;
+  void run_fixed_rate(int64_t epoch_ns) noexcept;
+  void run_lockstep() noexcept;
+  void adopt_offered_pipeline() noexcept;
+  void record_stage(LoopStage stage, int64_t ns) noexcept;
+  void follow_source_phase(int64_t waited_ns) noexcept;
+
+  LoopOptions options_;
+  drivers::MarkerSource& source_;
+  std::unique_ptr<SolvePipeline> pipeline_;
+  ShmWriter* shm_;
+  Recorder* recorder_;
+  int64_t period_ns_;
+  bool phase_lock_ = false;
+  int64_t phase_correction_ns_ = 0;  // applied to the next deadline
+
+  MarkerFrame marker_frame_;
+  SolvedFrame solved_frame_;
+
+  std::atomic<SolvePipeline*> offered_{nullptr};
+  std::atomic<SolvePipeline*> retired_{nullptr};
+
+  LoopCounters counters_;
+  LatencyHistogram latency_;
+  RealtimeReport realtime_report_;
+  std::atomic<bool> realtime_ready_{false};
+  std::atomic<bool> stop_requested_{false};
+  std::atomic<bool> source_finished_{false};
+  std::atomic<bool> exited_{false};
+  int64_t epoch_ns_ = 0;
+  std::thread thread_;
+};
+
+}  // namespace facecap::daemon

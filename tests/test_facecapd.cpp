@@ -1,0 +1,298 @@
+// facecapd as a process, the way systemd runs it: NOTIFY_SOCKET and WATCHDOG_USEC from a
+// socket this test owns, frames read through the client library, SIGTERM and SIGHUP.
+#include <csignal>
+#include <fstream>
+#include <sstream>
+
+#include <catch2/catch.hpp>
+#include <fmt/format.h>
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "client/facecap_client.hpp"
+#include "core/time.hpp"
+#include "daemon/notify_listener.hpp"
+#include "formats/recording.hpp"
+#include "solver/builtin_face.hpp"
+#include "tests/test_support.hpp"
+
+extern char** environ;
+
+using namespace facecap;
+using Catch::Contains;
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kFacecapd = std::string(FACECAP_BINARY_DIR) + "/daemon/facecapd";
+
+std::string read_text(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// facecapd started with extra environment, its output in a log file.
+class DaemonProcess {
+ public:
+  DaemonProcess(const std::vector<std::string>& args, const std::vector<std::string>& env, const fs::path& log)
+      : log_(log) {
+    std::vector<std::string> argv_storage = {kFacecapd};
+    argv_storage.insert(argv_storage.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (auto& a : argv_storage) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    std::vector<std::string> env_storage = env;
+    for (char** e = environ; *e; ++e) env_storage.emplace_back(*e);
+    std::vector<char*> envp;
+    for (auto& e : env_storage) envp.push_back(e.data());
+    envp.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&actions, 1, 2);
+    const int rc = posix_spawn(&pid_, kFacecapd.c_str(), &actions, nullptr, argv.data(), envp.data());
+    posix_spawn_file_actions_destroy(&actions);
+    REQUIRE(rc == 0);
+  }
+  ~DaemonProcess() {
+    if (!exited_) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
+  pid_t pid() const { return pid_; }
+  // Exit status, or -1 if still running after timeout_ns.
+  int wait_exit(int64_t timeout_ns) {
+    const int64_t give_up = monotonic_now_ns() + timeout_ns;
+    for (;;) {
+      int status = 0;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        exited_ = true;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      if (monotonic_now_ns() >= give_up) return -1;
+      usleep(1000);
+    }
+  }
+  std::string log() const { return read_text(log_); }
+
+ private:
+  pid_t pid_ = 0;
+  bool exited_ = false;
+  fs::path log_;
+};
+
+// Collects sd_notify messages and waits for particular ones.
+struct NotifyRecorder {
+  daemon::NotifyListener listener;
+  std::vector<std::string> messages;
+
+  bool wait_for(const std::string& needle, int64_t timeout_ns, std::size_t from = 0) {
+    const int64_t give_up = monotonic_now_ns() + timeout_ns;
+    for (;;) {
+      for (std::size_t i = from; i < messages.size(); ++i)
+        if (messages[i].find(needle) != std::string::npos) return true;
+      const int64_t left = give_up - monotonic_now_ns();
+      if (left <= 0) return false;
+      if (auto m = listener.receive(std::min<int64_t>(left, 50 * kNsPerMs))) messages.push_back(*m);
+    }
+  }
+  void drain() {
+    while (auto m = listener.receive(0)) messages.push_back(*m);
+  }
+  std::size_t count(const std::string& needle) const {
+    std::size_t n = 0;
+    for (const auto& m : messages) n += m.find(needle) != std::string::npos ? 1 : 0;
+    return n;
+  }
+  std::size_t index_of(const std::string& needle) const {
+    for (std::size_t i = 0; i < messages.size(); ++i)
+      if (messages[i].find(needle) != std::string::npos) return i;
+    return messages.size();
+  }
+};
+
+std::string unique_shm(const std::string& what) { return fmt::format("facecap-test-{}-{}", ::getpid(), what); }
+
+}  // namespace
+
+TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth and stops cleanly on SIGTERM") {
+  const fs::path dir = test::scratch_dir("facecapd-run");
+  const std::string shm = unique_shm("run");
+  NotifyRecorder notify;
+  DaemonProcess d({"--set", "outputs.shm.name=" + shm, "--set", "recording.enabled=true", "--set",
+                   "recording.directory=" + (dir / "recordings").string(), "--set", "control.status_interval_s=0.25"},
+                  {"NOTIFY_SOCKET=" + notify.listener.address(), "WATCHDOG_USEC=400000"}, dir / "facecapd.log");
+  INFO(d.log());
+  REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
+  CHECK(notify.messages.front().find("READY=1") != std::string::npos);  // nothing before READY
+
+  client::Subscriber reader(shm);  // exists once READY is sent
+  CHECK(reader.writer_pid() == d.pid());
+  CHECK(reader.nominal_rate_hz() == 120.0);
+  REQUIRE(reader.shape_count() == uint32_t(BuiltinFace::instance().rig().shape_count()));
+  const Rig& rig = BuiltinFace::instance().rig();
+  const Eigen::Index jaw = *rig.shape_index("jawOpen");
+
+  facecap_frame f{};
+  uint64_t frames = 0, dropped = 0, compared = 0;
+  int64_t first_publish = 0, last_publish = 0, last_frame_no = -1;
+  double weight_error = 0, jaw_error = 0, vertex_error_cm = 0;
+  const int64_t read_until = monotonic_now_ns() + 4 * kNsPerSecond;
+  while (monotonic_now_ns() < read_until) {
+    const int status = reader.wait_next(f, kNsPerSecond);
+    REQUIRE(status == FACECAP_OK);
+    if (frames == 0) first_publish = f.publish_time_ns;
+    else dropped += f.dropped;
+    last_publish = f.publish_time_ns;
+    CHECK(f.frame_no > last_frame_no);
+    last_frame_no = f.frame_no;
+    ++frames;
+    // Compare every 10th frame after the first second with the sim's performance.
+    if (frames > 120 && frames % 10 == 0) {
+      const Eigen::VectorXd truth = BuiltinFace::instance().motion_weights(double(f.frame_no) / 120.0);
+      Eigen::VectorXd solved(truth.size());
+      for (Eigen::Index s = 0; s < truth.size(); ++s) solved[s] = f.weights[s];
+      weight_error += (solved - truth).cwiseAbs().mean();
+      jaw_error += std::abs(solved[jaw] - truth[jaw]);
+      const Eigen::Matrix3Xd true_pose = BuiltinFace::instance().articulated_pose(truth);
+      const Eigen::Map<const Eigen::Matrix3Xf> vertices(f.vertices, 3, f.vertex_count);
+      vertex_error_cm += (vertices.cast<double>() - true_pose).colwise().norm().mean();
+      ++compared;
+    }
+    notify.drain();
+  }
+  const double seconds = double(last_publish - first_publish) / kNsPerSecond;
+  const double rate = double(frames - 1) / seconds;
+  INFO(frames << " frames in " << seconds << " s = " << rate << " fps, " << dropped << " dropped");
+  CHECK(rate == Approx(120.0).epsilon(0.02));
+  CHECK(dropped == 0);
+  REQUIRE(compared > 20);
+  INFO("mean |w - w_true| " << weight_error / compared << ", jawOpen " << jaw_error / compared << ", vertices "
+                            << 10 * vertex_error_cm / compared << " mm");
+  CHECK(weight_error / compared < 0.06);
+  CHECK(jaw_error / compared < 0.03);
+  CHECK(vertex_error_cm / compared < 0.05);
+
+  // Notifications while running: STATUS with figures, WATCHDOG at half of 400 ms.
+  CHECK(notify.count("WATCHDOG=1") >= 10);
+  CHECK(notify.count("STATUS=") >= 8);
+  const std::string& status = notify.messages[notify.index_of("fps, latency")];
+  CHECK_THAT(status, Contains("STATUS=") && Contains(" fps, latency p50 ") && Contains(" overruns"));
+
+  const int64_t sigterm = monotonic_now_ns();
+  ::kill(d.pid(), SIGTERM);
+  const int exit_status = d.wait_exit(5 * kNsPerSecond);
+  const double stop_ms = double(monotonic_now_ns() - sigterm) / kNsPerMs;
+  INFO("stopped in " << stop_ms << " ms");
+  CHECK(exit_status == 0);
+  CHECK(stop_ms < 1000.0);
+  notify.drain();
+  CHECK(notify.count("STOPPING=1") == 1);
+  CHECK(notify.index_of("STOPPING=1") > notify.index_of("READY=1"));
+
+  // The shared memory is gone and the recording is complete.
+  facecap_client* gone = nullptr;
+  CHECK(facecap_client_open(shm.c_str(), &gone) == FACECAP_ERR_NOT_FOUND);
+  std::vector<fs::path> recordings;
+  for (const auto& entry : fs::directory_iterator(dir / "recordings")) recordings.push_back(entry.path());
+  REQUIRE(recordings.size() == 1);
+  formats::RecordingReader recording(recordings.front());
+  CHECK_FALSE(recording.truncated());
+  CHECK_FALSE(recording.index_rebuilt());
+  CHECK(recording.solved_frame_count() >= frames);
+  CHECK(recording.marker_frame_count() == recording.solved_frame_count());
+  CHECK(recording.header().shape_names == rig.shape_names);
+  CHECK(recording.header().marker_labels.size() == 52);
+  SolvedFrame last;
+  recording.read_solved_frame(recording.solved_frame_count() - 1, last);
+  CHECK(last.frame_no >= last_frame_no);
+  CHECK_THAT(d.log(), Contains("stopping: SIGTERM") && Contains("recording") && Contains("closed"));
+}
+
+TEST_CASE("SIGHUP with an invalid file keeps the running configuration and a valid one is applied") {
+  const fs::path dir = test::scratch_dir("facecapd-hup");
+  const std::string shm = unique_shm("hup");
+  const fs::path config = dir / "facecapd.toml";
+  test::write_text(config, "version = 1\n[outputs.shm]\nname = \"" + shm + "\"\n[control]\nstatus_interval_s = 0.2\n");
+  NotifyRecorder notify;
+  DaemonProcess d({"--config", config.string()}, {"NOTIFY_SOCKET=" + notify.listener.address()}, dir / "facecapd.log");
+  INFO(d.log());
+  REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
+  client::Subscriber reader(shm);
+
+  test::write_text(config, "version = 1\n[outputs.shm]\nname = \"" + shm + "\"\n[solver]\nalpah = 0.5\n");
+  std::size_t before = notify.messages.size();
+  ::kill(d.pid(), SIGHUP);
+  REQUIRE(notify.wait_for("RELOADING=1", 10 * kNsPerSecond, before));
+  REQUIRE(notify.wait_for("reload rejected", 10 * kNsPerSecond, before));
+  CHECK_THAT(d.log(), Contains("reload rejected") && Contains("did you mean 'alpha'?"));
+  facecap_frame f{};
+  CHECK(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);  // still solving
+  CHECK(d.wait_exit(0) == -1);
+
+  test::write_text(config, "version = 1\n[outputs.shm]\nname = \"" + shm + "\"\n[solver]\nalpha = 0.5\n[loop]\nrate_hz = 60\n");
+  before = notify.messages.size();
+  ::kill(d.pid(), SIGHUP);
+  REQUIRE(notify.wait_for("RELOADING=1", 10 * kNsPerSecond, before));
+  REQUIRE(notify.wait_for("READY=1", 10 * kNsPerSecond, before));
+  const int64_t give_up = monotonic_now_ns() + 30 * kNsPerSecond;
+  while (d.log().find("new solver handed to the loop") == std::string::npos && monotonic_now_ns() < give_up) usleep(20000);
+  const std::string log = d.log();
+  CHECK_THAT(log, Contains("solver.alpha = 0.5") && Contains("new solver handed to the loop"));
+  CHECK_THAT(log, Contains("loop.rate_hz changed to 60.0: takes effect after a restart"));
+  CHECK(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);
+  ::kill(d.pid(), SIGTERM);
+  CHECK(d.wait_exit(5 * kNsPerSecond) == 0);
+}
+
+TEST_CASE("facecapd refuses to start with a rig file that does not exist and creates nothing") {
+  const fs::path dir = test::scratch_dir("facecapd-badrig");
+  const std::string shm = unique_shm("badrig");
+  DaemonProcess d({"--set", "outputs.shm.name=" + shm, "--set", "rig.path=" + (dir / "no-such-rig").string()}, {},
+                  dir / "facecapd.log");
+  CHECK(d.wait_exit(30 * kNsPerSecond) == 1);
+  const std::string log = d.log();
+  CHECK_THAT(log, Contains("invalid configuration, nothing started") &&
+                      Contains("--set [rig.path]: \"" + (dir / "no-such-rig").string() + "\" does not exist"));
+  facecap_client* c = nullptr;
+  CHECK(facecap_client_open(shm.c_str(), &c) == FACECAP_ERR_NOT_FOUND);
+}
+
+TEST_CASE("a second facecapd on the same shared memory name fails and the first keeps running") {
+  const fs::path dir = test::scratch_dir("facecapd-twice");
+  const std::string shm = unique_shm("twice");
+  NotifyRecorder notify;
+  DaemonProcess first({"--set", "outputs.shm.name=" + shm}, {"NOTIFY_SOCKET=" + notify.listener.address()},
+                      dir / "first.log");
+  REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
+  DaemonProcess second({"--set", "outputs.shm.name=" + shm}, {}, dir / "second.log");
+  CHECK(second.wait_exit(60 * kNsPerSecond) == 1);
+  CHECK_THAT(second.log(), Contains("already exists") && Contains(fmt::format("facecapd pid {} is writing it", first.pid())));
+  client::Subscriber reader(shm);
+  facecap_frame f{};
+  CHECK(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);
+  ::kill(first.pid(), SIGTERM);
+  CHECK(first.wait_exit(5 * kNsPerSecond) == 0);
+}
+
+TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working and stops it cleanly") {
+  const std::string command = std::string(FACECAP_BINARY_DIR) + "/tools/facecap daemon-demo --seconds 2 2>&1";
+  std::string out;
+  FILE* pipe = popen(command.c_str(), "r");
+  REQUIRE(pipe != nullptr);
+  char buffer[4096];
+  while (std::size_t n = fread(buffer, 1, sizeof buffer, pipe)) out.append(buffer, n);
+  const int status = pclose(pipe);
+  INFO(out);
+  CHECK(WEXITSTATUS(status) == 0);
+  CHECK_THAT(out, Contains("is READY") && Contains(" fps  publish->read p50 ") && Contains("exit status 0"));
+  const auto at = out.find("mean vertex error ");
+  REQUIRE(at != std::string::npos);
+  CHECK(std::stod(out.substr(at + 18)) < 1.0);  // mm
+}
