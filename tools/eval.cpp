@@ -1,6 +1,8 @@
 // facecap eval: solves a synthetic take (from facecap synth) with every selected solver
 // and compares with the ground truth: vertex error, jitter, intersecting and flipped
-// triangles. Definitions: docs/tools.md.
+// triangles. Definitions: docs/tools.md. With --calib it evaluates a real, calibrated
+// take instead (no truth): leave-one-out held-out marker error and the same mesh
+// figures (tools/eval_take.cpp, docs/alignment.md).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -15,6 +17,7 @@
 #include "solver/collide.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/commands.hpp"
+#include "tools/eval_take.hpp"
 #include "tools/synth_truth.hpp"
 #include "tools/tool_support.hpp"
 
@@ -25,6 +28,12 @@ struct Options {
   std::string rig, take, truth, solvers = "all", rig_units_override;
   bool json = false;
   bool truth_weights = false;
+  // Real takes (--calib).
+  std::string calib;
+  int every = 10;
+  int offline_every = 200;
+  int max_frames = 0;
+  bool progress = false;
 };
 
 // Vertex errors in mm, binned at 1 micrometre: the p95 over millions of samples without
@@ -213,17 +222,44 @@ void run_eval(const Options& o) {
 
 void add_eval_command(CLI::App& app, int& exit_code) {
   auto o = std::make_shared<Options>();
-  auto* cmd = app.add_subcommand("eval", "Solve a synthetic take with each solver and compare with its ground truth");
-  cmd->add_option("--rig", o->rig, "The rig the take was made from")->required();
-  cmd->add_option("--take", o->take, "The take (.trc, .c3d, .fcrec) written by facecap synth")->required()->check(CLI::ExistingFile);
-  cmd->add_option("--truth", o->truth, "Its truth manifest (default: <take stem>.truth.json)")->check(CLI::ExistingFile);
+  auto* cmd = app.add_subcommand("eval", "Evaluate solvers: a synthetic take against its ground truth, or a real take "
+                                         "calibrated with --calib by held-out marker error");
+  cmd->add_option("--rig", o->rig, "The rig the take was made from (or calibrated to)")->required();
+  cmd->add_option("--take", o->take, "The take (.trc, .c3d, .fcrec): from facecap synth, or a real one with --calib")->required()->check(CLI::ExistingFile);
+  auto* truth = cmd->add_option("--truth", o->truth, "Its truth manifest (default: <take stem>.truth.json)")->check(CLI::ExistingFile);
+  auto* calib = cmd->add_option("--calib", o->calib, "A real take's calibration profile (facecap calibrate): leave-one-out evaluation")
+                    ->check(CLI::ExistingFile);
+  calib->excludes(truth);
+  cmd->add_option("--every", o->every, "With --calib: held-out error and mesh checks on every Nth frame")
+      ->capture_default_str()->check(CLI::PositiveNumber)->needs(calib);
+  cmd->add_option("--offline-every", o->offline_every, "With --calib: solve offline solvers (meshik) on every Nth frame only")
+      ->capture_default_str()->check(CLI::PositiveNumber)->needs(calib);
+  cmd->add_option("--max-frames", o->max_frames, "With --calib: only the first N frames (0: all)")->needs(calib);
+  cmd->add_flag("--progress", o->progress, "With --calib: progress on stderr (default: on a terminal)")->needs(calib);
   cmd->add_option("--solver", o->solvers, "all, or a comma-separated list of solvers")->capture_default_str();
   cmd->add_option("--rig-units", o->rig_units_override, "The rig's units when they cannot be guessed: mm, cm or m");
   cmd->add_flag("--truth-weights", o->truth_weights,
                 "Skip the weights step: mesh each frame from the truth weights (isolates the blend from the weight fit)");
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
   cmd->callback([o, &exit_code] {
-    run_eval(*o);
+    if (!o->calib.empty()) {
+      if (o->truth_weights) throw Error("--truth-weights needs a synthetic take's truth, not --calib");
+      TakeEvalOptions t;
+      t.rig = o->rig;
+      t.take = o->take;
+      t.calib = o->calib;
+      t.solvers = o->solvers;
+      t.rig_units = o->rig_units_override;
+      t.every = o->every;
+      t.offline_every = o->offline_every;
+      t.max_frames = o->max_frames;
+      t.progress = o->progress;
+      const auto report = evaluate_take(t);
+      if (o->json) std::puts(report.dump(2).c_str());
+      else print_take_evaluation(report);
+    } else {
+      run_eval(*o);
+    }
     exit_code = 0;
   });
 }

@@ -21,6 +21,8 @@ int main(int argc, char** argv) {
   facecap::tools::add_convert_command(app, exit_code);
   facecap::tools::add_synth_command(app, exit_code);
   facecap::tools::add_bench_command(app, exit_code);
+  facecap::tools::add_calibrate_command(app, exit_code);
+  facecap::tools::add_solve_command(app, exit_code);
   facecap::tools::add_eval_command(app, exit_code);
   facecap::tools::add_subscribe_command(app, exit_code);
   facecap::tools::add_daemon_demo_command(app, exit_code);

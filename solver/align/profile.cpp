@@ -1,0 +1,314 @@
+#include "solver/align/profile.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include <fmt/format.h>
+#include <toml++/toml.h>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+
+namespace facecap::align {
+
+namespace {
+
+std::string quote(std::string_view s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\', out += c;
+    else if (static_cast<unsigned char>(c) < 0x20) out += fmt::format("\\u{:04x}", int(c));
+    else out += c;
+  }
+  return out + "\"";
+}
+std::string vec3(const Eigen::Vector3d& v) { return fmt::format("[{}, {}, {}]", v.x(), v.y(), v.z()); }
+
+constexpr std::string_view kChecksumKey = "checksum = ";
+
+uint64_t body_checksum(std::string_view text) {
+  Fnv1a64 h;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string_view line = text.substr(pos, end - pos);
+    if (line.substr(0, kChecksumKey.size()) != kChecksumKey) {
+      h.add(line.data(), line.size());
+      h.add("\n", 1);
+    }
+    pos = end + 1;
+  }
+  return h.digest();
+}
+
+}  // namespace
+
+std::string write_calibration_profile(const Calibration& c) {
+  std::string body;
+  auto out = [&body](std::string_view s) { body += s; };
+  out("# facecap calibration profile: written by `facecap calibrate`, read by solve, eval and facecapd.\n");
+  out(fmt::format("version = {}\n", kCalibrationProfileVersion));
+  out("\n[rig]\n");
+  out(fmt::format("name = {}\ncontent_hash = \"{:016x}\"\nunits = {}\n", quote(c.rig_name), c.rig_hash, quote(unit_name(c.rig_mm_per_unit))));
+  out("\n[source]\n");
+  out(fmt::format("take = {}\nframe = {}\nunits = {}\nunits_detected = {}\n", quote(c.source_take), c.source_frame,
+                  quote(unit_name(c.take_mm_per_unit)), c.units_detected));
+  out("\n[transform]  # rig = scale * rotation * take + translation\n");
+  const Eigen::Matrix3d& R = c.take_to_rig.rotation;
+  out(fmt::format("scale = {}\nrotation = [{}, {}, {}]\ntranslation = {}\n", c.take_to_rig.scale,
+                  vec3(R.row(0).transpose()), vec3(R.row(1).transpose()), vec3(R.row(2).transpose()),
+                  vec3(c.take_to_rig.translation)));
+  out("\n[fit]  # rig millimetres\n");
+  out(fmt::format("hull_rms_mm = {}\ntrimmed_rms_mm = {}\nstart = {}\n", c.hull_rms_mm, c.trimmed_rms_mm, c.start_index));
+  out("\n[stabilise]\nmarkers = [");
+  for (std::size_t i = 0; i < c.stable_markers.size(); ++i) out((i ? ", " : "") + quote(c.stable_markers[i]));
+  out("]\n");
+  if (!c.notes.empty()) {
+    out("\n[notes]\ntext = [\n");
+    for (const auto& n : c.notes) out("  " + quote(n) + ",\n");
+    out("]\n");
+  }
+  for (const auto& m : c.markers) {
+    out("\n[[marker]]\n");
+    out(fmt::format("label = {}\nvertices = [{}, {}, {}]\nbarycentric = {}\nneutral = {}\nbound_point = {}\noffset = {}\nresidual_mm = {}\n",
+                    quote(m.label), m.binding.vertices[0], m.binding.vertices[1], m.binding.vertices[2],
+                    vec3(m.binding.barycentric), vec3(m.neutral), vec3(m.bound_point),
+                    vec3(c.take_to_rig.apply(m.neutral) - m.bound_point), m.residual_mm));
+  }
+  // The checksum line goes second; it is left out of its own sum.
+  const std::size_t first_break = body.find('\n') + 1;
+  body.insert(first_break, fmt::format("{}\"fnv1a64:{:016x}\"\n", kChecksumKey, body_checksum(body)));
+  return body;
+}
+
+void save_calibration_profile(const std::filesystem::path& path, const Calibration& calibration) {
+  const std::string text = write_calibration_profile(calibration);
+  write_file_atomically(path, std::span<const char>(text.data(), text.size()));
+}
+
+namespace {
+
+class Reader {
+ public:
+  explicit Reader(std::string name) : name_(std::move(name)) {}
+
+  [[noreturn]] void fail(const toml::node* node, const std::string& what, const std::string& key) const {
+    ErrorLocation where{.file = name_, .key = key};
+    if (node) {
+      where.line = node->source().begin.line;
+      where.column = node->source().begin.column;
+    }
+    throw Error(what, where);
+  }
+  void only_keys(const toml::table& t, std::initializer_list<std::string_view> keys, const std::string& path) const {
+    for (const auto& [k, v] : t) {
+      if (std::find(keys.begin(), keys.end(), k.str()) == keys.end()) {
+        std::string allowed;
+        for (auto a : keys) allowed += (allowed.empty() ? "" : ", ") + std::string(a);
+        fail(&v, fmt::format("unknown key '{}' (allowed here: {})", k.str(), allowed), path + std::string(k.str()));
+      }
+    }
+  }
+  const toml::table& table(const toml::table& t, std::string_view key, const std::string& path) const {
+    const toml::node* n = t.get(key);
+    if (!n) fail(&t, fmt::format("missing table [{}]", key), path + std::string(key));
+    if (!n->is_table()) fail(n, fmt::format("'{}' must be a table", key), path + std::string(key));
+    return *n->as_table();
+  }
+  const toml::node& need(const toml::table& t, std::string_view key, const std::string& path) const {
+    const toml::node* n = t.get(key);
+    if (!n) fail(&t, fmt::format("missing key '{}'", key), path + std::string(key));
+    return *n;
+  }
+  std::string string(const toml::table& t, std::string_view key, const std::string& path) const {
+    const toml::node& n = need(t, key, path);
+    if (!n.is_string()) fail(&n, fmt::format("'{}' must be a string", key), path + std::string(key));
+    return std::string(n.as_string()->get());
+  }
+  double number(const toml::node& n, const std::string& key) const {
+    if (n.is_floating_point()) return n.as_floating_point()->get();
+    if (n.is_integer()) return double(n.as_integer()->get());
+    fail(&n, fmt::format("'{}' must be a number", key), key);
+  }
+  double number(const toml::table& t, std::string_view key, const std::string& path) const {
+    const double v = number(need(t, key, path), path + std::string(key));
+    if (!std::isfinite(v)) fail(t.get(key), fmt::format("'{}' must be finite", key), path + std::string(key));
+    return v;
+  }
+  int64_t integer(const toml::table& t, std::string_view key, const std::string& path) const {
+    const toml::node& n = need(t, key, path);
+    if (!n.is_integer()) fail(&n, fmt::format("'{}' must be an integer", key), path + std::string(key));
+    return n.as_integer()->get();
+  }
+  bool boolean(const toml::table& t, std::string_view key, const std::string& path) const {
+    const toml::node& n = need(t, key, path);
+    if (!n.is_boolean()) fail(&n, fmt::format("'{}' must be true or false", key), path + std::string(key));
+    return n.as_boolean()->get();
+  }
+  Eigen::Vector3d vector3(const toml::node& n, const std::string& key) const {
+    const toml::array* a = n.as_array();
+    if (!a || a->size() != 3) fail(&n, fmt::format("'{}' must be an array of 3 numbers", key), key);
+    Eigen::Vector3d v;
+    for (std::size_t i = 0; i < 3; ++i) v[Eigen::Index(i)] = number(*a->get(i), key);
+    if (!v.allFinite()) fail(&n, fmt::format("'{}' must be finite", key), key);
+    return v;
+  }
+  Eigen::Vector3d vector3(const toml::table& t, std::string_view key, const std::string& path) const {
+    return vector3(need(t, key, path), path + std::string(key));
+  }
+  std::vector<std::string> strings(const toml::table& t, std::string_view key, const std::string& path) const {
+    const toml::node& n = need(t, key, path);
+    const toml::array* a = n.as_array();
+    if (!a) fail(&n, fmt::format("'{}' must be an array of strings", key), path + std::string(key));
+    std::vector<std::string> out;
+    for (const auto& e : *a) {
+      if (!e.is_string()) fail(&e, fmt::format("'{}' must be an array of strings", key), path + std::string(key));
+      out.emplace_back(e.as_string()->get());
+    }
+    return out;
+  }
+  const std::string& name() const { return name_; }
+
+ private:
+  std::string name_;
+};
+
+bool is_hex16(const std::string& s) {
+  return s.size() == 16 && s.find_first_not_of("0123456789abcdefABCDEF") == std::string::npos;
+}
+
+}  // namespace
+
+Calibration read_calibration_profile(std::string_view text, const std::string& name) {
+  toml::table root;
+  try {
+    root = toml::parse(text, name);
+  } catch (const toml::parse_error& e) {
+    const auto& b = e.source().begin;
+    throw Error(std::string(e.description()), ErrorLocation{.file = name, .line = b.line, .column = b.column});
+  }
+  Reader r(name);
+  r.only_keys(root, {"version", "checksum", "rig", "source", "transform", "fit", "stabilise", "notes", "marker"}, "");
+  const int64_t version = r.integer(root, "version", "");
+  if (version < 1 || version > kCalibrationProfileVersion)
+    r.fail(root.get("version"), fmt::format("profile version {} is not readable by this facecap (reads 1..{})", version,
+                                            kCalibrationProfileVersion), "version");
+  if (const toml::node* sum = root.get("checksum")) {
+    const std::string expected = fmt::format("fnv1a64:{:016x}", body_checksum(text));
+    if (!sum->is_string() || sum->as_string()->get() != expected)
+      r.fail(sum, fmt::format("checksum mismatch (the file was changed after calibration; expected {}): remove the "
+                              "checksum line to accept hand edits", expected), "checksum");
+  }
+  Calibration c;
+  const auto& rig = r.table(root, "rig", "");
+  r.only_keys(rig, {"name", "content_hash", "units"}, "rig.");
+  c.rig_name = r.string(rig, "name", "rig.");
+  const std::string hash = r.string(rig, "content_hash", "rig.");
+  if (!is_hex16(hash)) r.fail(rig.get("content_hash"), "content_hash must be 16 hex digits", "rig.content_hash");
+  c.rig_hash = std::stoull(hash, nullptr, 16);
+  const std::string rig_units = r.string(rig, "units", "rig.");
+  const auto rig_mm = millimetres_per_unit(rig_units);
+  if (!rig_mm) r.fail(rig.get("units"), fmt::format("units '{}' are not mm, cm or m", rig_units), "rig.units");
+  c.rig_mm_per_unit = *rig_mm;
+
+  const auto& src = r.table(root, "source", "");
+  r.only_keys(src, {"take", "frame", "units", "units_detected"}, "source.");
+  c.source_take = r.string(src, "take", "source.");
+  c.source_frame = r.integer(src, "frame", "source.");
+  const std::string take_units = r.string(src, "units", "source.");
+  const auto take_mm = millimetres_per_unit(take_units);
+  if (!take_mm) r.fail(src.get("units"), fmt::format("units '{}' are not mm, cm or m", take_units), "source.units");
+  c.take_mm_per_unit = *take_mm;
+  c.units_detected = r.boolean(src, "units_detected", "source.");
+
+  const auto& tf = r.table(root, "transform", "");
+  r.only_keys(tf, {"scale", "rotation", "translation"}, "transform.");
+  c.take_to_rig.scale = r.number(tf, "scale", "transform.");
+  if (!(c.take_to_rig.scale > 0.0)) r.fail(tf.get("scale"), "scale must be positive", "transform.scale");
+  const toml::node& rot = r.need(tf, "rotation", "transform.");
+  const toml::array* rows = rot.as_array();
+  if (!rows || rows->size() != 3) r.fail(&rot, "rotation must be 3 rows of 3 numbers", "transform.rotation");
+  for (std::size_t i = 0; i < 3; ++i)
+    c.take_to_rig.rotation.row(Eigen::Index(i)) = r.vector3(*rows->get(i), "transform.rotation").transpose();
+  const Eigen::Matrix3d& R = c.take_to_rig.rotation;
+  if ((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() > 1e-6 || R.determinant() < 0.0)
+    r.fail(&rot, "rotation is not a proper rotation matrix", "transform.rotation");
+  c.take_to_rig.translation = r.vector3(tf, "translation", "transform.");
+
+  if (const toml::node* fit_node = root.get("fit")) {
+    if (!fit_node->is_table()) r.fail(fit_node, "'fit' must be a table", "fit");
+    const auto& fit = *fit_node->as_table();
+    r.only_keys(fit, {"hull_rms_mm", "trimmed_rms_mm", "start"}, "fit.");
+    c.hull_rms_mm = r.number(fit, "hull_rms_mm", "fit.");
+    c.trimmed_rms_mm = r.number(fit, "trimmed_rms_mm", "fit.");
+    c.start_index = int(r.integer(fit, "start", "fit."));
+  }
+  const auto& stab = r.table(root, "stabilise", "");
+  r.only_keys(stab, {"markers"}, "stabilise.");
+  c.stable_markers = r.strings(stab, "markers", "stabilise.");
+  if (const toml::node* notes = root.get("notes")) {
+    if (!notes->is_table()) r.fail(notes, "'notes' must be a table", "notes");
+    r.only_keys(*notes->as_table(), {"text"}, "notes.");
+    c.notes = r.strings(*notes->as_table(), "text", "notes.");
+  }
+
+  const toml::node* markers = root.get("marker");
+  if (!markers || !markers->is_array_of_tables()) r.fail(&root, "no [[marker]] entries", "marker");
+  std::set<std::string> seen;
+  for (const auto& node : *markers->as_array()) {
+    const auto& t = *node.as_table();
+    r.only_keys(t, {"label", "vertices", "barycentric", "neutral", "bound_point", "offset", "residual_mm"}, "marker.");
+    MarkerCalibration m;
+    m.label = r.string(t, "label", "marker.");
+    if (m.label.empty()) r.fail(t.get("label"), "empty marker label", "marker.label");
+    if (!seen.insert(m.label).second) r.fail(t.get("label"), fmt::format("marker '{}' appears twice", m.label), "marker.label");
+    const toml::node& verts = r.need(t, "vertices", "marker.");
+    const toml::array* va = verts.as_array();
+    if (!va || va->size() != 3) r.fail(&verts, "vertices must be 3 integers", "marker.vertices");
+    for (std::size_t i = 0; i < 3; ++i) {
+      const toml::node* v = va->get(i);
+      if (!v->is_integer() || v->as_integer()->get() < 0) r.fail(v, "vertices must be 3 non-negative integers", "marker.vertices");
+      m.binding.vertices[i] = int(v->as_integer()->get());
+    }
+    m.binding.label = m.label;
+    m.binding.barycentric = r.vector3(t, "barycentric", "marker.");
+    if (std::abs(m.binding.barycentric.sum() - 1.0) > 1e-6 || m.binding.barycentric.minCoeff() < -1e-9)
+      r.fail(t.get("barycentric"), "barycentric coordinates must be non-negative and sum to 1", "marker.barycentric");
+    m.neutral = r.vector3(t, "neutral", "marker.");
+    m.bound_point = r.vector3(t, "bound_point", "marker.");
+    m.residual_mm = r.number(t, "residual_mm", "marker.");
+    // The neutral offset (the actor's marker from its bound point, rig units) is derived;
+    // when present it must agree with the transform, neutral and bound_point.
+    if (const toml::node* off = t.get("offset")) {
+      const Eigen::Vector3d offset = r.vector3(*off, "marker.offset");
+      const Eigen::Vector3d derived = c.take_to_rig.apply(m.neutral) - m.bound_point;
+      if ((offset - derived).norm() > 1e-6 * (1.0 + derived.norm()))
+        r.fail(off, fmt::format("offset of '{}' disagrees with transform(neutral) - bound_point", m.label), "marker.offset");
+    }
+    c.markers.push_back(std::move(m));
+  }
+  for (const auto& s : c.stable_markers)
+    if (c.find(s) < 0) r.fail(stab.get("markers"), fmt::format("stable marker '{}' has no [[marker]] entry", s), "stabilise.markers");
+  return c;
+}
+
+Calibration load_calibration_profile(const std::filesystem::path& path) {
+  const auto bytes = read_file_bytes(path);
+  return read_calibration_profile(std::string_view(bytes.data(), bytes.size()), path.string());
+}
+
+void check_profile_matches_rig(const Calibration& c, const Rig& rig, const std::string& profile_name) {
+  if (c.rig_hash != rig.content_hash())
+    throw Error(fmt::format("profile was calibrated on rig '{}' ({:016x}), not on '{}' ({:016x}): calibrate again for this rig",
+                            c.rig_name, c.rig_hash, rig.name, rig.content_hash()),
+                ErrorLocation{.file = profile_name, .key = "rig.content_hash"});
+  for (const auto& m : c.markers)
+    for (int v : m.binding.vertices)
+      if (v >= rig.vertex_count())
+        throw Error(fmt::format("marker '{}' binds vertex {}, the rig has {}", m.label, v, rig.vertex_count()),
+                    ErrorLocation{.file = profile_name, .key = "marker.vertices"});
+}
+
+}  // namespace facecap::align

@@ -1,0 +1,187 @@
+// Alignment on real data: the four AnimFace takes (41 markers, cm, Y up, 60 Hz) with the
+// ICT FaceKit face. Skipped with a message when ../shared/data is absent.
+#include <algorithm>
+#include <numeric>
+#include <random>
+
+#include <catch2/catch.hpp>
+
+#include "formats/take.hpp"
+#include "solver/align/calibrate.hpp"
+#include "solver/align/label.hpp"
+#include "solver/align/mapper.hpp"
+#include "solver/align/neutral.hpp"
+#include "solver/align/pipeline.hpp"
+#include "solver/align/stabilise.hpp"
+#include "solver/rig.hpp"
+#include "tests/test_support.hpp"
+
+using namespace facecap;
+using namespace facecap::align;
+
+namespace {
+
+constexpr const char* kTakes[] = {"CheeksMoCap", "EyebrowsMoCap", "JawMoCap", "NoseMoCap"};
+
+struct Calibrated {
+  formats::MarkerTake take;
+  Calibration calibration;
+  Eigen::Matrix3Xd neutral;  // 3 x K in take slot order
+};
+
+// The calibrate command's pipeline on a take as it is in the file.
+Calibrated calibrate_file(const Rig& rig, const std::filesystem::path& path) {
+  Calibrated c;
+  c.take = formats::read_take(path);
+  TakeCalibrationOptions o;
+  o.neutral.rate_hz = c.take.rate_hz;
+  o.neutral.take_mm_per_unit = 10.0;
+  o.calibration.rig_mm_per_unit = 10.0;
+  const TakeCalibration t = calibrate_take(rig, c.take.labels, c.take.frames, o);
+  c.calibration = t.calibration;
+  c.neutral = t.positions;
+  return c;
+}
+
+const Rig& ict_rig(const std::filesystem::path& dir) {
+  static const Rig rig = load_rig(dir.string());
+  return rig;
+}
+
+}  // namespace
+
+TEST_CASE("AnimFace takes calibrate to the ICT face from the file as it is with stable markers under 1 mm", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
+  const Rig& rig = ict_rig(ict);
+  for (const char* name : kTakes) {
+    const Calibrated c = calibrate_file(rig, animface / (std::string(name) + ".trc"));
+    const Calibration& cal = c.calibration;
+    std::vector<double> residuals;
+    for (const auto& m : cal.markers) residuals.push_back(m.residual_mm);
+    std::sort(residuals.begin(), residuals.end());
+    // Head stabilisation over the whole take: residuals of the stable markers.
+    MarkerMapper mapper(cal, c.take.labels, StabiliserParams{.outlier_floor = 0.1});
+    auto mapped = mapper.make_output();
+    std::vector<double> stable_mm;
+    int held = 0;
+    for (const auto& f : c.take.frames) {
+      mapper.process(f, mapped);
+      held += mapped.head_held;
+      for (double r : mapper.stabiliser().residuals())
+        if (!std::isnan(r)) stable_mm.push_back(r * 10.0);
+    }
+    std::nth_element(stable_mm.begin(), stable_mm.begin() + std::ptrdiff_t(stable_mm.size() / 2), stable_mm.end());
+    const double stable_median = stable_mm[stable_mm.size() / 2];
+    std::string stable_names;
+    for (const auto& s : cal.stable_markers) stable_names += " " + s;
+    WARN(name << ": units " << unit_name(cal.take_mm_per_unit) << ", scale " << cal.take_to_rig.scale << ", residual median "
+              << residuals[residuals.size() / 2] << " mm, max " << residuals.back() << " mm; stable markers" << stable_names
+              << ": residual median " << stable_median << " mm");
+    CHECK(cal.units_detected);
+    CHECK(cal.take_mm_per_unit == 10.0);  // the files are in cm, and the fit says so
+    CHECK(cal.markers.size() == 41);
+    CHECK(cal.take_to_rig.scale > 0.8);
+    CHECK(cal.take_to_rig.scale < 1.25);
+    // The take is Y up looking +Z like the rig: the fitted rotation is small.
+    CHECK(rotation_angle(cal.take_to_rig.rotation) < 0.35);
+    CHECK(residuals[residuals.size() / 2] < 3.0);  // a different face than the rig's, within a few mm
+    CHECK(stable_median < 1.0);
+    CHECK(held == 0);
+  }
+}
+
+TEST_CASE("AnimFace labels are recovered from unlabelled shuffled points in at least 99 percent of frames", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
+  const Rig& rig = ict_rig(ict);
+  std::mt19937 rng(12);
+  for (const char* name : kTakes) {
+    const Calibrated c = calibrate_file(rig, animface / (std::string(name) + ".trc"));
+    LabellerParams p;
+    p.gate = 0.6;  // cm
+    p.gate_growth = 0.1;
+    p.max_gate = 2.0;
+    p.label_margin = 0.1;
+    // The labeller knows the markers only from the calibration's neutral shape.
+    MarkerLabeller labeller(c.take.labels, c.neutral, p);
+    MarkerFrame out;
+    std::size_t correct = 0;
+    std::vector<Eigen::Vector3d> points;
+    for (const auto& f : c.take.frames) {
+      points.clear();
+      for (const auto& m : f.markers)
+        if (m.present()) points.push_back(m.position);
+      std::shuffle(points.begin(), points.end(), rng);
+      labeller.label(points, out);
+      bool ok = true;
+      for (std::size_t k = 0; k < f.markers.size(); ++k)
+        ok &= f.markers[k].present() ? out.markers[k].present() && out.markers[k].position == f.markers[k].position
+                                     : !out.markers[k].present();
+      correct += ok;
+    }
+    const double rate = double(correct) / double(c.take.frames.size());
+    WARN(name << ": labels recovered in " << correct << " of " << c.take.frames.size() << " frames (" << 100.0 * rate << "%)");
+    CHECK(rate >= 0.99);
+
+    // Harder: 1% of the markers drop out at random and two ghosts appear in the face's
+    // bounding box every frame.
+    MarkerLabeller noisy(c.take.labels, c.neutral, p);
+    const Eigen::Vector3d lo = c.neutral.rowwise().minCoeff(), hi = c.neutral.rowwise().maxCoeff();
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    std::size_t correct_noisy = 0;
+    for (const auto& f : c.take.frames) {
+      points.clear();
+      std::vector<uint8_t> kept(f.markers.size(), 0);
+      for (std::size_t k = 0; k < f.markers.size(); ++k)
+        if (f.markers[k].present() && u(rng) >= 0.01) points.push_back(f.markers[k].position), kept[k] = 1;
+      for (int g = 0; g < 2; ++g)
+        points.push_back(lo + Eigen::Vector3d(u(rng), u(rng), u(rng)).cwiseProduct(hi - lo));
+      std::shuffle(points.begin(), points.end(), rng);
+      noisy.label(points, out);
+      bool ok = true;
+      for (std::size_t k = 0; k < f.markers.size(); ++k)
+        ok &= kept[k] ? out.markers[k].present() && out.markers[k].position == f.markers[k].position : !out.markers[k].present();
+      correct_noisy += ok;
+    }
+    const double noisy_rate = double(correct_noisy) / double(c.take.frames.size());
+    WARN(name << " with 1% dropouts and 2 ghosts a frame: " << correct_noisy << " of " << c.take.frames.size() << " frames ("
+              << 100.0 * noisy_rate << "%)");
+    CHECK(noisy_rate >= 0.99);
+  }
+}
+
+TEST_CASE("AnimFace swapped labels are corrected by the label check", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
+  const Rig& rig = ict_rig(ict);
+  const Calibrated c = calibrate_file(rig, animface / "JawMoCap.trc");
+  LabellerParams p;
+  p.gate = 0.6;
+  p.max_gate = 2.0;
+  p.label_margin = 0.1;
+  MarkerLabeller checker(c.take.labels, c.neutral, p);
+  const auto slot = [&](const char* label) {
+    return std::size_t(std::find(c.take.labels.begin(), c.take.labels.end(), label) - c.take.labels.begin());
+  };
+  // The mocap system swaps two neighbouring lip markers for a second, then the chin pair.
+  const std::size_t a = slot("Mouth_DownL"), b = slot("Mouth_Down"), d = slot("Chin_L1"), e = slot("Chin");
+  std::size_t correct = 0, swapped_frames = 0, flagged = 0;
+  for (std::size_t i = 0; i < c.take.frames.size(); ++i) {
+    MarkerFrame frame = c.take.frames[i];
+    const bool swap_lips = i >= 300 && i < 360, swap_chin = i >= 900 && i < 960;
+    if (swap_lips) std::swap(frame.markers[a].position, frame.markers[b].position);
+    if (swap_chin) std::swap(frame.markers[d].position, frame.markers[e].position);
+    swapped_frames += swap_lips || swap_chin;
+    checker.check(frame);
+    bool ok = true;
+    for (std::size_t k = 0; k < frame.markers.size(); ++k) ok &= frame.markers[k].position == c.take.frames[i].markers[k].position;
+    correct += ok;
+    if (swap_lips) flagged += (frame.markers[a].flags & kMarkerRelabelled) && (frame.markers[b].flags & kMarkerRelabelled);
+    if (swap_chin) flagged += (frame.markers[d].flags & kMarkerRelabelled) && (frame.markers[e].flags & kMarkerRelabelled);
+  }
+  WARN("JawMoCap with two swapped pairs: " << correct << " of " << c.take.frames.size() << " frames right after the check, "
+                                           << flagged << " of " << swapped_frames << " swapped frames flagged");
+  CHECK(double(correct) / double(c.take.frames.size()) >= 0.99);
+  CHECK(flagged == swapped_frames);
+}

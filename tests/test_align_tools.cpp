@@ -1,0 +1,226 @@
+// facecap calibrate, solve and eval, run as processes the way operators run them.
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+#include <sys/wait.h>
+
+#include "formats/livelinkface.hpp"
+#include "formats/recording.hpp"
+#include "formats/take.hpp"
+#include "solver/align/profile.hpp"
+#include "tests/align_test_support.hpp"
+#include "tests/test_support.hpp"
+
+using namespace facecap;
+
+namespace {
+
+struct Run {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+std::string slurp(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+Run run_facecap(const std::filesystem::path& dir, const std::vector<std::string>& args) {
+  std::string command = std::string("'") + FACECAP_BINARY_DIR + "/tools/facecap'";
+  for (const auto& a : args) command += " '" + a + "'";
+  command += " >'" + (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "' </dev/null";
+  const int status = std::system(command.c_str());
+  Run run;
+  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  run.out = slurp(dir / "stdout");
+  run.err = slurp(dir / "stderr");
+  return run;
+}
+
+// The synthetic built-in take as a TRC file in mm, in a random pose (Z up or anything).
+formats::MarkerTake to_take(const test::SyntheticTake& s, const std::string& units) {
+  formats::MarkerTake take;
+  take.format = formats::TakeFormat::kTrc;
+  take.labels = s.labels;
+  take.rate_hz = 60.0;
+  take.units = units;
+  take.first_frame = 1;
+  take.frames = s.frames;
+  return take;
+}
+
+}  // namespace
+
+TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a synthetic take", "[tools]") {
+  const auto dir = facecap::test::scratch_dir("align-tools");
+  test::SyntheticTakeOptions o;
+  o.seed = 21;
+  o.take_mm_per_unit = 1.0;
+  o.rest_frames = 60;
+  o.motion_frames = 120;
+  o.head_sway_deg = 4.0;
+  const auto synthetic = test::make_synthetic_take(o);
+  const auto trc = dir / "take.trc";
+  formats::write_take(trc, to_take(synthetic, "mm"));
+
+  Run r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", trc.string(), "--auto-neutral", "-o", (dir / "actor.toml").string(), "--json"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto report = nlohmann::json::parse(r.out);
+  CHECK(report["units"] == "mm");
+  CHECK(report["units_detected"] == true);
+  CHECK(report["residual_mm"]["max"].get<double>() < 1.0);
+  CHECK(report["stable_residual_median_mm"].get<double>() < 0.5);
+  CHECK(report["markers"].size() == synthetic.labels.size());
+  const auto cal = align::load_calibration_profile(dir / "actor.toml");
+  CHECK(cal.source_take == "take.trc");
+  CHECK(cal.stable_markers.size() == 6);
+  // The text report lists every marker's residual.
+  r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", trc.string(), "--frame", "10", "--average", "9", "-o",
+                        (dir / "actor.toml").string(), "--force"});
+  REQUIRE(r.exit_code == 0);
+  for (const auto& label : synthetic.labels) CHECK(r.out.find(label) != std::string::npos);
+  CHECK(r.out.find("residual median") != std::string::npos);
+  // Refuses to overwrite without --force.
+  r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", trc.string(), "-o", (dir / "actor.toml").string()});
+  CHECK(r.exit_code == 1);
+  CHECK(r.err.find("--force") != std::string::npos);
+
+  // Solve to a Live Link Face CSV: jawOpen follows the truth.
+  r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "actor.toml").string(), "--take", trc.string(), "-o",
+                        (dir / "out.csv").string()});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  CHECK(r.err.find("solving take.trc") != std::string::npos);  // the progress bar
+  const auto face = formats::read_livelinkface(dir / "out.csv");
+  REQUIRE(face.frames.size() == synthetic.frames.size());
+  const auto jaw_arkit = *formats::arkit_shape_index("JawOpen");
+  const auto jaw_rig = *BuiltinFace::instance().rig().shape_index("jawOpen");
+  double worst = 0;
+  for (std::size_t f = 0; f < face.frames.size(); ++f)
+    worst = std::max(worst, std::abs(double(face.frames[f].weights[jaw_arkit]) - synthetic.weights[f][jaw_rig]));
+  INFO("largest jawOpen error " << worst);
+  CHECK(worst < 0.15);
+  // The head sway shows in the head angles (yaw about the rig's vertical axis).
+  double max_yaw = 0;
+  for (const auto& f : face.frames) max_yaw = std::max(max_yaw, double(std::abs(f.angles[0])));
+  CHECK(max_yaw > 0.02);
+  CHECK(max_yaw < 0.2);
+
+  // ... and to a recording with the calibration in its header.
+  r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "actor.toml").string(), "--take", trc.string(), "-o",
+                        (dir / "out.fcrec").string(), "--solver", "linear", "-q"});
+  REQUIRE(r.exit_code == 0);
+  CHECK(r.err.empty());
+  formats::RecordingReader rec(dir / "out.fcrec");
+  CHECK(rec.solved_frame_count() == synthetic.frames.size());
+  CHECK(rec.marker_frame_count() == synthetic.frames.size());
+  CHECK(rec.header().calibration.find("[[marker]]") != std::string::npos);
+  SolvedFrame solved;
+  rec.read_solved_frame(100, solved);
+  CHECK(solved.weights.size() == BuiltinFace::instance().rig().shape_count());
+
+  // eval: held-out error and the rest, per solver, as JSON.
+  r = run_facecap(dir, {"eval", "--rig", "builtin", "--take", trc.string(), "--calib", (dir / "actor.toml").string(), "--solver",
+                        "nonlinear,linear,dt", "--json", "--every", "20"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto eval = nlohmann::json::parse(r.out);
+  CHECK(eval["sampling"]["sampled_frames"] == 9);
+  CHECK(eval["stable_residual_mm"]["median"].get<double>() < 0.5);
+  for (const char* name : {"nonlinear", "linear", "dt"}) {
+    INFO(name);
+    REQUIRE(eval["solvers"].contains(name));
+    const auto& s = eval["solvers"][name];
+    const double heldout = s["heldout_mm"]["median"].get<double>();
+    CHECK(heldout > 0.0);
+    CHECK(heldout < 3.0);
+    CHECK(s["heldout_mm"]["p95"].get<double>() >= heldout);
+    CHECK(s["heldout_mm"]["samples"].get<int>() == 9 * int(eval["heldout_markers"].size()));
+    CHECK(s["jitter_mm"]["mean"].get<double>() >= 0.0);
+    CHECK(s.contains("intersections"));
+    CHECK(s.contains("flipped"));
+  }
+}
+
+TEST_CASE("facecap calibrate and solve give clear errors on bad input", "[tools]") {
+  const auto dir = facecap::test::scratch_dir("align-tools-bad");
+  test::SyntheticTakeOptions o;
+  o.rest_frames = 30;
+  o.motion_frames = 10;
+  auto synthetic = test::make_synthetic_take(o);
+  // Four markers only.
+  auto few = to_take(synthetic, "mm");
+  few.labels.resize(4);
+  for (auto& f : few.frames) f.markers.resize(4);
+  formats::write_take(dir / "few.trc", few);
+  Run r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", (dir / "few.trc").string(), "-o", (dir / "a.toml").string()});
+  CHECK(r.exit_code == 1);
+  CHECK(r.err.find("4 markers; calibration needs at least 6") != std::string::npos);
+  // A frame that does not exist.
+  formats::write_take(dir / "take.trc", to_take(synthetic, "mm"));
+  r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", (dir / "take.trc").string(), "--frame", "999", "-o", (dir / "a.toml").string()});
+  CHECK(r.exit_code == 1);
+  CHECK(r.err.find("no frame number 999") != std::string::npos);
+  // A marker missing in every frame is left out with a note; the rest calibrates.
+  auto gappy = to_take(synthetic, "mm");
+  for (auto& f : gappy.frames) formats::set_missing(f.markers[5]);
+  formats::write_take(dir / "gappy.trc", gappy);
+  r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", (dir / "gappy.trc").string(), "--frame", "5", "-o", (dir / "g.toml").string()});
+  INFO(r.out << r.err);
+  CHECK(r.exit_code == 0);
+  CHECK(r.out.find("is missing in the calibration frame") != std::string::npos);
+  // A profile made for another rig.
+  r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", (dir / "take.trc").string(), "--frame", "5", "-o", (dir / "a.toml").string()});
+  REQUIRE(r.exit_code == 0);
+  std::string text = slurp(dir / "a.toml");
+  const auto at = text.find("content_hash = \"");
+  text.replace(at + 16, 16, "0123456789abcdef");
+  text.erase(text.find("checksum"), text.find('\n', text.find("checksum")) - text.find("checksum") + 1);
+  facecap::test::write_text(dir / "other.toml", text);
+  r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "other.toml").string(), "--take", (dir / "take.trc").string(), "-o",
+                        (dir / "out.csv").string()});
+  CHECK(r.exit_code == 1);
+  CHECK(r.err.find("calibrate again") != std::string::npos);
+  // An unknown solver and an unknown output format.
+  r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "a.toml").string(), "--take", (dir / "take.trc").string(), "-o",
+                        (dir / "out.csv").string(), "--solver", "magic"});
+  CHECK(r.exit_code == 1);
+  CHECK(r.err.find("unknown solver 'magic'") != std::string::npos);
+  r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "a.toml").string(), "--take", (dir / "take.trc").string(), "-o",
+                        (dir / "out.txt").string()});
+  CHECK(r.exit_code == 1);
+  CHECK(r.err.find(".csv") != std::string::npos);
+}
+
+TEST_CASE("facecap eval on a real AnimFace take reports held-out error for every solver", "[tools][data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
+  const auto dir = facecap::test::scratch_dir("align-tools-animface");
+  const auto take = (animface / "JawMoCap.trc").string();
+  Run r = run_facecap(dir, {"calibrate", "--rig", ict.string(), "--take", take, "-o", (dir / "actor.toml").string()});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  r = run_facecap(dir, {"eval", "--rig", ict.string(), "--take", take, "--calib", (dir / "actor.toml").string(), "--solver", "all",
+                        "--json", "--max-frames", "240", "--every", "60", "--offline-every", "1000"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto eval = nlohmann::json::parse(r.out);
+  CHECK(eval["frames"] == 240);
+  CHECK(eval["stable_residual_mm"]["median"].get<double>() < 1.0);
+  // meshik (offline, about 0.6 s a solve) only on frame 0.
+  CHECK(eval["solvers"]["meshik"]["frames_solved"] == 1);
+  CHECK(eval["solvers"]["meshik"]["jitter_mm"].is_null());
+  for (const char* name : {"nonlinear", "linear", "dt", "meshik"}) {
+    INFO(name);
+    REQUIRE(eval["solvers"].contains(name));
+    const double heldout = eval["solvers"][name]["heldout_mm"]["median"].get<double>();
+    CHECK(heldout > 0.1);
+    CHECK(heldout < 5.0);
+  }
+}

@@ -1,0 +1,207 @@
+// facecap calibrate: an actor's calibration profile from one neutral frame of a take
+// (paper Algorithm 1 plus stable markers for head stabilisation). See docs/alignment.md.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.hpp"
+#include "formats/take.hpp"
+#include "solver/align/neutral.hpp"
+#include "solver/align/pipeline.hpp"
+#include "solver/align/profile.hpp"
+#include "solver/align/stabilise.hpp"
+#include "tools/align_support.hpp"
+#include "tools/commands.hpp"
+
+namespace facecap::tools {
+namespace {
+
+struct Options {
+  std::string rig, take, output, markers, stable, units, rig_units;
+  int64_t frame = 0;
+  bool auto_neutral = false;
+  int stable_count = 6;
+  int average = 0;
+  bool json = false;
+  bool force = false;
+};
+
+// Keeps only the named markers (in the take's order). Throws on an unknown name.
+formats::MarkerTake select_markers(formats::MarkerTake take, const std::vector<std::string>& names, const std::string& take_name) {
+  if (names.empty()) return take;
+  std::vector<std::size_t> keep;
+  for (const auto& n : names) {
+    const auto it = std::find(take.labels.begin(), take.labels.end(), n);
+    if (it == take.labels.end()) throw file_error(take_name, fmt::format("--markers names '{}', which the take does not have", n));
+    keep.push_back(std::size_t(it - take.labels.begin()));
+  }
+  std::sort(keep.begin(), keep.end());
+  keep.erase(std::unique(keep.begin(), keep.end()), keep.end());
+  formats::MarkerTake out = std::move(take);
+  std::vector<std::string> labels;
+  for (auto k : keep) labels.push_back(out.labels[k]);
+  for (auto& f : out.frames) {
+    std::vector<Marker> m;
+    for (auto k : keep) m.push_back(f.markers[k]);
+    f.markers = std::move(m);
+  }
+  out.labels = std::move(labels);
+  return out;
+}
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return std::nan("");
+  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+void run_calibrate(const Options& o, bool frame_given) {
+  const Rig rig = load_rig(o.rig);
+  const double rig_mm = rig_mm_per_unit(rig, o.rig_units);
+  formats::MarkerTake take = select_markers(formats::read_take(o.take), split_list(o.markers), o.take);
+  for (const auto& w : take.warnings) fmt::print(stderr, "facecap: warning: {}: {}\n", o.take, w);
+  if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
+  if (take.marker_count() < 6) throw file_error(o.take, fmt::format("{} markers; calibration needs at least 6", take.marker_count()));
+
+  std::optional<double> given_units;
+  if (!o.units.empty()) {
+    given_units = align::millimetres_per_unit(o.units);
+    if (!given_units) throw Error(fmt::format("--units '{}': use mm, cm or m", o.units));
+  }
+  const auto file_units = align::millimetres_per_unit(take.units);
+  // Provisional units for the neutral search's mm thresholds: given, stated, or the
+  // decade a face's size suggests.
+  double search_units = given_units ? *given_units : file_units ? *file_units : 10.0;
+  if (!given_units && !file_units) {
+    std::vector<uint8_t> present;
+    const auto P = frame_positions(take.frames.front(), present);
+    if (const auto g = align::millimetres_per_unit(guess_face_units(bounding_box(P)))) search_units = *g;
+  }
+
+  align::TakeCalibrationOptions topts;
+  topts.calibration.take_mm_per_unit = given_units;
+  topts.calibration.rig_mm_per_unit = rig_mm;
+  topts.neutral.rate_hz = take.rate_hz > 0 ? take.rate_hz : 60.0;
+  topts.neutral.take_mm_per_unit = search_units;
+  topts.average = o.average;
+  topts.stable_count = o.stable_count;
+  // Stable markers: named, or found (mutual distances vary least over this take, among
+  // the markers the rig moves least).
+  if (!o.stable.empty()) {
+    for (const auto& n : split_list(o.stable)) {
+      const auto it = std::find(take.labels.begin(), take.labels.end(), n);
+      if (it == take.labels.end()) throw file_error(o.take, fmt::format("--stable names '{}', which the take does not have", n));
+      topts.stable_slots.push_back(int(it - take.labels.begin()));
+    }
+    if (topts.stable_slots.size() < 3) throw Error("--stable: name at least 3 markers");
+  }
+  if (frame_given) topts.frame = frame_index(take, o.frame, o.take);
+  const align::TakeCalibration result = align::calibrate_take(rig, take.labels, take.frames, topts);
+  align::Calibration cal = result.calibration;
+  const bool auto_neutral = result.neutral.has_value();
+  const align::NeutralFrame neutral = result.neutral.value_or(align::NeutralFrame{});
+  cal.source_take = std::filesystem::path(o.take).filename().string();
+  cal.source_frame = take.frames[result.frame].frame_no;
+  if (result.count > 1)
+    cal.notes.push_back(fmt::format("neutral positions are the mean of frames {} to {} stabilised onto frame {}",
+                                    take.frames[result.first].frame_no, take.frames[result.first + result.count - 1].frame_no,
+                                    cal.source_frame));
+  if (cal.units_detected && file_units && *file_units != cal.take_mm_per_unit)
+    cal.notes.push_back(fmt::format("the take states '{}' but its size says '{}'; used '{}' (override with --units)", take.units,
+                                    align::unit_name(cal.take_mm_per_unit), align::unit_name(cal.take_mm_per_unit)));
+
+  // How well the stable markers hold still once the head motion is removed, over the take.
+  auto setup = make_calibrated_setup(rig, cal, take.labels);
+  auto mapped = setup.mapper->make_output();
+  std::vector<double> stable_residuals;
+  std::size_t held = 0;
+  for (const auto& f : take.frames) {
+    setup.mapper->process(f, mapped);
+    held += mapped.head_held;
+    for (double r : setup.mapper->stabiliser().residuals())
+      if (!std::isnan(r)) stable_residuals.push_back(r * cal.take_mm_per_unit);
+  }
+  const double stable_median = median_of(stable_residuals);
+
+  if (!o.force && std::filesystem::exists(o.output)) throw file_error(o.output, "exists; pass --force to replace it");
+  align::save_calibration_profile(o.output, cal);
+
+  std::vector<double> residuals;
+  for (const auto& m : cal.markers) residuals.push_back(m.residual_mm);
+  if (o.json) {
+    nlohmann::json j;
+    j["profile"] = o.output;
+    j["rig"] = {{"name", cal.rig_name}, {"content_hash", fmt::format("{:016x}", cal.rig_hash)}};
+    j["take"] = o.take;
+    j["frame"] = cal.source_frame;
+    j["auto_neutral"] = auto_neutral;
+    if (auto_neutral) j["neutral"] = {{"distance_mm", neutral.distance_mm}, {"speed_mm_s", neutral.speed_mm_s}};
+    j["units"] = align::unit_name(cal.take_mm_per_unit);
+    j["units_detected"] = cal.units_detected;
+    j["scale"] = cal.take_to_rig.scale;
+    j["hull_rms_mm"] = cal.hull_rms_mm;
+    j["trimmed_rms_mm"] = cal.trimmed_rms_mm;
+    j["residual_mm"] = {{"median", median_of(residuals)}, {"max", *std::max_element(residuals.begin(), residuals.end())}};
+    nlohmann::json per = nlohmann::json::object();
+    for (const auto& m : cal.markers) per[m.label] = m.residual_mm;
+    j["markers"] = per;
+    j["stable_markers"] = cal.stable_markers;
+    j["stable_residual_median_mm"] = stable_median;
+    j["head_pose_held_frames"] = held;
+    j["notes"] = cal.notes;
+    std::puts(j.dump(2).c_str());
+    return;
+  }
+  fmt::print("calibrated {} on {} frame {}{}\n", o.take, rig.name, cal.source_frame,
+             !auto_neutral ? "" : fmt::format(" (auto-neutral: {:.2f} mm from the median shape, {:.1f} mm/s)",
+                                            neutral.distance_mm, neutral.speed_mm_s));
+  fmt::print("units {} ({}), scale {:.4f} rig units per take unit, hull ICP {:.2f} mm, surface ICP {:.2f} mm (trimmed RMS)\n",
+             align::unit_name(cal.take_mm_per_unit), cal.units_detected ? "detected" : "given", cal.take_to_rig.scale,
+             cal.hull_rms_mm, cal.trimmed_rms_mm);
+  fmt::print("\n{:<24} {:>10}  {}\n", "marker", "residual", "bound to (triangle vertices, barycentric)");
+  for (const auto& m : cal.markers) {
+    const bool stable = std::find(cal.stable_markers.begin(), cal.stable_markers.end(), m.label) != cal.stable_markers.end();
+    fmt::print("{:<24} {:>7.2f} mm  {} {} {}  ({:.2f} {:.2f} {:.2f}){}\n", m.label, m.residual_mm, m.binding.vertices[0],
+               m.binding.vertices[1], m.binding.vertices[2], m.binding.barycentric[0], m.binding.barycentric[1],
+               m.binding.barycentric[2], stable ? "  stable" : "");
+  }
+  fmt::print("\nresidual median {:.2f} mm, max {:.2f} mm over {} markers\n", median_of(residuals),
+             *std::max_element(residuals.begin(), residuals.end()), residuals.size());
+  fmt::print("stable markers: {}; after stabilisation their residual median is {:.3f} mm over {} frames ({} held)\n",
+             fmt::join(cal.stable_markers, ", "), stable_median, take.frames.size(), held);
+  for (const auto& n : cal.notes) fmt::print("note: {}\n", n);
+  fmt::print("wrote {}\n", o.output);
+}
+
+}  // namespace
+
+void add_calibrate_command(CLI::App& app, int& exit_code) {
+  auto opts = std::make_shared<Options>();
+  auto* cmd = app.add_subcommand("calibrate", "Calibrate an actor's markers to a rig from a neutral frame of a take");
+  cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, or a .gltf/.glb file")->required();
+  cmd->add_option("--take", opts->take, "Marker take (.trc, .c3d, .fcrec)")->required()->check(CLI::ExistingFile);
+  auto* frame = cmd->add_option("--frame", opts->frame, "Calibrate on this frame number (as numbered in the file)");
+  auto* autoneutral = cmd->add_flag("--auto-neutral", opts->auto_neutral,
+                                    "Find the most neutral stretch of the take (the default without --frame)");
+  frame->excludes(autoneutral);
+  cmd->add_option("--average", opts->average,
+                  "Average this many frames around the calibration frame (default: the auto-neutral stretch, or 1 with --frame)");
+  cmd->add_option("--markers", opts->markers, "Comma-separated markers to calibrate (default: all)");
+  cmd->add_option("--stable", opts->stable, "Comma-separated stable markers for head stabilisation (default: found)");
+  cmd->add_option("--stable-count", opts->stable_count, "How many stable markers to find")->capture_default_str()->check(CLI::Range(3, 64));
+  cmd->add_option("--units", opts->units, "Take units mm|cm|m (default: detected from the face's size)");
+  cmd->add_option("--rig-units", opts->rig_units, "Rig units mm|cm|m (default: guessed from the face's size)");
+  cmd->add_option("-o,--output", opts->output, "Calibration profile to write (.toml)")->required();
+  cmd->add_flag("--force", opts->force, "Replace the output file if it exists");
+  cmd->add_flag("--json", opts->json, "Print JSON instead of text");
+  cmd->callback([opts, frame, &exit_code] {
+    run_calibrate(*opts, frame->count() > 0);
+    exit_code = 0;
+  });
+}
+
+}  // namespace facecap::tools

@@ -1,0 +1,200 @@
+#include "tools/eval_take.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+#include "formats/take.hpp"
+#include "solver/align/profile.hpp"
+#include "solver/solver_model.hpp"
+#include "tools/align_support.hpp"
+#include "solver/collide.hpp"
+#include "tools/progress.hpp"
+#include "tools/tool_support.hpp"
+
+namespace facecap::tools {
+namespace {
+
+struct Summary {
+  std::vector<double> values;
+  void add(double v) { values.push_back(v); }
+  double percentile(double p) {
+    if (values.empty()) return std::nan("");
+    std::sort(values.begin(), values.end());
+    const std::size_t rank = std::max<std::size_t>(1, std::size_t(std::ceil(p / 100.0 * double(values.size()))));
+    return values[rank - 1];
+  }
+  double mean() const {
+    double s = 0;
+    for (double v : values) s += v;
+    return values.empty() ? std::nan("") : s / double(values.size());
+  }
+  nlohmann::json json() {
+    return {{"median", percentile(50)}, {"p95", percentile(95)}, {"mean", mean()}, {"samples", values.size()}};
+  }
+};
+
+struct SolverRun {
+  std::string name;
+  bool offline = false;  // too slow to solve every frame: sampled frames only
+  std::unique_ptr<FaceSolver> full;                    // every marker, every frame
+  std::vector<std::unique_ptr<FaceSolver>> held_out;   // one per face marker, that marker removed
+  SolveResult result, held_result;
+  Eigen::Matrix3Xd previous, previous2;                // the two previous frames' meshes
+  int frames_solved = 0;
+  Summary heldout_mm, fit_mm, jitter_mm, solve_ms;
+  int64_t intersections = 0, intersection_frames = 0, flipped = 0, flipped_frames = 0, checked_frames = 0;
+  int held = 0;
+};
+
+}  // namespace
+
+nlohmann::json evaluate_take(const TakeEvalOptions& o) {
+  if (o.every < 1 || o.offline_every < 1) throw Error("--every and --offline-every must be at least 1");
+  const Rig rig = load_rig(o.rig);
+  const align::Calibration cal = align::load_calibration_profile(o.calib);
+  // The rig's units as calibrated, unless overridden.
+  const double rig_mm = o.rig_units.empty() ? cal.rig_mm_per_unit : rig_mm_per_unit(rig, o.rig_units);
+  align::check_profile_matches_rig(cal, rig, o.calib);
+  const formats::MarkerTake take = formats::read_take(o.take);
+  if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
+  const std::size_t F = o.max_frames > 0 ? std::min<std::size_t>(take.frames.size(), std::size_t(o.max_frames)) : take.frames.size();
+
+  auto setup = make_calibrated_setup(rig, cal, take.labels);
+  const auto names = select_solvers(o.solvers);
+
+  const Eigen::Index K = setup.mapper->marker_count();
+  std::vector<int> face_markers;  // held-out candidates: calibrated, in the take, not stable
+  for (Eigen::Index k = 0; k < K; ++k)
+    if (setup.mapper->slots()[std::size_t(k)] >= 0 && !setup.mapper->is_stable()[std::size_t(k)]) face_markers.push_back(int(k));
+
+  std::vector<SolverRun> runs;
+  for (const auto& name : names) {
+    SolverRun run;
+    run.name = name;
+    run.offline = name == "meshik";
+    run.full = make_solver(name, setup.model);
+    run.result = run.full->make_result();
+    for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(name, setup.model));
+    run.held_result = run.full->make_result();
+    runs.push_back(std::move(run));
+  }
+
+  const int64_t neutral_intersections = count_intersecting_pairs(rig.triangles, rig.neutral);
+  auto mapped = setup.mapper->make_output();
+  Summary stable_mm;
+  int head_held = 0;
+  std::size_t sampled = 0;
+  std::vector<uint8_t> present(static_cast<std::size_t>(K));
+  const bool show = o.progress || (stderr_is_terminal() && F >= 200);
+  ProgressBar bar("evaluating", show);
+  const auto& bindings = setup.model->markers;
+  for (std::size_t f = 0; f < F; ++f) {
+    setup.mapper->process(take.frames[f], mapped);
+    head_held += mapped.head_held;
+    for (double r : setup.mapper->stabiliser().residuals())
+      if (!std::isnan(r)) stable_mm.add(r * cal.take_mm_per_unit);
+    const bool sample = f % std::size_t(o.every) == 0;
+    sampled += sample;
+    for (auto& run : runs) {
+      const bool run_sample = run.offline ? f % std::size_t(o.offline_every) == 0 : sample;
+      if (run.offline && !run_sample) continue;
+      const auto t0 = std::chrono::steady_clock::now();
+      run.full->solve(mapped.targets, mapped.present, run.result);
+      run.solve_ms.add(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      run.held += run.result.held;
+      for (Eigen::Index k = 0; k < K; ++k)
+        if (mapped.present[std::size_t(k)])
+          run.fit_mm.add((bound_position(bindings[std::size_t(k)], run.result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
+      if (run.frames_solved >= 2 && !run.offline) {
+        // Second difference: how much the mesh shakes beyond steady motion.
+        run.jitter_mm.add(((run.result.vertices - 2.0 * run.previous + run.previous2).colwise().norm().mean()) * rig_mm);
+      }
+      run.previous2 = run.frames_solved >= 1 ? run.previous : run.result.vertices;
+      run.previous = run.result.vertices;
+      ++run.frames_solved;
+      if (!run_sample) continue;
+      const int64_t hits = count_intersecting_pairs(rig.triangles, run.result.vertices);
+      run.intersections += hits;
+      run.intersection_frames += hits > neutral_intersections;
+      const int64_t flips = count_flipped_triangles(rig.triangles, rig.neutral, run.result.vertices);
+      run.flipped += flips;
+      run.flipped_frames += flips > 0;
+      ++run.checked_frames;
+      for (std::size_t i = 0; i < face_markers.size(); ++i) {
+        const int k = face_markers[i];
+        if (!mapped.present[std::size_t(k)]) continue;
+        std::copy(mapped.present.begin(), mapped.present.end(), present.begin());
+        present[std::size_t(k)] = 0;
+        run.held_out[i]->solve(mapped.targets, present, run.held_result);
+        if (run.held_result.held) continue;
+        run.heldout_mm.add((bound_position(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
+      }
+    }
+    bar.update(f + 1, F);
+  }
+  bar.finish();
+
+  nlohmann::json j;
+  j["take"] = o.take;
+  j["rig"] = {{"name", rig.name}, {"content_hash", fmt::format("{:016x}", rig.content_hash())}};
+  j["calib"] = o.calib;
+  j["frames"] = F;
+  j["markers"] = K;
+  std::vector<std::string> face_labels, stable_labels;
+  for (int k : face_markers) face_labels.push_back(cal.markers[std::size_t(k)].label);
+  j["heldout_markers"] = face_labels;
+  j["stable_markers"] = cal.stable_markers;
+  j["sampling"] = {{"every", o.every},
+                   {"sampled_frames", sampled},
+                   {"offline_every", o.offline_every},
+                   {"what", "every frame is solved with all markers (fit, jitter, timing); held-out error, intersections and "
+                            "flips on frames 0, every, 2*every, ...; held-out solvers see only those frames. Offline solvers "
+                            "(meshik) are solved on frames 0, offline_every, ... only, and report no jitter"}};
+  j["stable_residual_mm"] = stable_mm.json();
+  j["head_pose_held_frames"] = head_held;
+  j["neutral_intersections"] = neutral_intersections;
+  nlohmann::json per = nlohmann::json::object();
+  for (auto& run : runs) {
+    per[run.name] = {{"heldout_mm", run.heldout_mm.json()},
+                     {"fit_mm", run.fit_mm.json()},
+                     {"jitter_mm", run.offline ? nlohmann::json(nullptr) : run.jitter_mm.json()},
+                     {"intersections", {{"pairs_per_checked_frame", run.checked_frames ? double(run.intersections) / double(run.checked_frames) : 0.0},
+                                        {"frames_above_neutral", run.intersection_frames}}},
+                     {"flipped", {{"triangles_per_checked_frame", run.checked_frames ? double(run.flipped) / double(run.checked_frames) : 0.0},
+                                  {"frames_with", run.flipped_frames}}},
+                     {"checked_frames", run.checked_frames},
+                     {"frames_solved", run.frames_solved},
+                     {"solve_ms", run.solve_ms.json()},
+                     {"held_frames", run.held}};
+  }
+  j["solvers"] = per;
+  return j;
+}
+
+void print_take_evaluation(const nlohmann::json& j) {
+  fmt::print("{}: {} frames, {} markers ({} held out), sampled every {} ({} frames)\n", j["take"].get<std::string>(),
+             j["frames"].get<int64_t>(), j["markers"].get<int64_t>(), j["heldout_markers"].size(),
+             j["sampling"]["every"].get<int>(), j["sampling"]["sampled_frames"].get<int64_t>());
+  fmt::print("stable markers after stabilisation: median {:.3f} mm, p95 {:.3f} mm; head pose held in {} frames\n",
+             j["stable_residual_mm"]["median"].get<double>(), j["stable_residual_mm"]["p95"].get<double>(),
+             j["head_pose_held_frames"].get<int64_t>());
+  fmt::print("\n{:<10} {:>16} {:>16} {:>10} {:>14} {:>10} {:>10}\n", "solver", "held-out mm", "fit mm", "jitter mm",
+             "intersect/frm", "flip/frm", "solve ms");
+  fmt::print("{:<10} {:>16} {:>16} {:>10} {:>14} {:>10} {:>10}\n", "", "median / p95", "median / p95", "mean",
+             fmt::format("(neutral {})", j["neutral_intersections"].get<int64_t>()), "", "mean");
+  for (const auto& [name, s] : j["solvers"].items()) {
+    const std::string jitter = s["jitter_mm"].is_null() ? "-" : fmt::format("{:.4f}", s["jitter_mm"]["mean"].get<double>());
+    fmt::print("{:<10} {:>7.2f} / {:>6.2f} {:>7.2f} / {:>6.2f} {:>10} {:>14.1f} {:>10.2f} {:>10.3f}\n", name,
+               s["heldout_mm"]["median"].get<double>(), s["heldout_mm"]["p95"].get<double>(), s["fit_mm"]["median"].get<double>(),
+               s["fit_mm"]["p95"].get<double>(), jitter,
+               s["intersections"]["pairs_per_checked_frame"].get<double>(), s["flipped"]["triangles_per_checked_frame"].get<double>(),
+               s["solve_ms"]["mean"].get<double>());
+  }
+}
+
+}  // namespace facecap::tools
