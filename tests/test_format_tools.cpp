@@ -18,30 +18,10 @@ using namespace facecap::formats;
 
 namespace {
 
-struct Run {
-  int exit_code = -1;
-  std::string out, err;
-};
+using test::Run;
+using test::run_facecap;
+using test::slurp;
 
-std::string slurp(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-// Runs the facecap binary with arguments (single-quoted), capturing stdout and stderr.
-Run run_facecap(const std::filesystem::path& dir, const std::vector<std::string>& args) {
-  std::string command = std::string("'") + FACECAP_BINARY_DIR + "/tools/facecap'";
-  for (const auto& a : args) command += " '" + a + "'";
-  command += " >'" + (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "' </dev/null";
-  const int status = std::system(command.c_str());
-  Run run;
-  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  run.out = slurp(dir / "stdout");
-  run.err = slurp(dir / "stderr");
-  return run;
-}
 
 }  // namespace
 

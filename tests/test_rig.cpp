@@ -46,14 +46,7 @@ RigLoadOptions no_cache() {
   return o;
 }
 
-std::string run_and_capture(const std::string& command, int* status) {
-  std::string out;
-  FILE* pipe = popen(command.c_str(), "r");
-  char buffer[4096];
-  while (std::size_t n = fread(buffer, 1, sizeof buffer, pipe)) out.append(buffer, n);
-  *status = pclose(pipe);
-  return out;
-}
+using test::run_and_capture;
 
 }  // namespace
 

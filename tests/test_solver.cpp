@@ -9,28 +9,15 @@
 #include "solver/face_solver.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
+#include "tests/solver_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
 
-namespace {
-
-std::vector<uint8_t> all_present(Eigen::Index k) { return std::vector<uint8_t>(std::size_t(k), 1); }
-
-// Marker positions of a pose (3 x N) for a layout.
-Eigen::Matrix3Xd markers_of(const Eigen::Matrix3Xd& pose, const std::vector<MarkerBinding>& layout) {
-  Eigen::Matrix3Xd out(3, Eigen::Index(layout.size()));
-  for (std::size_t k = 0; k < layout.size(); ++k) {
-    out.col(Eigen::Index(k)).setZero();
-    for (int a = 0; a < 3; ++a) out.col(Eigen::Index(k)) += layout[k].barycentric[a] * pose.col(layout[k].vertices[a]);
-  }
-  return out;
-}
-
-double max_error(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b) { return (a - b).colwise().norm().maxCoeff(); }
-double mean_error(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b) { return (a - b).colwise().norm().mean(); }
-
-}  // namespace
+using test::all_present;
+using test::markers_of;
+using test::max_error;
+using test::mean_error;
 
 TEST_CASE("box QP results satisfy the KKT conditions on random problems") {
   std::mt19937 rng(7);

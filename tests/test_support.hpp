@@ -2,6 +2,7 @@
 // Helpers for tests: where the shared third-party data is, scratch directories.
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace facecap::test {
 
@@ -17,6 +18,20 @@ std::filesystem::path scratch_dir(const std::string& name);
 
 // Writes text to a file, creating directories.
 void write_text(const std::filesystem::path& path, const std::string& text);
+
+// A whole file as text (empty when absent).
+std::string slurp(const std::filesystem::path& path);
+
+// Runs a shell command, returning its standard output; *status gets pclose's status.
+std::string run_and_capture(const std::string& command, int* status);
+
+// The built facecap binary run with arguments (each single-quoted), its output captured
+// into files under dir.
+struct Run {
+  int exit_code = -1;
+  std::string out, err;
+};
+Run run_facecap(const std::filesystem::path& dir, const std::vector<std::string>& args);
 
 }  // namespace facecap::test
 
