@@ -67,7 +67,7 @@ MarkerCalibration read_calibration_file(const std::string& file, const Rig& rig)
   MarkerCalibration calibration;
   calibration.origin = file;
   if (const toml::node* units = table.get("marker_units")) {
-    calibration.marker_mm_per_unit = drivers::millimetres_per_unit(units->value_or<std::string>(""));
+    calibration.marker_mm_per_unit = millimetres_per_unit(units->value_or<std::string>("")).value_or(0.0);
     if (calibration.marker_mm_per_unit <= 0.0)
       throw Error("marker_units must be \"mm\", \"cm\" or \"m\"", where(*units, file, "marker_units"));
   }
@@ -114,7 +114,7 @@ MarkerCalibration load_calibration(const config::CalibrationSection& section, co
 
 double marker_to_rig_scale(const MarkerCalibration& calibration, const std::string& source_units, const Rig& rig) {
   const double mm_per_unit = calibration.marker_mm_per_unit > 0.0 ? calibration.marker_mm_per_unit
-                                                                  : drivers::millimetres_per_unit(source_units);
+                                                                  : millimetres_per_unit(source_units).value_or(0.0);
   return mm_per_unit > 0.0 ? mm_per_unit * drivers::rig_units_per_mm(rig) : 1.0;
 }
 

@@ -43,17 +43,8 @@ MarkerSet default_marker_set(const Rig& rig, int face_markers, int head_markers)
   return set;
 }
 
-double millimetres_per_unit(const std::string& units) {
-  std::string u;
-  for (char c : units) u.push_back(char(std::tolower((unsigned char)c)));
-  if (u == "mm" || u == "millimeter" || u == "millimeters" || u == "millimetre" || u == "millimetres") return 1.0;
-  if (u == "cm" || u == "centimeter" || u == "centimeters" || u == "centimetre" || u == "centimetres") return 10.0;
-  if (u == "m" || u == "meter" || u == "meters" || u == "metre" || u == "metres") return 1000.0;
-  return 0.0;
-}
-
 double rig_units_per_mm(const Rig& rig) {
-  const double mm = millimetres_per_unit(guess_face_units(bounding_box(rig.neutral)));
+  const double mm = millimetres_per_unit(guess_face_units(bounding_box(rig.neutral))).value_or(0.0);
   return mm > 0.0 ? 1.0 / mm : 0.1;
 }
 

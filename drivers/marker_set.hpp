@@ -41,7 +41,5 @@ inline Eigen::Vector3d binding_point(const MarkerBinding& binding, const Eigen::
 // Rig units per millimetre from the face's size (0.1 for a rig in cm); 0.1 when unknown.
 double rig_units_per_mm(const Rig& rig);
 
-// Millimetres per unit for "mm", "cm", "m" (also "millimeters", ...); 0 when unknown.
-double millimetres_per_unit(const std::string& units);
 
 }  // namespace facecap::drivers

@@ -182,56 +182,48 @@ void save_gltf_rig(const Rig& rig, const std::string& path) {
   model.asset.version = "2.0";
   model.asset.generator = "facecap";
   tinygltf::Buffer buffer;
-  auto append = [&](const void* data, std::size_t size) {
-    const std::size_t offset = buffer.data.size();
-    const auto* p = static_cast<const unsigned char*>(data);
-    buffer.data.insert(buffer.data.end(), p, p + size);
-    return offset;
-  };
-  auto add_vec3 = [&](const Eigen::Matrix3Xd& m, bool with_bounds) {
-    const Eigen::Matrix3Xf f = m.cast<float>();
+  // One buffer view and accessor over bytes appended to the single buffer.
+  auto add_accessor = [&](const void* data, std::size_t bytes, int target, int component, int type,
+                          std::size_t count) {
     tinygltf::BufferView view;
     view.buffer = 0;
-    view.byteOffset = append(f.data(), sizeof(float) * std::size_t(f.size()));
-    view.byteLength = sizeof(float) * std::size_t(f.size());
-    view.target = TINYGLTF_TARGET_ARRAY_BUFFER;
+    view.byteOffset = buffer.data.size();
+    view.byteLength = bytes;
+    view.target = target;
+    const auto* p = static_cast<const unsigned char*>(data);
+    buffer.data.insert(buffer.data.end(), p, p + bytes);
     model.bufferViews.push_back(view);
     tinygltf::Accessor acc;
     acc.bufferView = int(model.bufferViews.size() - 1);
-    acc.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-    acc.type = TINYGLTF_TYPE_VEC3;
-    acc.count = std::size_t(f.cols());
-    if (with_bounds || f.cols()) {
-      const Eigen::Vector3f lo = f.rowwise().minCoeff(), hi = f.rowwise().maxCoeff();
-      acc.minValues = {lo.x(), lo.y(), lo.z()};
-      acc.maxValues = {hi.x(), hi.y(), hi.z()};
-    }
+    acc.componentType = component;
+    acc.type = type;
+    acc.count = count;
     model.accessors.push_back(acc);
     return int(model.accessors.size() - 1);
   };
+  // Float positions with the min/max bounds glTF requires of POSITION accessors.
+  auto add_vec3 = [&](const Eigen::Matrix3Xd& m) {
+    const Eigen::Matrix3Xf f = m.cast<float>();
+    const int index = add_accessor(f.data(), sizeof(float) * std::size_t(f.size()), TINYGLTF_TARGET_ARRAY_BUFFER,
+                                   TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, std::size_t(f.cols()));
+    if (f.cols()) {
+      const Eigen::Vector3f lo = f.rowwise().minCoeff(), hi = f.rowwise().maxCoeff();
+      model.accessors.back().minValues = {lo.x(), lo.y(), lo.z()};
+      model.accessors.back().maxValues = {hi.x(), hi.y(), hi.z()};
+    }
+    return index;
+  };
   tinygltf::Primitive prim;
   prim.mode = TINYGLTF_MODE_TRIANGLES;
-  prim.attributes["POSITION"] = add_vec3(rig.neutral, true);
-  {
-    const Eigen::Matrix<uint32_t, 3, Eigen::Dynamic> idx = rig.triangles.cast<uint32_t>();
-    tinygltf::BufferView view;
-    view.buffer = 0;
-    view.byteOffset = append(idx.data(), sizeof(uint32_t) * std::size_t(idx.size()));
-    view.byteLength = sizeof(uint32_t) * std::size_t(idx.size());
-    view.target = TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER;
-    model.bufferViews.push_back(view);
-    tinygltf::Accessor acc;
-    acc.bufferView = int(model.bufferViews.size() - 1);
-    acc.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
-    acc.type = TINYGLTF_TYPE_SCALAR;
-    acc.count = std::size_t(idx.size());
-    model.accessors.push_back(acc);
-    prim.indices = int(model.accessors.size() - 1);
-  }
+  prim.attributes["POSITION"] = add_vec3(rig.neutral);
+  const Eigen::Matrix<uint32_t, 3, Eigen::Dynamic> indices = rig.triangles.cast<uint32_t>();
+  prim.indices = add_accessor(indices.data(), sizeof(uint32_t) * std::size_t(indices.size()),
+                              TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
+                              TINYGLTF_TYPE_SCALAR, std::size_t(indices.size()));
   tinygltf::Value::Array names;
   for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
     const Eigen::Map<const Eigen::Matrix3Xd> d(rig.deltas.col(s).data(), 3, rig.vertex_count());
-    prim.targets.push_back({{"POSITION", add_vec3(d, true)}});
+    prim.targets.push_back({{"POSITION", add_vec3(d)}});
     names.emplace_back(rig.shape_names[std::size_t(s)]);
   }
   tinygltf::Mesh mesh;

@@ -1,6 +1,7 @@
 #include "solver/rig.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <set>
 
@@ -56,6 +57,16 @@ std::string guess_face_units(const BoundingBox& box) {
   if (extent >= 5.0 && extent <= 60.0) return "cm";
   if (extent >= 50.0 && extent <= 600.0) return "mm";
   return "unknown";
+}
+
+std::optional<double> millimetres_per_unit(const std::string& units) {
+  std::string u;
+  for (char c : units)
+    if (!std::isspace(static_cast<unsigned char>(c))) u += char(std::tolower(static_cast<unsigned char>(c)));
+  if (u == "mm" || u == "millimeter" || u == "millimeters" || u == "millimetre" || u == "millimetres") return 1.0;
+  if (u == "cm" || u == "centimeter" || u == "centimeters" || u == "centimetre" || u == "centimetres") return 10.0;
+  if (u == "m" || u == "meter" || u == "meters" || u == "metre" || u == "metres") return 1000.0;
+  return std::nullopt;
 }
 
 Eigen::VectorXd max_shape_displacement(const Rig& rig) {

@@ -22,7 +22,7 @@ std::vector<std::string> split_list(const std::string& text) {
 
 double rig_mm_per_unit(const Rig& rig, const std::string& override_units) {
   const std::string units = override_units.empty() ? guess_face_units(bounding_box(rig.neutral)) : override_units;
-  const auto mm = align::millimetres_per_unit(units);
+  const auto mm = millimetres_per_unit(units);
   if (!mm)
     throw Error(fmt::format("cannot tell the units of rig '{}' (guessed '{}'): pass --rig-units mm|cm|m", rig.name, units));
   return *mm;

@@ -69,17 +69,17 @@ void run_calibrate(const Options& o, bool frame_given) {
 
   std::optional<double> given_units;
   if (!o.units.empty()) {
-    given_units = align::millimetres_per_unit(o.units);
+    given_units = millimetres_per_unit(o.units);
     if (!given_units) throw Error(fmt::format("--units '{}': use mm, cm or m", o.units));
   }
-  const auto file_units = align::millimetres_per_unit(take.units);
+  const auto file_units = millimetres_per_unit(take.units);
   // Provisional units for the neutral search's mm thresholds: given, stated, or the
   // decade a face's size suggests.
   double search_units = given_units ? *given_units : file_units ? *file_units : 10.0;
   if (!given_units && !file_units) {
     std::vector<uint8_t> present;
     const auto P = frame_positions(take.frames.front(), present);
-    if (const auto g = align::millimetres_per_unit(guess_face_units(bounding_box(P)))) search_units = *g;
+    if (const auto g = millimetres_per_unit(guess_face_units(bounding_box(P)))) search_units = *g;
   }
 
   align::TakeCalibrationOptions topts;

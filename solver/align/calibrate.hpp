@@ -32,8 +32,6 @@
 
 namespace facecap::align {
 
-// Millimetres per unit for "mm", "cm", "m" (also "millimeters", "meters", ...); nullopt otherwise.
-std::optional<double> millimetres_per_unit(const std::string& units);
 // The canonical name ("mm", "cm", "m") of a unit size.
 std::string unit_name(double mm_per_unit);
 
