@@ -3,6 +3,7 @@
 #include "solver/meshik.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include <Eigen/LU>
@@ -24,13 +25,25 @@ Eigen::Matrix3d symmetric_from6(const double* s, double diagonal) {
   return S;
 }
 
-// Whether entry e of a shape's triangle range changes its triangle (the range holds
-// zeros for the unchanged triangles inside it).
-bool entry_changes(const ShapeTriangleTerms& terms, int e) {
-  const std::size_t n = std::size_t(terms.count);
-  for (std::size_t c = 0; c < 9; ++c)
-    if (terms.nonlinear[c * n + std::size_t(e)] != 0.0f) return true;
-  return false;
+// Calls f(triangle, v) for every triangle `shape` changes, v[c] being component c of
+// its Eq. 3 terms.
+template <class F>
+void for_each_changed_triangle(const TriangleTerms& terms, Eigen::Index shape, F&& f) {
+  constexpr int B = TriangleTerms::kBlock;
+  for (const int32_t e : terms.entries_of_shape(shape)) {
+    const std::size_t first = std::size_t(terms.entries[std::size_t(e)].block) * B;
+    for (int i = 0; i < B; ++i) {
+      const int32_t t = terms.triangle_of_slot[first + std::size_t(i)];
+      if (t < 0) continue;
+      std::array<double, 9> v;
+      bool changes = false;
+      for (int c = 0; c < 9; ++c) {
+        v[std::size_t(c)] = terms.nonlinear.at(e, c, i);
+        changes = changes || v[std::size_t(c)] != 0.0;
+      }
+      if (changes) f(Eigen::Index(t), v);
+    }
+  }
 }
 
 }  // namespace
@@ -60,10 +73,11 @@ struct MeshIkSolver::State {
   Eigen::Matrix<double, 3, Eigen::Dynamic> log_sum;      // sum_i w_i log R_ij
   Eigen::Matrix<double, 6, Eigen::Dynamic> stretch_sum;  // sum_i w_i (S_ij - I)
   Eigen::Matrix<double, 9, Eigen::Dynamic> rotation, stretch, transform;  // R_j, S_j, T_j
-  Eigen::Matrix3Xd rhs, x, work, column_rhs;
+  Eigen::Matrix3Xd rhs, x, column_rhs;
+  Eigen::Matrix4Xd work;
   Eigen::VectorXd residual;  // 6 T triangle entries, then 3 K marker entries
   Eigen::MatrixXd jacobian;  // residual rows x M
-  std::vector<double> transform_derivative;  // 9 per entry of the shape being differentiated
+  std::vector<double> transform_derivative;  // 9 per triangle of the shape being differentiated
 
   Eigen::MatrixXd JtJ, H;
   Eigen::VectorXd Jtf, g, w, trial, damping;
@@ -120,12 +134,8 @@ struct MeshIkSolver::State {
       for (int k = 0; k < 3; ++k) identity_rhs.col(tri[k]) += Q.col(k);
     }
     std::vector<uint8_t> shaped(std::size_t(T), 0);
-    std::size_t largest_shape = 0;
-    for (const auto& terms : m.shape_terms) {
-      for (int e = 0; e < terms.count; ++e)
-        if (entry_changes(terms, e)) shaped[std::size_t(terms.first_triangle + e)] = 1;
-      largest_shape = std::max(largest_shape, std::size_t(terms.count));
-    }
+    for (Eigen::Index i = 0; i < M; ++i)
+      for_each_changed_triangle(m.triangle_terms, i, [&](Eigen::Index t, const std::array<double, 9>&) { shaped[std::size_t(t)] = 1; });
     for (Eigen::Index t = 0; t < T; ++t)
       if (shaped[std::size_t(t)]) shaped_triangles.push_back(int(t));
     log_sum.setZero(3, T);
@@ -136,11 +146,11 @@ struct MeshIkSolver::State {
     transform = rotation;
     rhs.resize(3, N);
     x.resize(3, N);
-    work.resize(3, N);
+    work.resize(4, N);
     column_rhs.resize(3, N);
     residual.resize(6 * T + 3 * K);
     jacobian.resize(6 * T + 3 * K, M);
-    transform_derivative.resize(9 * largest_shape);
+    transform_derivative.resize(9 * std::size_t(T));
     JtJ.resize(M, M);
     H.resize(M, M);
     Jtf.resize(M);
@@ -202,14 +212,10 @@ struct MeshIkSolver::State {
     for (Eigen::Index s = 0; s < M; ++s) {
       const double ws = weights[s];
       if (ws == 0.0) continue;
-      const auto& terms = m.shape_terms[std::size_t(s)];
-      const std::size_t n = std::size_t(terms.count);
-      const float* v = terms.nonlinear.data();
-      for (std::size_t e = 0; e < n; ++e) {
-        const int t = terms.first_triangle + int(e);
-        for (std::size_t k = 0; k < 3; ++k) log_sum(Eigen::Index(k), t) += ws * v[k * n + e];
-        for (std::size_t k = 0; k < 6; ++k) stretch_sum(Eigen::Index(k), t) += ws * v[(3 + k) * n + e];
-      }
+      for_each_changed_triangle(m.triangle_terms, s, [&](Eigen::Index t, const std::array<double, 9>& v) {
+        for (int k = 0; k < 3; ++k) log_sum(k, t) += ws * v[std::size_t(k)];
+        for (int k = 0; k < 6; ++k) stretch_sum(k, t) += ws * v[std::size_t(3 + k)];
+      });
     }
     for (int t : shaped_triangles) {
       const Eigen::Matrix3d R = rotation_exp(log_sum.col(t));
@@ -277,36 +283,29 @@ struct MeshIkSolver::State {
     const double h = options.difference_step;
     jacobian.setZero();
     for (Eigen::Index i = 0; i < M; ++i) {
-      const auto& terms = m.shape_terms[std::size_t(i)];
-      const std::size_t n = std::size_t(terms.count);
-      if (n == 0) continue;  // the shape deforms no triangle: its column is zero
-      const float* v = terms.nonlinear.data();
+      if (m.triangle_terms.entries_of_shape(i).empty()) continue;  // the shape deforms no triangle: its column is zero
       column_rhs.setZero();
-      for (std::size_t e = 0; e < n; ++e) {
-        Eigen::Map<Eigen::Matrix3d> dT(&transform_derivative[9 * e]);
-        if (!entry_changes(terms, int(e))) { dT.setZero(); continue; }
-        const int t = terms.first_triangle + int(e);
+      for_each_changed_triangle(m.triangle_terms, i, [&](Eigen::Index t, const std::array<double, 9>& v) {
+        Eigen::Map<Eigen::Matrix3d> dT(&transform_derivative[9 * std::size_t(t)]);
         const Eigen::Vector3d L = log_sum.col(t);
-        const Eigen::Vector3d l(v[e], v[n + e], v[2 * n + e]);
+        const Eigen::Vector3d l(v[0], v[1], v[2]);
         const Eigen::Matrix3d dR = (rotation_exp(L + h * l) - rotation_exp(L - h * l)) / (2.0 * h);
         double s[6];
-        for (std::size_t k = 0; k < 6; ++k) s[k] = v[(3 + k) * n + e];
+        for (int k = 0; k < 6; ++k) s[k] = v[std::size_t(3 + k)];
         dT = dR * Eigen::Map<const Eigen::Matrix3d>(stretch.col(t).data()) +
              Eigen::Map<const Eigen::Matrix3d>(rotation.col(t).data()) * symmetric_from6(s, 0.0);
         const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
         const Eigen::Matrix3d contribution = dT * Q;
         for (int k = 0; k < 3; ++k) column_rhs.col(rig.triangles(k, t)) += contribution.col(k);
-      }
+      });
       solve_system(column_rhs);  // dx / dw_i
       auto column = jacobian.col(i);
       triangle_residuals(column_rhs, column, /*with_targets=*/false);
-      for (std::size_t e = 0; e < n; ++e) {
-        if (!entry_changes(terms, int(e))) continue;
-        const int t = terms.first_triangle + int(e);
-        const Eigen::Map<const Eigen::Matrix3d> dT(&transform_derivative[9 * e]);
+      for_each_changed_triangle(m.triangle_terms, i, [&](Eigen::Index t, const std::array<double, 9>&) {
+        const Eigen::Map<const Eigen::Matrix3d> dT(&transform_derivative[9 * std::size_t(t)]);
         Matrix32 d = dT * Eigen::Map<const Matrix32>(target_projection.col(t).data());
         column.segment<6>(6 * t) -= Eigen::Map<const Eigen::Matrix<double, 6, 1>>(d.data());
-      }
+      });
       for (Eigen::Index k = 0; k < K; ++k) {
         if (!usable[std::size_t(k)]) continue;
         const auto& b = m.markers[std::size_t(k)];

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <numbers>
 #include <queue>
@@ -102,10 +103,16 @@ Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
   return L;
 }
 
+// One shape's Eq. 3 terms on every triangle, 9 per triangle (built, then regrouped).
+struct ShapeDeformation {
+  std::vector<uint8_t> changed;          // T
+  std::vector<float> nonlinear, gradient;  // 9 x T, triangle-major
+};
+
 // Deformation of every (shape, triangle) that changes, with rotation logs kept on one
 // branch across the mesh: triangles turning less than pi/2 fix the branch, and the rest
 // take the branch nearest their already-decided neighbours, breadth first.
-ShapeTriangleTerms build_shape_terms(const Rig& rig, Eigen::Index shape, const TriangleAdjacency& adjacency) {
+ShapeDeformation build_shape_deformation(const Rig& rig, Eigen::Index shape, const TriangleAdjacency& adjacency) {
   const Eigen::Index T = rig.triangle_count();
   const Eigen::Matrix3Xd posed = rig.shape_positions(shape);
   std::vector<Eigen::Vector3d> logs(std::size_t(T), Eigen::Vector3d::Zero());
@@ -148,26 +155,106 @@ ShapeTriangleTerms build_shape_terms(const Rig& rig, Eigen::Index shape, const T
   for (Eigen::Index t = 0; t < T; ++t)  // islands rotating more than pi/2 everywhere
     if (!decided[std::size_t(t)]) { decided[std::size_t(t)] = 1; frontier.push(int(t)); propagate(); }
 
-  ShapeTriangleTerms terms;
-  Eigen::Index first = T, last = -1;
-  for (Eigen::Index t = 0; t < T; ++t)
-    if (changed[std::size_t(t)]) { first = std::min(first, t); last = t; }
-  if (last < 0) return terms;
-  terms.first_triangle = int(first);
-  terms.count = int(last - first + 1);
-  const std::size_t n = std::size_t(terms.count);
-  terms.nonlinear.assign(9 * n, 0.0f);
-  terms.gradient.assign(9 * n, 0.0f);
-  for (Eigen::Index t = first; t <= last; ++t) {
-    const std::size_t i = std::size_t(t), e = std::size_t(t - first);
-    if (!changed[i]) continue;
+  ShapeDeformation out;
+  out.changed = std::move(changed);
+  out.nonlinear.assign(9 * triangle_count, 0.0f);
+  out.gradient.assign(9 * triangle_count, 0.0f);
+  for (std::size_t i = 0; i < triangle_count; ++i) {
+    if (!out.changed[i]) continue;
     const Eigen::Matrix3d& s = stretch[i];
     const double values[9] = {logs[i][0], logs[i][1], logs[i][2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
     for (std::size_t c = 0; c < 9; ++c) {
-      terms.nonlinear[c * n + e] = float(values[c]);
-      terms.gradient[c * n + e] = float(gradient[i].data()[c]);
+      out.nonlinear[9 * i + c] = float(values[c]);
+      out.gradient[9 * i + c] = float(gradient[i].data()[c]);
     }
   }
+  return out;
+}
+
+// Triangles in Morton order of their rest centroids: neighbours on the face end up in
+// the same block, where values are alike and quantise finely.
+std::vector<int32_t> space_filling_order(const Rig& rig) {
+  const BoundingBox box = bounding_box(rig.neutral);
+  const Eigen::Array3d extent = box.size().array().max(1e-12);
+  auto spread = [](uint64_t v) {  // 21 bits -> every third bit
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+  };
+  const Eigen::Index T = rig.triangle_count();
+  auto keyed = std::vector<std::pair<uint64_t, int32_t>>(std::size_t(T));
+  for (Eigen::Index t = 0; t < T; ++t) {
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) centroid += rig.neutral.col(rig.triangles(k, t)) / 3.0;
+    const Eigen::Array3d unit = ((centroid - box.min).array() / extent).min(1.0).max(0.0);
+    uint64_t code = 0;
+    for (int a = 0; a < 3; ++a) code |= spread(uint64_t(unit[a] * 2097151.0)) << a;
+    keyed[std::size_t(t)] = {code, int32_t(t)};
+  }
+  std::sort(keyed.begin(), keyed.end());
+  auto order = std::vector<int32_t>(std::size_t(T));
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = keyed[i].second;
+  return order;
+}
+
+// Appends one entry: the given triangles (-1: padding) of 9 x T triangle-major values.
+void quantise(const std::vector<float>& values, std::span<const int32_t> triangles, TriangleTerms::Values& out) {
+  constexpr int B = TriangleTerms::kBlock;
+  const std::size_t base = out.value.size();
+  out.value.resize(base + TriangleTerms::kEntrySize, 0);
+  for (std::size_t c = 0; c < 9; ++c) {
+    double low = std::numeric_limits<double>::infinity(), high = -low;
+    for (const int32_t t : triangles) {
+      if (t < 0) continue;
+      low = std::min(low, double(values[9 * std::size_t(t) + c]));
+      high = std::max(high, double(values[9 * std::size_t(t) + c]));
+    }
+    const float offset = float(0.5 * (low + high));
+    const float scale = high > low ? float((high - low) / 65534.0) : 1.0f;
+    out.offset.push_back(offset);
+    out.scale.push_back(scale);
+    for (std::size_t i = 0; i < triangles.size(); ++i) {
+      if (triangles[i] < 0) continue;
+      const long q = std::lround((double(values[9 * std::size_t(triangles[i]) + c]) - offset) / scale);
+      out.value[base + c * B + i] = int16_t(std::clamp(q, -32767L, 32767L));
+    }
+  }
+}
+
+// The shapes' deformations regrouped into TriangleTerms blocks.
+TriangleTerms block_triangle_terms(const std::vector<ShapeDeformation>& shapes, const Rig& rig) {
+  constexpr int B = TriangleTerms::kBlock;
+  const std::vector<int32_t> order = space_filling_order(rig);
+  const int blocks = int((order.size() + B - 1) / B);
+  TriangleTerms terms;
+  terms.triangle_of_slot.assign(std::size_t(blocks) * B, -1);
+  std::copy(order.begin(), order.end(), terms.triangle_of_slot.begin());
+  terms.slot_of_triangle.resize(order.size());
+  for (std::size_t i = 0; i < order.size(); ++i) terms.slot_of_triangle[std::size_t(order[i])] = int32_t(i);
+  terms.block_begin.push_back(0);
+  for (int b = 0; b < blocks; ++b) {
+    const std::span<const int32_t> block(terms.triangle_of_slot.data() + std::size_t(b) * B, B);
+    for (std::size_t s = 0; s < shapes.size(); ++s) {
+      const ShapeDeformation& shape = shapes[s];
+      if (std::none_of(block.begin(), block.end(), [&](int32_t t) { return t >= 0 && shape.changed[std::size_t(t)]; }))
+        continue;
+      terms.entries.push_back({int32_t(s), int32_t(b)});
+      quantise(shape.nonlinear, block, terms.nonlinear);
+      quantise(shape.gradient, block, terms.gradient);
+    }
+    terms.block_begin.push_back(int32_t(terms.entries.size()));
+  }
+  terms.shape_begin.assign(shapes.size() + 1, 0);
+  for (const auto& e : terms.entries) ++terms.shape_begin[std::size_t(e.shape) + 1];
+  for (std::size_t s = 0; s < shapes.size(); ++s) terms.shape_begin[s + 1] += terms.shape_begin[s];
+  terms.shape_entries.resize(terms.entries.size());
+  std::vector<int32_t> fill(terms.shape_begin.begin(), terms.shape_begin.end() - 1);
+  for (std::size_t e = 0; e < terms.entries.size(); ++e)
+    terms.shape_entries[std::size_t(fill[std::size_t(terms.entries[e].shape)]++)] = int32_t(e);
   return terms;
 }
 
@@ -180,15 +267,13 @@ void build_marker_paths(SolverModel& model) {
     for (int k = 0; k < 3; ++k) incident[std::size_t(rig.triangles(k, t))].push_back(int(t));
   constexpr double kTurning = 0.05;  // radians; below this a straight path is as good
   for (Eigen::Index s = 0; s < M; ++s) {
-    const auto& terms = model.shape_terms[std::size_t(s)];
     for (Eigen::Index k = 0; k < K; ++k) {
       const auto& b = model.markers[std::size_t(k)];
       Eigen::Vector3d r = Eigen::Vector3d::Zero();
       for (int a = 0; a < 3; ++a) {
         const auto& tris = incident[std::size_t(b.vertices[a])];
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        for (int t : tris)
-          if (terms.covers(t)) sum += Eigen::Vector3d(terms.nonlinear_at(0, t), terms.nonlinear_at(1, t), terms.nonlinear_at(2, t));
+        for (int t : tris) sum += model.triangle_terms.rotation_log(s, t);
         if (!tris.empty()) r += b.barycentric[a] * sum / double(tris.size());
       }
       const double theta = r.norm();
@@ -223,6 +308,16 @@ void choose_collision_region(SolverModel& model) {
 }
 
 }  // namespace
+
+Eigen::Vector3d TriangleTerms::rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept {
+  const int32_t slot = slot_of_triangle[std::size_t(triangle)];
+  const auto block = std::size_t(slot / kBlock), i = std::size_t(slot % kBlock);
+  for (int32_t e = block_begin[block]; e < block_begin[block + 1]; ++e) {
+    if (entries[std::size_t(e)].shape != shape) continue;
+    return {nonlinear.at(e, 0, int(i)), nonlinear.at(e, 1, int(i)), nonlinear.at(e, 2, int(i))};
+  }
+  return Eigen::Vector3d::Zero();
+}
 
 Eigen::Matrix3d deformation_gradient(const Eigen::Vector3d& a0, const Eigen::Vector3d& b0, const Eigen::Vector3d& c0,
                                      const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
@@ -286,15 +381,15 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   {
     const auto t0 = Clock::now();
     const Eigen::Index M = rig.shape_count();
-    model->shape_terms.resize(std::size_t(M));
+    auto shapes = std::vector<ShapeDeformation>(std::size_t(M));
     const unsigned threads = std::max(1u, std::min(std::thread::hardware_concurrency(), unsigned(M)));
     std::vector<std::thread> pool;
     for (unsigned w = 0; w < threads; ++w)
       pool.emplace_back([&, w] {
-        for (Eigen::Index s = w; s < M; s += threads) model->shape_terms[std::size_t(s)] = build_shape_terms(rig, s, adjacency);
+        for (Eigen::Index s = w; s < M; s += threads) shapes[std::size_t(s)] = build_shape_deformation(rig, s, adjacency);
       });
     for (auto& t : pool) t.join();
-    for (const auto& terms : model->shape_terms) model->triangle_terms_kept += std::size_t(terms.count);
+    model->triangle_terms = block_triangle_terms(shapes, rig);
     model->setup.gradients_s = seconds_since(t0);
   }
 

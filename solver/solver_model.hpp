@@ -1,7 +1,9 @@
 #pragma once
 // Everything the per-frame solvers share, precomputed once per rig and marker layout
 // (see build_solver_model). Read-only after construction; safe to share across threads.
+#include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include <Eigen/Core>
@@ -18,19 +20,48 @@ struct SparseShapeDeltas {
   std::vector<float> deltas;  // 3 per vertex
 };
 
-// One shape's per-triangle deformation (Eq. 3) over the contiguous range of triangles it
-// changes, as structure-of-arrays so the per-frame sums stream through vector units.
-// Component c of triangle first_triangle + i is at [c * count + i]; unchanged triangles
-// inside the range hold zeros.
-struct ShapeTriangleTerms {
-  int first_triangle = 0;
-  int count = 0;
-  std::vector<float> nonlinear;  // 9 x count: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
-  std::vector<float> gradient;   // 9 x count: F - I, column-major (deformation transfer)
-  bool covers(int triangle) const { return triangle >= first_triangle && triangle < first_triangle + count; }
-  float nonlinear_at(int component, int triangle) const {
-    return nonlinear[std::size_t(component) * std::size_t(count) + std::size_t(triangle - first_triangle)];
+// Eq. 3 for every (shape, triangle) that changes, stored by blocks of kBlock triangles so
+// that one frame's weighted sum reads memory once, front to back: block b holds, for each
+// shape changing any of its triangles, 9 x kBlock values component-major (component c of
+// slot b * kBlock + i at [c * kBlock + i]). Values are 16-bit fixed point, offset + scale * q
+// with one offset and scale per entry and component spanning the block's range: the
+// per-frame sum is bound by memory bandwidth, and the rounding (half a step of 1/65534 of
+// the block's range) moves vertices by under 1e-5 cm (docs/solver.md, measured on ICT).
+struct TriangleTerms {
+  static constexpr int kBlock = 16;
+  static constexpr std::size_t kEntrySize = 9 * kBlock;
+  struct Entry {
+    int32_t shape = 0, block = 0;
+  };
+  // One set of quantised values: kEntrySize integers, 9 offsets and 9 scales per entry.
+  struct Values {
+    std::vector<int16_t> value;
+    std::vector<float> offset, scale;
+    const int16_t* values_of(int32_t entry) const noexcept { return value.data() + kEntrySize * std::size_t(entry); }
+    const float* offsets_of(int32_t entry) const noexcept { return offset.data() + 9 * std::size_t(entry); }
+    const float* scales_of(int32_t entry) const noexcept { return scale.data() + 9 * std::size_t(entry); }
+    float at(int32_t entry, int component, int i) const noexcept {
+      return offsets_of(entry)[component] + scales_of(entry)[component] * float(values_of(entry)[component * kBlock + i]);
+    }
+  };
+  // Slot b * kBlock + i is triangle triangle_of_slot[slot] (-1: padding). Triangles go in
+  // Morton order of their rest centroids so that a block holds neighbours, whose values
+  // are alike and quantise finely.
+  std::vector<int32_t> triangle_of_slot, slot_of_triangle;
+  std::vector<Entry> entries;           // grouped by block, shapes ascending within a block
+  std::vector<int32_t> block_begin;     // blocks + 1: block b's entries are [block_begin[b], block_begin[b + 1])
+  std::vector<int32_t> shape_begin;     // shapes + 1: shape s's entries are shape_entries[shape_begin[s] ..]
+  std::vector<int32_t> shape_entries;
+  Values nonlinear;  // log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
+  Values gradient;   // F - I, column-major (deformation transfer)
+
+  int block_count() const noexcept { return int(block_begin.size()) - 1; }
+  std::span<const int32_t> entries_of_shape(Eigen::Index shape) const noexcept {
+    return {shape_entries.data() + shape_begin[std::size_t(shape)],
+            std::size_t(shape_begin[std::size_t(shape) + 1] - shape_begin[std::size_t(shape)])};
   }
+  // The rotation log of `shape` at `triangle`; zero where the shape leaves it unchanged.
+  Eigen::Vector3d rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept;
 };
 
 // How a marker moves with one shape's weight t under Eq. 4 where the shape turns the
@@ -68,7 +99,7 @@ class SolverModel {
   // Eq. 3-5: per triangle j, Q_j = area_j [grad phi_1, grad phi_2, grad phi_3] so the
   // right-hand side gains T_j Q_j on the triangle's three vertices.
   Eigen::Matrix<double, 9, Eigen::Dynamic> triangle_operator;  // 9 x T, column-major 3x3
-  std::vector<ShapeTriangleTerms> shape_terms;                 // M
+  TriangleTerms triangle_terms;
   std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
 
   // Low-rank modifications of A0 without refactoring: a marker dropping out removes
@@ -85,7 +116,6 @@ class SolverModel {
   }
 
   SolverSetupTimes setup;
-  std::size_t triangle_terms_kept = 0;  // (shape, triangle) entries stored
 
   Eigen::Index marker_count() const { return Eigen::Index(markers.size()); }
   Eigen::Index shape_count() const { return rig.shape_count(); }

@@ -2,6 +2,7 @@
 // Everything here after construction is real-time safe unless said otherwise.
 #include <array>
 #include <cmath>
+#include <cstring>
 
 #include <fmt/format.h>
 
@@ -19,6 +20,10 @@ namespace {
 constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear", "dt", "meshik"};
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
 constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds the stage to about a millisecond
+
+// One component of a TriangleTerms block: 16 lanes, one vector register with AVX-512.
+using Lanes16 = float __attribute__((vector_size(64)));
+using Shorts16 = int16_t __attribute__((vector_size(32)));
 
 class StageClock {
  public:
@@ -210,18 +215,19 @@ class PoissonSolver : public FaceSolver {
       : FaceSolver(std::move(model)), blend_(blend), weights_(*model_, blend == Blend::kNonlinear) {
     const SolverModel& m = *model_;
     const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
-    sums_.assign(9 * std::size_t(T), 0.0f);
-    contribution_.assign(9 * std::size_t(T), 0.0);
-    operator_.resize(9 * std::size_t(T));
-    // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied component-major.
+    constexpr std::size_t B = TriangleTerms::kBlock;
+    operator_.assign(std::size_t(m.triangle_terms.block_count()) * TriangleTerms::kEntrySize, 0.0);
+    // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied in blocks like the terms.
     identity_rhs_.setZero(3, N);
     for (Eigen::Index t = 0; t < T; ++t) {
       const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
       for (int k = 0; k < 3; ++k) identity_rhs_.col(m.rig.triangles(k, t)) += Q.col(k);
-      for (int c = 0; c < 9; ++c) operator_[std::size_t(c) * std::size_t(T) + std::size_t(t)] = Q.data()[c];
+      const auto slot = std::size_t(m.triangle_terms.slot_of_triangle[std::size_t(t)]);
+      for (int c = 0; c < 9; ++c)
+        operator_[slot / B * TriangleTerms::kEntrySize + std::size_t(c) * B + slot % B] = Q.data()[c];
     }
     rhs_.resize(3, N);
-    work_.resize(3, N);
+    work_.resize(4, N);
     if (!m.collision_triangles.empty()) {
       ColliderConfig config;
       config.epsilon = m.params.collision_epsilon;
@@ -266,17 +272,9 @@ class PoissonSolver : public FaceSolver {
   void solve_mesh(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out,
                   StageClock& clock) noexcept {
     const SolverModel& m = *model_;
-    blend(out.weights);
+    blend(out.weights);  // also the triangles' share of the right-hand side
     clock.lap(SolveStage::kBlend);
 
-    rhs_ = identity_rhs_;
-    const Eigen::Index T = m.rig.triangle_count();
-    const double* C = contribution_.data();
-    for (Eigen::Index t = 0; t < T; ++t)
-      for (int k = 0; k < 3; ++k) {
-        double* column = rhs_.col(m.rig.triangles(k, t)).data();
-        for (int r = 0; r < 3; ++r) column[r] += C[(3 * k + r) * T + t];
-      }
     modification_count_ = 0;
     const double beta = m.params.beta;
     for (Eigen::Index k = 0; k < m.marker_count(); ++k) {
@@ -297,68 +295,102 @@ class PoissonSolver : public FaceSolver {
     clock.finish();
   }
 
-  // Sums the active shapes' per-triangle terms, turns each sum into T_j - I (Eq. 4 for
-  // nonlinear, sum w_i (F_ij - I) for dt) and multiplies by Q_j into contribution_.
-  // Component-major arrays keep both loops in vector registers.
+  // Block by block: sums the active shapes' terms in vector registers, turns each sum into
+  // T_j - I (Eq. 4 for nonlinear, sum w_i (F_ij - I) for dt), multiplies by Q_j and adds
+  // that to rhs_ (which starts as the T = I right-hand side). The terms are read once,
+  // front to back: memory bandwidth is what bounds the stage.
   void blend(const Eigen::VectorXd& w) noexcept {
     const SolverModel& m = *model_;
-    const std::size_t T = std::size_t(m.rig.triangle_count());
-    std::fill(sums_.begin(), sums_.end(), 0.0f);
-    for (Eigen::Index s = 0; s < m.shape_count(); ++s) {
-      if (w[s] <= m.params.active_weight) continue;
-      const float ws = float(w[s]);
-      const auto& terms = m.shape_terms[std::size_t(s)];
-      const std::size_t n = std::size_t(terms.count);
-      const float* source = blend_ == Blend::kNonlinear ? terms.nonlinear.data() : terms.gradient.data();
-      for (std::size_t c = 0; c < 9; ++c) {
-        float* __restrict dst = sums_.data() + c * T + std::size_t(terms.first_triangle);
-        const float* __restrict src = source + c * n;
-        for (std::size_t i = 0; i < n; ++i) dst[i] += ws * src[i];
+    rhs_ = identity_rhs_;
+    const TriangleTerms& terms = m.triangle_terms;
+    constexpr int B = TriangleTerms::kBlock;
+    constexpr std::size_t E = TriangleTerms::kEntrySize;
+    static_assert(B == 16, "one component of a block is one Lanes16");
+    alignas(64) float sum[E];
+    for (int block = 0; block < terms.block_count(); ++block) {
+      Lanes16 lanes[9] = {};
+      float offset_sum[9] = {};
+      for (int32_t e = terms.block_begin[std::size_t(block)]; e < terms.block_begin[std::size_t(block) + 1]; ++e) {
+        const double ws = w[terms.entries[std::size_t(e)].shape];
+        if (ws <= m.params.active_weight) continue;
+        const TriangleTerms::Values& values = blend_ == Blend::kNonlinear ? terms.nonlinear : terms.gradient;
+        const int16_t* src = values.values_of(e);
+        const float* scale = values.scales_of(e);
+        const float* offset = values.offsets_of(e);
+        for (int c = 0; c < 9; ++c) {
+          Shorts16 q;
+          std::memcpy(&q, src + c * B, sizeof q);
+          lanes[c] += (float(ws) * scale[c]) * __builtin_convertvector(q, Lanes16);
+          offset_sum[c] += float(ws) * offset[c];
+        }
       }
-    }
-    const float* S = sums_.data();
-    const double* Q = operator_.data();
-    double* out = contribution_.data();
-    if (blend_ == Blend::kDeformationTransfer) {
-      for (std::size_t t = 0; t < T; ++t)
-        for (int r = 0; r < 3; ++r)
-          for (int k = 0; k < 3; ++k)
-            out[(3 * k + r) * T + t] = S[r * T + t] * Q[(3 * k) * T + t] + S[(3 + r) * T + t] * Q[(3 * k + 1) * T + t] +
-                                       S[(6 + r) * T + t] * Q[(3 * k + 2) * T + t];
-      return;
-    }
-    for (std::size_t t = 0; t < T; ++t) {
-      const double rx = S[t], ry = S[T + t], rz = S[2 * T + t];
-      const double x = rx * rx + ry * ry + rz * rz;
-      // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to 1e-10
-      // for theta <= 2.5; larger turns are redone with sin and cos below.
-      double a = 1.0 / 6227020800.0, b = 1.0 / 87178291200.0;  // 1/13!, 1/14!
-      constexpr double kInvFactorial[] = {1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0, 1.0 / 6.0, 1.0};
-      constexpr double kInvFactorialEven[] = {1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5};
-      for (int i = 0; i < 6; ++i) {
-        a = kInvFactorial[i] - x * a;
-        b = kInvFactorialEven[i] - x * b;
+      for (int c = 0; c < 9; ++c) {
+        const Lanes16 v = lanes[c] + offset_sum[c];
+        std::memcpy(sum + c * B, &v, sizeof v);
       }
-      finish_triangle(t, T, rx, ry, rz, x, a, b, S, Q, out);
-    }
-    for (std::size_t t = 0; t < T; ++t) {
-      const double rx = S[t], ry = S[T + t], rz = S[2 * T + t];
-      const double x = rx * rx + ry * ry + rz * rz;
-      if (x <= 6.25) continue;
-      const double theta = std::sqrt(x);
-      finish_triangle(t, T, rx, ry, rz, x, std::sin(theta) / theta, (1.0 - std::cos(theta)) / x, S, Q, out);
+      const double* Q = operator_.data() + std::size_t(block) * E;
+      alignas(64) double out[E];  // (T_j - I) Q_j, component-major like sum
+      if (blend_ == Blend::kDeformationTransfer)
+        transfer_block(sum, Q, out);
+      else
+        nonlinear_block(sum, Q, out);
+      for (int i = 0; i < B; ++i) {
+        const int32_t t = terms.triangle_of_slot[std::size_t(block) * B + std::size_t(i)];
+        if (t < 0) continue;
+        for (int k = 0; k < 3; ++k) {
+          double* column = rhs_.col(m.rig.triangles(k, t)).data();
+          for (int r = 0; r < 3; ++r) column[r] += out[(3 * k + r) * B + i];
+        }
+      }
     }
   }
 
-  // out = (R (I + S) - I) Q for one triangle, R = I + a [r]x + b [r]x^2.
-  static void finish_triangle(std::size_t t, std::size_t T, double rx, double ry, double rz, double x, double a,
-                              double b, const float* S, const double* Q, double* out) noexcept {
+  // out = sum Q per slot of a block: deformation transfer's T - I = sum w_i (F_i - I).
+  static void transfer_block(const float* sum, const double* Q, double* out) noexcept {
+    constexpr int B = TriangleTerms::kBlock;
+    for (int t = 0; t < B; ++t)
+      for (int r = 0; r < 3; ++r)
+        for (int k = 0; k < 3; ++k)
+          out[(3 * k + r) * B + t] = sum[r * B + t] * Q[(3 * k) * B + t] + sum[(3 + r) * B + t] * Q[(3 * k + 1) * B + t] +
+                                     sum[(6 + r) * B + t] * Q[(3 * k + 2) * B + t];
+  }
+
+  // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4).
+  static void nonlinear_block(const float* sum, const double* Q, double* out) noexcept {
+    constexpr int B = TriangleTerms::kBlock;
+      for (int t = 0; t < B; ++t) {
+        const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
+        const double x = rx * rx + ry * ry + rz * rz;
+        // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to 1e-10
+        // for theta <= 2.5; larger turns are redone with sin and cos below.
+        double a = 1.0 / 6227020800.0, b = 1.0 / 87178291200.0;  // 1/13!, 1/14!
+        constexpr double kInvFactorial[] = {1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0, 1.0 / 6.0, 1.0};
+        constexpr double kInvFactorialEven[] = {1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5};
+        for (int i = 0; i < 6; ++i) {
+          a = kInvFactorial[i] - x * a;
+          b = kInvFactorialEven[i] - x * b;
+        }
+        finish_triangle(t, rx, ry, rz, x, a, b, sum, Q, out);
+      }
+      for (int t = 0; t < B; ++t) {
+        const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
+        const double x = rx * rx + ry * ry + rz * rz;
+        if (x <= 6.25) continue;
+        const double theta = std::sqrt(x);
+        finish_triangle(t, rx, ry, rz, x, std::sin(theta) / theta, (1.0 - std::cos(theta)) / x, sum, Q, out);
+      }
+  }
+
+  // out = (R (I + S) - I) Q for triangle t of a block, R = I + a [r]x + b [r]x^2.
+  static void finish_triangle(int t, double rx, double ry, double rz, double x, double a, double b, const float* S,
+                              const double* Q, double* out) noexcept {
+    constexpr int B = TriangleTerms::kBlock;
     double R[9];  // column-major
     R[0] = 1 + b * (rx * rx - x); R[3] = -a * rz + b * rx * ry;  R[6] = a * ry + b * rx * rz;
     R[1] = a * rz + b * rx * ry;  R[4] = 1 + b * (ry * ry - x);  R[7] = -a * rx + b * ry * rz;
     R[2] = -a * ry + b * rx * rz; R[5] = a * rx + b * ry * rz;   R[8] = 1 + b * (rz * rz - x);
-    const double sxx = 1 + S[3 * T + t], syy = 1 + S[4 * T + t], szz = 1 + S[5 * T + t];
-    const double sxy = S[6 * T + t], sxz = S[7 * T + t], syz = S[8 * T + t];
+    const double sxx = 1 + S[3 * B + t], syy = 1 + S[4 * B + t], szz = 1 + S[5 * B + t];
+    const double sxy = S[6 * B + t], sxz = S[7 * B + t], syz = S[8 * B + t];
     const double Sm[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};
     double M[9];  // R S - I
     for (int c = 0; c < 3; ++c)
@@ -366,8 +398,8 @@ class PoissonSolver : public FaceSolver {
         M[3 * c + r] = R[r] * Sm[3 * c] + R[3 + r] * Sm[3 * c + 1] + R[6 + r] * Sm[3 * c + 2] - (r == c ? 1.0 : 0.0);
     for (int k = 0; k < 3; ++k)
       for (int r = 0; r < 3; ++r)
-        out[(3 * k + r) * T + t] =
-            M[r] * Q[(3 * k) * T + t] + M[3 + r] * Q[(3 * k + 1) * T + t] + M[6 + r] * Q[(3 * k + 2) * T + t];
+        out[(3 * k + r) * B + t] =
+            M[r] * Q[(3 * k) * B + t] + M[3 + r] * Q[(3 * k + 1) * B + t] + M[6 + r] * Q[(3 * k + 2) * B + t];
   }
 
   // Triangle pairs closer than epsilon pin their vertices to the linear blend
@@ -460,10 +492,9 @@ class PoissonSolver : public FaceSolver {
 
   Blend blend_;
   WeightsStage weights_;
-  std::vector<float> sums_;            // 9 x T component-major: summed shape terms
-  std::vector<double> operator_;       // 9 x T component-major copy of Q_j
-  std::vector<double> contribution_;   // 9 x T component-major: (T_j - I) Q_j
-  Eigen::Matrix3Xd identity_rhs_, rhs_, work_;
+  std::vector<double> operator_;       // Q_j, block-major like TriangleTerms
+  Eigen::Matrix3Xd identity_rhs_, rhs_;
+  Eigen::Matrix4Xd work_;
   std::vector<Modification> modifications_;
   Eigen::Index modification_count_ = 0;
   Eigen::MatrixXd small_;

@@ -20,21 +20,18 @@ class SparseLdlt {
   Eigen::Index size() const { return n_; }
   Eigen::Index factor_nonzeros() const { return Eigen::Index(row_.size()); }
 
-  // x = A^-1 b for the 3 x N interleaved right-hand sides, in place; work is 3 x N
+  // x = A^-1 b for the 3 x N interleaved right-hand sides, in place; work is 4 x N
   // scratch owned by the caller (so one factor serves several solvers). Real-time safe.
-  void solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix3Xd& work) const noexcept;
+  void solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) const noexcept;
   // x = A^-1 b for one right-hand side, in place; work has N entries. Real-time safe.
   void solve_in_place(Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept;
 
  private:
   Eigen::Index n_ = 0;
   std::vector<int> perm_;            // factor row i is A's row perm_[i]
-  // Strictly-lower entries of the unit L, by column (for L^T) and by row (for L), so both
-  // triangular solves gather rather than scatter.
+  // Strictly-lower entries of the unit L, by column.
   std::vector<int> col_start_, row_;
   std::vector<double> value_;
-  std::vector<int> row_start_, col_;
-  std::vector<double> row_value_;
   std::vector<double> inv_diagonal_; // 1 / D
 };
 

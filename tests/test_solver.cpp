@@ -87,6 +87,34 @@ TEST_CASE("solvers reproduce the neutral and every built-in shape exactly") {
   }
 }
 
+// The same on a real rig: ICT's shapes turn triangles by up to pi, and its Eq. 3 terms are
+// stored as 16-bit fixed point; both must stay within 1e-5 cm of each shape.
+TEST_CASE("nonlinear and dt reproduce every ICT FaceKit shape within 1e-5 cm") {
+  FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
+  const Rig rig = load_rig(dir.string());
+  const auto layout = spread_marker_layout(rig, 60);
+  SolverParams params;
+  params.collision_region = CollisionRegion::kNone;  // the shapes themselves have lip contacts
+  const auto model = build_solver_model(rig, layout, params);
+  for (const char* name : {"nonlinear", "dt"}) {
+    auto solver = make_solver(name, model);
+    SolveResult out = solver->make_result();
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+    double worst = 0.0;
+    std::string worst_shape;
+    for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
+      w.setZero();
+      w[s] = 1.0;
+      const Eigen::Matrix3Xd shape = rig.shape_positions(s);
+      solver->solve_with_weights(w, markers_of(shape, layout), all_present(60), out);
+      const double error = max_error(out.vertices, shape);
+      if (error > worst) { worst = error; worst_shape = rig.shape_names[std::size_t(s)]; }
+    }
+    INFO(name << ": largest error " << worst << " cm, on " << worst_shape);
+    CHECK(worst < 1e-5);
+  }
+}
+
 TEST_CASE("a missing marker gives the same mesh as a layout without it") {
   const Rig& rig = BuiltinFace::instance().rig();
   const auto layout = spread_marker_layout(rig, 40);
