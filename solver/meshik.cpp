@@ -28,17 +28,17 @@ Eigen::Matrix3d symmetric_from6(const double* s, double diagonal) {
 // Calls f(triangle, v) for every triangle `shape` changes, v[c] being component c of
 // its Eq. 3 terms.
 template <class F>
-void for_each_changed_triangle(const TriangleTerms& terms, Eigen::Index shape, F&& f) {
-  constexpr int B = TriangleTerms::kBlock;
-  for (const int32_t e : terms.entries_of_shape(shape)) {
-    const std::size_t first = std::size_t(terms.entries[std::size_t(e)].block) * B;
+void for_each_changed_triangle(const SolverModel& m, Eigen::Index shape, F&& f) {
+  constexpr int B = ShapeBlocks::kBlock;
+  for (const int32_t e : m.triangle_blocks.entries_of_shape(shape)) {
+    const std::size_t first = std::size_t(m.triangle_blocks.entries[std::size_t(e)].block) * B;
     for (int i = 0; i < B; ++i) {
-      const int32_t t = terms.triangle_of_slot[first + std::size_t(i)];
+      const int32_t t = m.triangle_blocks.element_of_slot[first + std::size_t(i)];
       if (t < 0) continue;
       std::array<double, 9> v;
       bool changes = false;
       for (int c = 0; c < 9; ++c) {
-        v[std::size_t(c)] = terms.nonlinear.at(e, c, i);
+        v[std::size_t(c)] = m.triangle_nonlinear.at(e, c, i);
         changes = changes || v[std::size_t(c)] != 0.0;
       }
       if (changes) f(Eigen::Index(t), v);
@@ -135,7 +135,7 @@ struct MeshIkSolver::State {
     }
     std::vector<uint8_t> shaped(std::size_t(T), 0);
     for (Eigen::Index i = 0; i < M; ++i)
-      for_each_changed_triangle(m.triangle_terms, i, [&](Eigen::Index t, const std::array<double, 9>&) { shaped[std::size_t(t)] = 1; });
+      for_each_changed_triangle(m, i, [&](Eigen::Index t, const std::array<double, 9>&) { shaped[std::size_t(t)] = 1; });
     for (Eigen::Index t = 0; t < T; ++t)
       if (shaped[std::size_t(t)]) shaped_triangles.push_back(int(t));
     log_sum.setZero(3, T);
@@ -212,7 +212,7 @@ struct MeshIkSolver::State {
     for (Eigen::Index s = 0; s < M; ++s) {
       const double ws = weights[s];
       if (ws == 0.0) continue;
-      for_each_changed_triangle(m.triangle_terms, s, [&](Eigen::Index t, const std::array<double, 9>& v) {
+      for_each_changed_triangle(m, s, [&](Eigen::Index t, const std::array<double, 9>& v) {
         for (int k = 0; k < 3; ++k) log_sum(k, t) += ws * v[std::size_t(k)];
         for (int k = 0; k < 6; ++k) stretch_sum(k, t) += ws * v[std::size_t(3 + k)];
       });
@@ -283,9 +283,9 @@ struct MeshIkSolver::State {
     const double h = options.difference_step;
     jacobian.setZero();
     for (Eigen::Index i = 0; i < M; ++i) {
-      if (m.triangle_terms.entries_of_shape(i).empty()) continue;  // the shape deforms no triangle: its column is zero
+      if (m.triangle_blocks.entries_of_shape(i).empty()) continue;  // the shape deforms no triangle: its column is zero
       column_rhs.setZero();
-      for_each_changed_triangle(m.triangle_terms, i, [&](Eigen::Index t, const std::array<double, 9>& v) {
+      for_each_changed_triangle(m, i, [&](Eigen::Index t, const std::array<double, 9>& v) {
         Eigen::Map<Eigen::Matrix3d> dT(&transform_derivative[9 * std::size_t(t)]);
         const Eigen::Vector3d L = log_sum.col(t);
         const Eigen::Vector3d l(v[0], v[1], v[2]);
@@ -301,7 +301,7 @@ struct MeshIkSolver::State {
       solve_system(column_rhs);  // dx / dw_i
       auto column = jacobian.col(i);
       triangle_residuals(column_rhs, column, /*with_targets=*/false);
-      for_each_changed_triangle(m.triangle_terms, i, [&](Eigen::Index t, const std::array<double, 9>&) {
+      for_each_changed_triangle(m, i, [&](Eigen::Index t, const std::array<double, 9>&) {
         const Eigen::Map<const Eigen::Matrix3d> dT(&transform_derivative[9 * std::size_t(t)]);
         Matrix32 d = dT * Eigen::Map<const Matrix32>(target_projection.col(t).data());
         column.segment<6>(6 * t) -= Eigen::Map<const Eigen::Matrix<double, 6, 1>>(d.data());

@@ -59,20 +59,6 @@ void build_marker_rows(SolverModel& model) {
         model.marker_basis.middleRows(3 * k, 3).transpose() * model.marker_basis.middleRows(3 * k, 3);
 }
 
-void build_shape_deltas(SolverModel& model) {
-  const Rig& rig = model.rig;
-  model.shape_deltas.resize(std::size_t(rig.shape_count()));
-  for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
-    auto& out = model.shape_deltas[std::size_t(s)];
-    for (Eigen::Index v = 0; v < rig.vertex_count(); ++v) {
-      const Eigen::Vector3d d = rig.deltas.col(s).segment<3>(3 * v);
-      if (d.isZero(0.0)) continue;
-      out.vertices.push_back(int(v));
-      out.deltas.insert(out.deltas.end(), {float(d.x()), float(d.y()), float(d.z())});
-    }
-  }
-}
-
 // Q_j and the Laplacian-like G^T W G.
 Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
   const Rig& rig = model.rig;
@@ -171,10 +157,9 @@ ShapeDeformation build_shape_deformation(const Rig& rig, Eigen::Index shape, con
   return out;
 }
 
-// Triangles in Morton order of their rest centroids: neighbours on the face end up in
-// the same block, where values are alike and quantise finely.
-std::vector<int32_t> space_filling_order(const Rig& rig) {
-  const BoundingBox box = bounding_box(rig.neutral);
+// Indices of `points` (3 x n) in Morton order: near points end up near in the order.
+std::vector<int32_t> morton_order(const Eigen::Matrix3Xd& points) {
+  const BoundingBox box = bounding_box(points);
   const Eigen::Array3d extent = box.size().array().max(1e-12);
   auto spread = [](uint64_t v) {  // 21 bits -> every third bit
     v &= 0x1fffff;
@@ -185,77 +170,119 @@ std::vector<int32_t> space_filling_order(const Rig& rig) {
     v = (v | v << 2) & 0x1249249249249249ULL;
     return v;
   };
-  const Eigen::Index T = rig.triangle_count();
-  auto keyed = std::vector<std::pair<uint64_t, int32_t>>(std::size_t(T));
-  for (Eigen::Index t = 0; t < T; ++t) {
-    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 3; ++k) centroid += rig.neutral.col(rig.triangles(k, t)) / 3.0;
-    const Eigen::Array3d unit = ((centroid - box.min).array() / extent).min(1.0).max(0.0);
+  auto keyed = std::vector<std::pair<uint64_t, int32_t>>(std::size_t(points.cols()));
+  for (Eigen::Index i = 0; i < points.cols(); ++i) {
+    const Eigen::Array3d unit = ((points.col(i) - box.min).array() / extent).min(1.0).max(0.0);
     uint64_t code = 0;
     for (int a = 0; a < 3; ++a) code |= spread(uint64_t(unit[a] * 2097151.0)) << a;
-    keyed[std::size_t(t)] = {code, int32_t(t)};
+    keyed[std::size_t(i)] = {code, int32_t(i)};
   }
   std::sort(keyed.begin(), keyed.end());
-  auto order = std::vector<int32_t>(std::size_t(T));
+  auto order = std::vector<int32_t>(keyed.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = keyed[i].second;
   return order;
 }
 
-// Appends one entry: the given triangles (-1: padding) of 9 x T triangle-major values.
-void quantise(const std::vector<float>& values, std::span<const int32_t> triangles, TriangleTerms::Values& out) {
-  constexpr int B = TriangleTerms::kBlock;
-  const std::size_t base = out.value.size();
-  out.value.resize(base + TriangleTerms::kEntrySize, 0);
-  for (std::size_t c = 0; c < 9; ++c) {
-    double low = std::numeric_limits<double>::infinity(), high = -low;
-    for (const int32_t t : triangles) {
-      if (t < 0) continue;
-      low = std::min(low, double(values[9 * std::size_t(t) + c]));
-      high = std::max(high, double(values[9 * std::size_t(t) + c]));
-    }
-    const float offset = float(0.5 * (low + high));
-    const float scale = high > low ? float((high - low) / 65534.0) : 1.0f;
-    out.offset.push_back(offset);
-    out.scale.push_back(scale);
-    for (std::size_t i = 0; i < triangles.size(); ++i) {
-      if (triangles[i] < 0) continue;
-      const long q = std::lround((double(values[9 * std::size_t(triangles[i]) + c]) - offset) / scale);
-      out.value[base + c * B + i] = int16_t(std::clamp(q, -32767L, 32767L));
-    }
+// Blocks over elements at `positions` (3 x n); changes(shape, element) says which get entries.
+template <class Changes>
+ShapeBlocks make_shape_blocks(const Eigen::Matrix3Xd& positions, Eigen::Index shapes, Changes&& changes) {
+  constexpr int B = ShapeBlocks::kBlock;
+  const std::vector<int32_t> order = morton_order(positions);
+  const int blocks = int((order.size() + B - 1) / B);
+  ShapeBlocks out;
+  out.element_of_slot.assign(std::size_t(blocks) * B, -1);
+  std::copy(order.begin(), order.end(), out.element_of_slot.begin());
+  out.slot_of_element.resize(order.size());
+  for (std::size_t i = 0; i < order.size(); ++i) out.slot_of_element[std::size_t(order[i])] = int32_t(i);
+  out.block_begin.push_back(0);
+  for (int b = 0; b < blocks; ++b) {
+    const int32_t* slots = out.element_of_slot.data() + std::size_t(b) * B;
+    for (Eigen::Index s = 0; s < shapes; ++s)
+      if (std::any_of(slots, slots + B, [&](int32_t e) { return e >= 0 && changes(s, e); }))
+        out.entries.push_back({int32_t(s), int32_t(b)});
+    out.block_begin.push_back(int32_t(out.entries.size()));
   }
+  out.shape_begin.assign(std::size_t(shapes) + 1, 0);
+  for (const auto& e : out.entries) ++out.shape_begin[std::size_t(e.shape) + 1];
+  for (std::size_t s = 0; s < std::size_t(shapes); ++s) out.shape_begin[s + 1] += out.shape_begin[s];
+  out.shape_entries.resize(out.entries.size());
+  std::vector<int32_t> fill(out.shape_begin.begin(), out.shape_begin.end() - 1);
+  for (std::size_t e = 0; e < out.entries.size(); ++e)
+    out.shape_entries[std::size_t(fill[std::size_t(out.entries[e].shape)]++)] = int32_t(e);
+  return out;
 }
 
-// The shapes' deformations regrouped into TriangleTerms blocks.
-TriangleTerms block_triangle_terms(const std::vector<ShapeDeformation>& shapes, const Rig& rig) {
-  constexpr int B = TriangleTerms::kBlock;
-  const std::vector<int32_t> order = space_filling_order(rig);
-  const int blocks = int((order.size() + B - 1) / B);
-  TriangleTerms terms;
-  terms.triangle_of_slot.assign(std::size_t(blocks) * B, -1);
-  std::copy(order.begin(), order.end(), terms.triangle_of_slot.begin());
-  terms.slot_of_triangle.resize(order.size());
-  for (std::size_t i = 0; i < order.size(); ++i) terms.slot_of_triangle[std::size_t(order[i])] = int32_t(i);
-  terms.block_begin.push_back(0);
-  for (int b = 0; b < blocks; ++b) {
-    const std::span<const int32_t> block(terms.triangle_of_slot.data() + std::size_t(b) * B, B);
-    for (std::size_t s = 0; s < shapes.size(); ++s) {
-      const ShapeDeformation& shape = shapes[s];
-      if (std::none_of(block.begin(), block.end(), [&](int32_t t) { return t >= 0 && shape.changed[std::size_t(t)]; }))
-        continue;
-      terms.entries.push_back({int32_t(s), int32_t(b)});
-      quantise(shape.nonlinear, block, terms.nonlinear);
-      quantise(shape.gradient, block, terms.gradient);
+// value(shape, element, component) quantised entry by entry (QuantisedValues); entries
+// whose rounding error (half a step) would exceed `tolerance` get the fine plane.
+template <class Value>
+QuantisedValues quantise(const ShapeBlocks& blocks, int components, double tolerance, Value&& value) {
+  constexpr int B = ShapeBlocks::kBlock;
+  QuantisedValues out;
+  out.components = components;
+  out.value.assign(blocks.entries.size() * out.entry_size(), 0);
+  out.fine_of_entry.assign(blocks.entries.size(), -1);
+  std::vector<double> exact(out.entry_size());
+  for (std::size_t e = 0; e < blocks.entries.size(); ++e) {
+    const auto [shape, block] = blocks.entries[e];
+    const int32_t* slots = blocks.element_of_slot.data() + std::size_t(block) * B;
+    bool needs_fine = false;
+    for (int c = 0; c < components; ++c) {
+      double low = std::numeric_limits<double>::infinity(), high = -low;
+      for (int i = 0; i < B; ++i) {
+        if (slots[i] < 0) continue;
+        low = std::min(low, value(shape, slots[i], c));
+        high = std::max(high, value(shape, slots[i], c));
+      }
+      const float offset = float(0.5 * (low + high));
+      const float scale = high > low ? float((high - low) / 65534.0) : 1.0f;
+      needs_fine = needs_fine || (high > low && 0.5 * scale > tolerance);
+      out.offset.push_back(offset);
+      out.scale.push_back(scale);
+      int16_t* q = out.value.data() + e * out.entry_size() + std::size_t(c) * B;
+      for (int i = 0; i < B; ++i) {
+        if (slots[i] < 0) continue;
+        exact[std::size_t(c) * B + std::size_t(i)] = (value(shape, slots[i], c) - offset) / scale;
+        q[i] = int16_t(std::clamp(std::lround(exact[std::size_t(c) * B + std::size_t(i)]), -32767L, 32767L));
+      }
     }
-    terms.block_begin.push_back(int32_t(terms.entries.size()));
+    if (!needs_fine) continue;
+    out.fine_of_entry[e] = int32_t(out.fine.size() / out.entry_size());
+    const int16_t* q = out.value.data() + e * out.entry_size();
+    for (std::size_t k = 0; k < out.entry_size(); ++k)
+      out.fine.push_back(slots[k % B] < 0 ? int16_t(0) : int16_t(std::clamp(std::lround((exact[k] - q[k]) * 65534.0), -32767L, 32767L)));
   }
-  terms.shape_begin.assign(shapes.size() + 1, 0);
-  for (const auto& e : terms.entries) ++terms.shape_begin[std::size_t(e.shape) + 1];
-  for (std::size_t s = 0; s < shapes.size(); ++s) terms.shape_begin[s + 1] += terms.shape_begin[s];
-  terms.shape_entries.resize(terms.entries.size());
-  std::vector<int32_t> fill(terms.shape_begin.begin(), terms.shape_begin.end() - 1);
-  for (std::size_t e = 0; e < terms.entries.size(); ++e)
-    terms.shape_entries[std::size_t(fill[std::size_t(terms.entries[e].shape)]++)] = int32_t(e);
-  return terms;
+  return out;
+}
+
+void build_vertex_deltas(SolverModel& model) {
+  const Rig& rig = model.rig;
+  model.vertex_blocks = make_shape_blocks(rig.neutral, rig.shape_count(), [&](Eigen::Index s, int32_t v) {
+    return !rig.deltas.col(s).segment<3>(3 * v).isZero(0.0);
+  });
+  // Rounding at most 1e-7 of the face's size (about 3e-6 cm on a face).
+  const double tolerance = 1e-7 * bounding_box(rig.neutral).size().norm();
+  model.vertex_deltas = quantise(model.vertex_blocks, 3, tolerance, [&](Eigen::Index s, int32_t v, int c) {
+    return rig.deltas(3 * v + c, s);
+  });
+}
+
+void build_triangle_terms(SolverModel& model, const std::vector<ShapeDeformation>& shapes) {
+  const Rig& rig = model.rig;
+  Eigen::Matrix3Xd centroids = Eigen::Matrix3Xd::Zero(3, rig.triangle_count());
+  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
+    for (int k = 0; k < 3; ++k) centroids.col(t) += rig.neutral.col(rig.triangles(k, t)) / 3.0;
+  model.triangle_blocks = make_shape_blocks(centroids, rig.shape_count(), [&](Eigen::Index s, int32_t t) {
+    return shapes[std::size_t(s)].changed[std::size_t(t)] != 0;
+  });
+  // Rotation logs and stretches are relative: 1e-6 rad moves a triangle's far corner by a
+  // millionth of its size.
+  constexpr double kTolerance = 1e-6;
+  model.triangle_nonlinear = quantise(model.triangle_blocks, 9, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
+    return double(shapes[std::size_t(s)].nonlinear[9 * std::size_t(t) + std::size_t(c)]);
+  });
+  model.triangle_gradient = quantise(model.triangle_blocks, 9, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
+    return double(shapes[std::size_t(s)].gradient[9 * std::size_t(t) + std::size_t(c)]);
+  });
 }
 
 // Marker paths from the shapes' per-triangle rotations around each marker's vertices.
@@ -273,7 +300,7 @@ void build_marker_paths(SolverModel& model) {
       for (int a = 0; a < 3; ++a) {
         const auto& tris = incident[std::size_t(b.vertices[a])];
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        for (int t : tris) sum += model.triangle_terms.rotation_log(s, t);
+        for (int t : tris) sum += model.rotation_log(s, t);
         if (!tris.empty()) r += b.barycentric[a] * sum / double(tris.size());
       }
       const double theta = r.norm();
@@ -309,14 +336,18 @@ void choose_collision_region(SolverModel& model) {
 
 }  // namespace
 
-Eigen::Vector3d TriangleTerms::rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept {
-  const int32_t slot = slot_of_triangle[std::size_t(triangle)];
-  const auto block = std::size_t(slot / kBlock), i = std::size_t(slot % kBlock);
-  for (int32_t e = block_begin[block]; e < block_begin[block + 1]; ++e) {
-    if (entries[std::size_t(e)].shape != shape) continue;
-    return {nonlinear.at(e, 0, int(i)), nonlinear.at(e, 1, int(i)), nonlinear.at(e, 2, int(i))};
-  }
-  return Eigen::Vector3d::Zero();
+int32_t ShapeBlocks::find_entry(Eigen::Index shape, int block) const noexcept {
+  for (int32_t e = block_begin[std::size_t(block)]; e < block_begin[std::size_t(block) + 1]; ++e)
+    if (entries[std::size_t(e)].shape == shape) return e;
+  return -1;
+}
+
+Eigen::Vector3d SolverModel::rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept {
+  const int32_t slot = triangle_blocks.slot_of_element[std::size_t(triangle)];
+  const int32_t e = triangle_blocks.find_entry(shape, slot / ShapeBlocks::kBlock);
+  if (e < 0) return Eigen::Vector3d::Zero();
+  const int i = slot % ShapeBlocks::kBlock;
+  return {triangle_nonlinear.at(e, 0, i), triangle_nonlinear.at(e, 1, i), triangle_nonlinear.at(e, 2, i)};
 }
 
 Eigen::Matrix3d deformation_gradient(const Eigen::Vector3d& a0, const Eigen::Vector3d& b0, const Eigen::Vector3d& c0,
@@ -375,7 +406,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   model->params = params;
   model->markers = std::move(markers);
   build_marker_rows(*model);
-  build_shape_deltas(*model);
+  build_vertex_deltas(*model);
 
   const TriangleAdjacency adjacency(rig.triangles);
   {
@@ -389,7 +420,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
         for (Eigen::Index s = w; s < M; s += threads) shapes[std::size_t(s)] = build_shape_deformation(rig, s, adjacency);
       });
     for (auto& t : pool) t.join();
-    model->triangle_terms = block_triangle_terms(shapes, rig);
+    build_triangle_terms(*model, shapes);
     model->setup.gradients_s = seconds_since(t0);
   }
 

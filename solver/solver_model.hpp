@@ -14,54 +14,59 @@
 
 namespace facecap {
 
-// One shape's non-zero vertex deltas (float: blendshape deltas are stored data).
-struct SparseShapeDeltas {
-  std::vector<int> vertices;
-  std::vector<float> deltas;  // 3 per vertex
-};
-
-// Eq. 3 for every (shape, triangle) that changes, stored by blocks of kBlock triangles so
-// that one frame's weighted sum reads memory once, front to back: block b holds, for each
-// shape changing any of its triangles, 9 x kBlock values component-major (component c of
-// slot b * kBlock + i at [c * kBlock + i]). Values are 16-bit fixed point, offset + scale * q
-// with one offset and scale per entry and component spanning the block's range: the
-// per-frame sum is bound by memory bandwidth, and the rounding (half a step of 1/65534 of
-// the block's range) moves vertices by under 1e-5 cm (docs/solver.md, measured on ICT).
-struct TriangleTerms {
+// Per-shape values on a mesh's elements (vertices for x0 + B w, triangles for Eq. 3),
+// laid out for the per-frame weighted sum over shapes, which memory bandwidth bounds:
+// elements in Morton order of their rest positions, cut into blocks of kBlock
+// neighbours; per block, an entry for each shape that changes any of its elements.
+// Slot b * kBlock + i of the order is element element_of_slot[slot] (-1: padding).
+struct ShapeBlocks {
   static constexpr int kBlock = 16;
-  static constexpr std::size_t kEntrySize = 9 * kBlock;
   struct Entry {
     int32_t shape = 0, block = 0;
   };
-  // One set of quantised values: kEntrySize integers, 9 offsets and 9 scales per entry.
-  struct Values {
-    std::vector<int16_t> value;
-    std::vector<float> offset, scale;
-    const int16_t* values_of(int32_t entry) const noexcept { return value.data() + kEntrySize * std::size_t(entry); }
-    const float* offsets_of(int32_t entry) const noexcept { return offset.data() + 9 * std::size_t(entry); }
-    const float* scales_of(int32_t entry) const noexcept { return scale.data() + 9 * std::size_t(entry); }
-    float at(int32_t entry, int component, int i) const noexcept {
-      return offsets_of(entry)[component] + scales_of(entry)[component] * float(values_of(entry)[component * kBlock + i]);
-    }
-  };
-  // Slot b * kBlock + i is triangle triangle_of_slot[slot] (-1: padding). Triangles go in
-  // Morton order of their rest centroids so that a block holds neighbours, whose values
-  // are alike and quantise finely.
-  std::vector<int32_t> triangle_of_slot, slot_of_triangle;
-  std::vector<Entry> entries;           // grouped by block, shapes ascending within a block
-  std::vector<int32_t> block_begin;     // blocks + 1: block b's entries are [block_begin[b], block_begin[b + 1])
-  std::vector<int32_t> shape_begin;     // shapes + 1: shape s's entries are shape_entries[shape_begin[s] ..]
+  std::vector<int32_t> element_of_slot, slot_of_element;
+  std::vector<Entry> entries;        // grouped by block, shapes ascending within a block
+  std::vector<int32_t> block_begin;  // blocks + 1: block b's entries are [block_begin[b], block_begin[b + 1])
+  std::vector<int32_t> shape_begin;  // shapes + 1: shape s's entries are shape_entries[shape_begin[s] ..]
   std::vector<int32_t> shape_entries;
-  Values nonlinear;  // log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
-  Values gradient;   // F - I, column-major (deformation transfer)
 
   int block_count() const noexcept { return int(block_begin.size()) - 1; }
   std::span<const int32_t> entries_of_shape(Eigen::Index shape) const noexcept {
     return {shape_entries.data() + shape_begin[std::size_t(shape)],
             std::size_t(shape_begin[std::size_t(shape) + 1] - shape_begin[std::size_t(shape)])};
   }
-  // The rotation log of `shape` at `triangle`; zero where the shape leaves it unchanged.
-  Eigen::Vector3d rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept;
+  // The entry of `shape` in `block`, or -1.
+  int32_t find_entry(Eigen::Index shape, int block) const noexcept;
+};
+
+// `components` values per element for every entry of a ShapeBlocks, component-major
+// (component c of slot i of entry e at value[(e * components + c) * kBlock + i]), as
+// 16-bit fixed point offset + scale * q with one offset and scale per entry and
+// component spanning that block's values: half the bytes of float, and as a block holds
+// neighbours its range is usually small. Entries whose step would exceed the tolerance
+// given at build time carry a second 16-bit plane, offset + scale * (q + fine / 65534),
+// which makes them finer than float.
+struct QuantisedValues {
+  int components = 0;
+  std::vector<int16_t> value;
+  std::vector<float> offset, scale;  // components per entry
+  std::vector<int32_t> fine_of_entry;  // index into `fine` (in units of components * kBlock), or -1
+  std::vector<int16_t> fine;
+
+  std::size_t entry_size() const noexcept { return std::size_t(components) * ShapeBlocks::kBlock; }
+  const int16_t* values_of(int32_t entry) const noexcept { return value.data() + std::size_t(entry) * entry_size(); }
+  const int16_t* fine_values_of(int32_t entry) const noexcept {
+    const int32_t f = fine_of_entry[std::size_t(entry)];
+    return f < 0 ? nullptr : fine.data() + std::size_t(f) * entry_size();
+  }
+  const float* offsets_of(int32_t entry) const noexcept { return offset.data() + std::size_t(entry) * std::size_t(components); }
+  const float* scales_of(int32_t entry) const noexcept { return scale.data() + std::size_t(entry) * std::size_t(components); }
+  double at(int32_t entry, int component, int i) const noexcept {
+    const std::size_t k = std::size_t(component) * ShapeBlocks::kBlock + std::size_t(i);
+    const int16_t* f = fine_values_of(entry);
+    return double(offsets_of(entry)[component]) +
+           double(scales_of(entry)[component]) * (double(values_of(entry)[k]) + (f ? double(f[k]) / 65534.0 : 0.0));
+  }
 };
 
 // How a marker moves with one shape's weight t under Eq. 4 where the shape turns the
@@ -94,12 +99,15 @@ class SolverModel {
 
   std::vector<MarkerPath> marker_paths;         // (marker, shape) pairs that turn
 
-  std::vector<SparseShapeDeltas> shape_deltas;  // M, for x0 + B w
+  ShapeBlocks vertex_blocks;
+  QuantisedValues vertex_deltas;  // B's columns (x, y, z), for x0 + B w
 
   // Eq. 3-5: per triangle j, Q_j = area_j [grad phi_1, grad phi_2, grad phi_3] so the
   // right-hand side gains T_j Q_j on the triangle's three vertices.
   Eigen::Matrix<double, 9, Eigen::Dynamic> triangle_operator;  // 9 x T, column-major 3x3
-  TriangleTerms triangle_terms;
+  ShapeBlocks triangle_blocks;
+  QuantisedValues triangle_nonlinear;  // Eq. 3: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
+  QuantisedValues triangle_gradient;   // F - I, column-major (deformation transfer)
   std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
 
   // Low-rank modifications of A0 without refactoring: a marker dropping out removes
@@ -118,6 +126,8 @@ class SolverModel {
   SolverSetupTimes setup;
 
   Eigen::Index marker_count() const { return Eigen::Index(markers.size()); }
+  // The rotation log of `shape` at `triangle`; zero where the shape leaves it unchanged.
+  Eigen::Vector3d rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept;
   Eigen::Index shape_count() const { return rig.shape_count(); }
   Eigen::Index vertex_count() const { return rig.vertex_count(); }
 };

@@ -21,7 +21,7 @@ constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear",
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
 constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds the stage to about a millisecond
 
-// One component of a TriangleTerms block: 16 lanes, one vector register with AVX-512.
+// One component of a ShapeBlocks block.
 using Lanes16 = float __attribute__((vector_size(64)));
 using Shorts16 = int16_t __attribute__((vector_size(32)));
 
@@ -156,20 +156,50 @@ class WeightsStage {
   Eigen::Array<bool, Eigen::Dynamic, 1> present_;
 };
 
-// x0 + B w over the active weights and each shape's non-zero vertices.
+// sum over the active shapes' entries in `block` of w_s * value, one Lanes16 per component
+// (ShapeBlocks::kBlock is 16: one vector register per component with AVX-512).
+template <int Components>
+void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int block, const Eigen::VectorXd& w,
+               double active_weight, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
+  static_assert(ShapeBlocks::kBlock == 16, "one component of a block is one Lanes16");
+  Lanes16 lanes[Components] = {};
+  float offset_sum[Components] = {};
+  for (int32_t e = blocks.block_begin[std::size_t(block)]; e < blocks.block_begin[std::size_t(block) + 1]; ++e) {
+    const double ws = w[blocks.entries[std::size_t(e)].shape];
+    if (ws <= active_weight) continue;
+    const int16_t* q = values.values_of(e);
+    const int16_t* fine = values.fine_values_of(e);
+    const float* scale = values.scales_of(e);
+    const float* offset = values.offsets_of(e);
+    for (int c = 0; c < Components; ++c) {
+      Shorts16 v;
+      std::memcpy(&v, q + c * 16, sizeof v);
+      const float f = float(ws) * scale[c];
+      lanes[c] += f * __builtin_convertvector(v, Lanes16);
+      offset_sum[c] += float(ws) * offset[c];
+      if (fine) {
+        std::memcpy(&v, fine + c * 16, sizeof v);
+        lanes[c] += (f * (1.0f / 65534.0f)) * __builtin_convertvector(v, Lanes16);
+      }
+    }
+  }
+  for (int c = 0; c < Components; ++c) {
+    const Lanes16 v = lanes[c] + offset_sum[c];
+    std::memcpy(sum + c * 16, &v, sizeof v);
+  }
+}
+
+// x0 + B w over the active weights, block by block (ShapeBlocks).
 void linear_blend(const SolverModel& m, const Eigen::VectorXd& w, Eigen::Matrix3Xd& out) noexcept {
-  out = m.rig.neutral;
-  double* x = out.data();
-  for (Eigen::Index s = 0; s < m.shape_count(); ++s) {
-    const double ws = w[s];
-    if (ws <= m.params.active_weight) continue;
-    const auto& d = m.shape_deltas[std::size_t(s)];
-    const float* delta = d.deltas.data();
-    for (std::size_t i = 0; i < d.vertices.size(); ++i) {
-      double* p = x + 3 * d.vertices[i];
-      p[0] += ws * delta[3 * i];
-      p[1] += ws * delta[3 * i + 1];
-      p[2] += ws * delta[3 * i + 2];
+  constexpr int B = ShapeBlocks::kBlock;
+  const ShapeBlocks& blocks = m.vertex_blocks;
+  alignas(64) float sum[3 * B];
+  for (int block = 0; block < blocks.block_count(); ++block) {
+    sum_block<3>(blocks, m.vertex_deltas, block, w, m.params.active_weight, sum);
+    for (int i = 0; i < B; ++i) {
+      const int32_t v = blocks.element_of_slot[std::size_t(block) * B + std::size_t(i)];
+      if (v < 0) continue;
+      for (int c = 0; c < 3; ++c) out(c, v) = m.rig.neutral(c, v) + double(sum[c * B + i]);
     }
   }
 }
@@ -215,16 +245,15 @@ class PoissonSolver : public FaceSolver {
       : FaceSolver(std::move(model)), blend_(blend), weights_(*model_, blend == Blend::kNonlinear) {
     const SolverModel& m = *model_;
     const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
-    constexpr std::size_t B = TriangleTerms::kBlock;
-    operator_.assign(std::size_t(m.triangle_terms.block_count()) * TriangleTerms::kEntrySize, 0.0);
+    constexpr std::size_t B = ShapeBlocks::kBlock;
+    operator_.assign(std::size_t(m.triangle_blocks.block_count()) * 9 * B, 0.0);
     // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied in blocks like the terms.
     identity_rhs_.setZero(3, N);
     for (Eigen::Index t = 0; t < T; ++t) {
       const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
       for (int k = 0; k < 3; ++k) identity_rhs_.col(m.rig.triangles(k, t)) += Q.col(k);
-      const auto slot = std::size_t(m.triangle_terms.slot_of_triangle[std::size_t(t)]);
-      for (int c = 0; c < 9; ++c)
-        operator_[slot / B * TriangleTerms::kEntrySize + std::size_t(c) * B + slot % B] = Q.data()[c];
+      const auto slot = std::size_t(m.triangle_blocks.slot_of_element[std::size_t(t)]);
+      for (int c = 0; c < 9; ++c) operator_[(slot / B * 9 + std::size_t(c)) * B + slot % B] = Q.data()[c];
     }
     rhs_.resize(3, N);
     work_.resize(4, N);
@@ -302,32 +331,13 @@ class PoissonSolver : public FaceSolver {
   void blend(const Eigen::VectorXd& w) noexcept {
     const SolverModel& m = *model_;
     rhs_ = identity_rhs_;
-    const TriangleTerms& terms = m.triangle_terms;
-    constexpr int B = TriangleTerms::kBlock;
-    constexpr std::size_t E = TriangleTerms::kEntrySize;
-    static_assert(B == 16, "one component of a block is one Lanes16");
+    const ShapeBlocks& blocks = m.triangle_blocks;
+    const QuantisedValues& values = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
+    constexpr int B = ShapeBlocks::kBlock;
+    constexpr std::size_t E = 9 * B;
     alignas(64) float sum[E];
-    for (int block = 0; block < terms.block_count(); ++block) {
-      Lanes16 lanes[9] = {};
-      float offset_sum[9] = {};
-      for (int32_t e = terms.block_begin[std::size_t(block)]; e < terms.block_begin[std::size_t(block) + 1]; ++e) {
-        const double ws = w[terms.entries[std::size_t(e)].shape];
-        if (ws <= m.params.active_weight) continue;
-        const TriangleTerms::Values& values = blend_ == Blend::kNonlinear ? terms.nonlinear : terms.gradient;
-        const int16_t* src = values.values_of(e);
-        const float* scale = values.scales_of(e);
-        const float* offset = values.offsets_of(e);
-        for (int c = 0; c < 9; ++c) {
-          Shorts16 q;
-          std::memcpy(&q, src + c * B, sizeof q);
-          lanes[c] += (float(ws) * scale[c]) * __builtin_convertvector(q, Lanes16);
-          offset_sum[c] += float(ws) * offset[c];
-        }
-      }
-      for (int c = 0; c < 9; ++c) {
-        const Lanes16 v = lanes[c] + offset_sum[c];
-        std::memcpy(sum + c * B, &v, sizeof v);
-      }
+    for (int block = 0; block < blocks.block_count(); ++block) {
+      sum_block<9>(blocks, values, block, w, m.params.active_weight, sum);
       const double* Q = operator_.data() + std::size_t(block) * E;
       alignas(64) double out[E];  // (T_j - I) Q_j, component-major like sum
       if (blend_ == Blend::kDeformationTransfer)
@@ -335,7 +345,7 @@ class PoissonSolver : public FaceSolver {
       else
         nonlinear_block(sum, Q, out);
       for (int i = 0; i < B; ++i) {
-        const int32_t t = terms.triangle_of_slot[std::size_t(block) * B + std::size_t(i)];
+        const int32_t t = blocks.element_of_slot[std::size_t(block) * B + std::size_t(i)];
         if (t < 0) continue;
         for (int k = 0; k < 3; ++k) {
           double* column = rhs_.col(m.rig.triangles(k, t)).data();
@@ -347,7 +357,7 @@ class PoissonSolver : public FaceSolver {
 
   // out = sum Q per slot of a block: deformation transfer's T - I = sum w_i (F_i - I).
   static void transfer_block(const float* sum, const double* Q, double* out) noexcept {
-    constexpr int B = TriangleTerms::kBlock;
+    constexpr int B = ShapeBlocks::kBlock;
     for (int t = 0; t < B; ++t)
       for (int r = 0; r < 3; ++r)
         for (int k = 0; k < 3; ++k)
@@ -357,7 +367,7 @@ class PoissonSolver : public FaceSolver {
 
   // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4).
   static void nonlinear_block(const float* sum, const double* Q, double* out) noexcept {
-    constexpr int B = TriangleTerms::kBlock;
+    constexpr int B = ShapeBlocks::kBlock;
       for (int t = 0; t < B; ++t) {
         const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
         const double x = rx * rx + ry * ry + rz * rz;
@@ -384,7 +394,7 @@ class PoissonSolver : public FaceSolver {
   // out = (R (I + S) - I) Q for triangle t of a block, R = I + a [r]x + b [r]x^2.
   static void finish_triangle(int t, double rx, double ry, double rz, double x, double a, double b, const float* S,
                               const double* Q, double* out) noexcept {
-    constexpr int B = TriangleTerms::kBlock;
+    constexpr int B = ShapeBlocks::kBlock;
     double R[9];  // column-major
     R[0] = 1 + b * (rx * rx - x); R[3] = -a * rz + b * rx * ry;  R[6] = a * ry + b * rx * rz;
     R[1] = a * rz + b * rx * ry;  R[4] = 1 + b * (ry * ry - x);  R[7] = -a * rx + b * ry * rz;
@@ -492,7 +502,7 @@ class PoissonSolver : public FaceSolver {
 
   Blend blend_;
   WeightsStage weights_;
-  std::vector<double> operator_;       // Q_j, block-major like TriangleTerms
+  std::vector<double> operator_;       // Q_j, in triangle_blocks' slots, component-major per block
   Eigen::Matrix3Xd identity_rhs_, rhs_;
   Eigen::Matrix4Xd work_;
   std::vector<Modification> modifications_;
