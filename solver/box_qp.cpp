@@ -25,24 +25,16 @@ bool BoxQpSolver::solve_free_subproblem(const Eigen::MatrixXd& H, const Eigen::V
     rhs_[a] = r;
     for (Eigen::Index b = 0; b <= a; ++b) chol_(a, b) = H(i, free_[b]);
   }
-  // In-place Cholesky (lower), then forward and back substitution.
+  // In-place Cholesky (lower, row by row so each dot product is two contiguous rows,
+  // which Eigen vectorises), then forward and back substitution.
   for (Eigen::Index j = 0; j < f; ++j) {
-    double d = chol_(j, j);
-    for (Eigen::Index k = 0; k < j; ++k) d -= chol_(j, k) * chol_(j, k);
-    if (!(d > 0.0)) return false;
-    d = std::sqrt(d);
+    const double d2 = chol_(j, j) - chol_.row(j).head(j).squaredNorm();
+    if (!(d2 > 0.0)) return false;
+    const double d = std::sqrt(d2);
     chol_(j, j) = d;
-    for (Eigen::Index i = j + 1; i < f; ++i) {
-      double s = chol_(i, j);
-      for (Eigen::Index k = 0; k < j; ++k) s -= chol_(i, k) * chol_(j, k);
-      chol_(i, j) = s / d;
-    }
+    for (Eigen::Index i = j + 1; i < f; ++i) chol_(i, j) = (chol_(i, j) - chol_.row(i).head(j).dot(chol_.row(j).head(j))) / d;
   }
-  for (Eigen::Index i = 0; i < f; ++i) {
-    double s = rhs_[i];
-    for (Eigen::Index k = 0; k < i; ++k) s -= chol_(i, k) * rhs_[k];
-    rhs_[i] = s / chol_(i, i);
-  }
+  for (Eigen::Index i = 0; i < f; ++i) rhs_[i] = (rhs_[i] - chol_.row(i).head(i).dot(rhs_.head(i))) / chol_(i, i);
   for (Eigen::Index i = f - 1; i >= 0; --i) {
     double s = rhs_[i];
     for (Eigen::Index k = i + 1; k < f; ++k) s -= chol_(k, i) * rhs_[k];
