@@ -737,6 +737,49 @@ class Bvh {
   int depth_ = 0;
 };
 
+// Pairs of `candidates` with a vertex of one within `edges` mesh edges of a vertex of the
+// other, first < second, sorted and unique (pairs sharing a vertex included).
+std::vector<TrianglePair> neighbour_pairs(const Eigen::Matrix3Xi& triangles, Eigen::Index vertex_count,
+                                          std::span<const int32_t> candidates, int edges) {
+  auto adjacent = std::vector<std::vector<int32_t>>(std::size_t(vertex_count));
+  auto incident = std::vector<std::vector<int32_t>>(std::size_t(vertex_count));
+  for (Eigen::Index t = 0; t < triangles.cols(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      adjacent[std::size_t(triangles(k, t))].push_back(triangles((k + 1) % 3, t));
+      adjacent[std::size_t(triangles((k + 1) % 3, t))].push_back(triangles(k, t));
+    }
+  for (int32_t t : candidates)
+    for (int k = 0; k < 3; ++k) incident[std::size_t(triangles(k, t))].push_back(t);
+  std::vector<TrianglePair> out;
+  auto reached_by = std::vector<int32_t>(std::size_t(vertex_count), -1);
+  std::vector<int32_t> reached, frontier;
+  for (int32_t t : candidates) {
+    reached.clear();
+    for (int k = 0; k < 3; ++k)
+      if (reached_by[std::size_t(triangles(k, t))] != t) {
+        reached_by[std::size_t(triangles(k, t))] = t;
+        reached.push_back(triangles(k, t));
+      }
+    std::size_t begin = 0;
+    for (int depth = 0; depth < edges; ++depth) {
+      const std::size_t end = reached.size();
+      for (std::size_t i = begin; i < end; ++i)
+        for (int32_t u : adjacent[std::size_t(reached[i])])
+          if (reached_by[std::size_t(u)] != t) {
+            reached_by[std::size_t(u)] = t;
+            reached.push_back(u);
+          }
+      begin = end;
+    }
+    for (int32_t v : reached)
+      for (int32_t u : incident[std::size_t(v)])
+        if (u > t) out.push_back({t, u});
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
 void check_triangles(const Eigen::Matrix3Xi& triangles, Eigen::Index vertex_count) {
   if (triangles.size() > 0 && (triangles.minCoeff() < 0 || triangles.maxCoeff() >= vertex_count))
     throw Error(fmt::format("triangle vertex indices must lie in [0, {})", vertex_count));
@@ -962,7 +1005,13 @@ void TriangleCollider::configure(const Eigen::Matrix3Xi& triangles, const Eigen:
   const auto all_vertices = int(state->candidate_vertices.size());
   state->max_vertices = config.max_vertices < 0 ? all_vertices : std::min(config.max_vertices, all_vertices);
   state->vertex_stamp.assign(std::size_t(n), 0);
+  if (config.neighbour_edges < 0) throw Error(fmt::format("collision neighbour_edges {} must be >= 0", config.neighbour_edges));
   state->tree.build(triangles, rest_positions, state->candidate_triangles);
+  std::vector<TrianglePair> skipped;
+  if (config.neighbour_edges > 0) {
+    skipped = neighbour_pairs(triangles, n, state->candidate_triangles, config.neighbour_edges);
+    state->tree.skip_pairs(skipped);
+  }
   if (config.ignore_rest_contacts) {
     State& s = *state;
     s.tree.refit(rest_positions, 0.5 * config.epsilon);
@@ -976,7 +1025,8 @@ void TriangleCollider::configure(const Eigen::Matrix3Xi& triangles, const Eigen:
       s.rest_contacts.push_back({std::min(ta, tb), std::max(ta, tb)});
     });
     std::sort(s.rest_contacts.begin(), s.rest_contacts.end());
-    s.tree.skip_pairs(s.rest_contacts);
+    skipped.insert(skipped.end(), s.rest_contacts.begin(), s.rest_contacts.end());
+    s.tree.skip_pairs(skipped);
   }
   state_ = std::move(state);
 }

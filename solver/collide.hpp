@@ -105,6 +105,11 @@ struct ColliderConfig {
   // contacts (the ICT neutral's lip corners interpenetrate), and pinning them every
   // frame constrains the mouth for nothing.
   bool ignore_rest_contacts = false;
+  // Also leave out pairs where a vertex of one is within this many mesh edges of a
+  // vertex of the other (0: only pairs sharing a vertex). Such triangles are neighbours
+  // on one sheet of skin, near by construction rather than in contact, and their boxes
+  // overlap: leaving them out spares most exact tests (>= 0).
+  int neighbour_edges = 0;
 };
 
 // One frame's collisions, sized once by TriangleCollider::make_result(); detect() only

@@ -20,7 +20,7 @@ namespace facecap {
 // neighbours; per block, an entry for each shape that changes any of its elements.
 // Slot b * kBlock + i of the order is element element_of_slot[slot] (-1: padding).
 struct ShapeBlocks {
-  static constexpr int kBlock = 16;
+  static constexpr int kBlock = 32;
   struct Entry {
     int32_t shape = 0, block = 0;
   };

@@ -1,5 +1,6 @@
 // The per-frame solvers: nonlinear (the paper), linear, dt and meshik baselines.
 // Everything here after construction is real-time safe unless said otherwise.
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstring>
@@ -161,8 +162,9 @@ class WeightsStage {
 template <int Components>
 void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int block, const Eigen::VectorXd& w,
                double active_weight, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
-  static_assert(ShapeBlocks::kBlock == 16, "one component of a block is one Lanes16");
-  Lanes16 lanes[Components] = {};
+  constexpr int L = ShapeBlocks::kBlock / 16;  // Lanes16 per component
+  static_assert(L * 16 == ShapeBlocks::kBlock);
+  Lanes16 lanes[Components][L] = {};
   float offset_sum[Components] = {};
   for (int32_t e = blocks.block_begin[std::size_t(block)]; e < blocks.block_begin[std::size_t(block) + 1]; ++e) {
     const double ws = w[blocks.entries[std::size_t(e)].shape];
@@ -172,21 +174,24 @@ void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int blo
     const float* scale = values.scales_of(e);
     const float* offset = values.offsets_of(e);
     for (int c = 0; c < Components; ++c) {
-      Shorts16 v;
-      std::memcpy(&v, q + c * 16, sizeof v);
       const float f = float(ws) * scale[c];
-      lanes[c] += f * __builtin_convertvector(v, Lanes16);
       offset_sum[c] += float(ws) * offset[c];
-      if (fine) {
-        std::memcpy(&v, fine + c * 16, sizeof v);
-        lanes[c] += (f * (1.0f / 65534.0f)) * __builtin_convertvector(v, Lanes16);
+      for (int l = 0; l < L; ++l) {
+        Shorts16 v;
+        std::memcpy(&v, q + (c * L + l) * 16, sizeof v);
+        lanes[c][l] += f * __builtin_convertvector(v, Lanes16);
+        if (fine) {
+          std::memcpy(&v, fine + (c * L + l) * 16, sizeof v);
+          lanes[c][l] += (f * (1.0f / 65534.0f)) * __builtin_convertvector(v, Lanes16);
+        }
       }
     }
   }
-  for (int c = 0; c < Components; ++c) {
-    const Lanes16 v = lanes[c] + offset_sum[c];
-    std::memcpy(sum + c * 16, &v, sizeof v);
-  }
+  for (int c = 0; c < Components; ++c)
+    for (int l = 0; l < L; ++l) {
+      const Lanes16 v = lanes[c][l] + offset_sum[c];
+      std::memcpy(sum + (c * L + l) * 16, &v, sizeof v);
+    }
 }
 
 // x0 + B w over the active weights, block by block (ShapeBlocks).
@@ -261,7 +266,16 @@ class PoissonSolver : public FaceSolver {
       ColliderConfig config;
       config.epsilon = m.params.collision_epsilon;
       config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
+      config.neighbour_edges = 2;
       collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config);
+      const auto C = Eigen::Index(m.collision_vertices.size());
+      collision_deltas_.resize(m.shape_count(), 3 * C);
+      for (Eigen::Index i = 0; i < C; ++i)
+        for (int c = 0; c < 3; ++c)
+          collision_deltas_.col(3 * i + c) = m.rig.deltas.row(3 * Eigen::Index(m.collision_vertices[std::size_t(i)]) + c).transpose();
+      linear_cache_.resize(3, C);
+      linear_stamp_.assign(std::size_t(C), 0);
+      pin_stamp_.assign(std::size_t(N), 0);
       collisions_ = collider_.make_result();
     }
     // Pins beyond capacity are left out (and counted); markers always fit.
@@ -413,51 +427,79 @@ class PoissonSolver : public FaceSolver {
   }
 
   // Triangle pairs closer than epsilon pin their vertices to the linear blend
-  // (x0 + B w)_v: y gains beta A0^-1 e_v p_v^T, A0 gains beta e_v e_v^T, and the mesh is
-  // solved again through the same low-rank update.
+  // (x0 + B w)_v, the paper's collision-free reference: A0 gains beta e_v e_v^T, the
+  // right-hand side beta e_v p_v^T, and the mesh is solved again through the same
+  // low-rank update.
+  // A pair the linear blend makes cross has no such reference (ICT's own shapes cross at
+  // the lips): pinning it would cost time and change nothing, so it is left.
   void collide(SolveResult& out) noexcept {
     const SolverModel& m = *model_;
     if (!collider_.configured() || !collider_.detect(out.vertices, collisions_)) return;
     out.collision_pairs = uint32_t(collisions_.pairs_found);
-    if (collisions_.vertex_count == 0) return;
+    if (collisions_.pair_count == 0) return;
+    if (++stamp_ == 0) {  // wrapped: forget every old stamp
+      std::fill(pin_stamp_.begin(), pin_stamp_.end(), 0u);
+      std::fill(linear_stamp_.begin(), linear_stamp_.end(), 0u);
+      stamp_ = 1;
+    }
     const double beta = m.params.beta;
     const Eigen::Index K = m.marker_count();
     Eigen::Index pins = 0;
-    for (const int v : collisions_.valid_vertices()) {
-      if (pins == pin_capacity_) break;
-      const double* column = nullptr;
-      if (m.collision_columns_precomputed()) {
-        column = m.modification_solution.col(K + m.vertex_to_collision[std::size_t(v)]).data();
-      } else {
-        auto z = pin_columns_.col(pins);
-        z.setZero();
-        z[v] = 1.0;
-        m.factor->solve_in_place(z, pin_work_);
-        column = z.data();
+    for (const TrianglePair& pair : collisions_.valid_pairs()) {
+      const auto ta = m.rig.triangles.col(pair.first), tb = m.rig.triangles.col(pair.second);
+      if (triangles_intersect(linear_position(ta[0], out.weights), linear_position(ta[1], out.weights),
+                              linear_position(ta[2], out.weights), linear_position(tb[0], out.weights),
+                              linear_position(tb[1], out.weights), linear_position(tb[2], out.weights)))
+        continue;
+      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) {
+        if (pin_stamp_[std::size_t(v)] == stamp_ || pins == pin_capacity_) continue;
+        pin_stamp_[std::size_t(v)] = stamp_;
+        const double* column = nullptr;
+        if (m.collision_columns_precomputed()) {
+          column = m.modification_solution.col(K + m.vertex_to_collision[std::size_t(v)]).data();
+        } else {
+          auto z = pin_columns_.col(pins);
+          z.setZero();
+          z[v] = 1.0;
+          m.factor->solve_in_place(z, pin_work_);
+          column = z.data();
+        }
+        add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, beta, linear_position(v, out.weights)});
+        ++pins;
       }
-      Eigen::Vector3d target = m.rig.neutral.col(v);
-      for (Eigen::Index s = 0; s < m.shape_count(); ++s)
-        if (out.weights[s] > m.params.active_weight) target += out.weights[s] * m.rig.deltas.block<3, 1>(3 * v, s);
-      rhs_.noalias() += (beta * target) * Eigen::Map<const Eigen::RowVectorXd>(column, m.vertex_count());
-      add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, beta});
-      ++pins;
     }
     out.collision_constraints = uint32_t(pins);
-    apply_modifications(rhs_, out.vertices);
+    if (pins > 0) apply_modifications(rhs_, out.vertices);
   }
 
-  // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; column = A0^-1 u.
+  // (x0 + B w)_v for a vertex of the collision region, computed once per frame.
+  Eigen::Vector3d linear_position(int v, const Eigen::VectorXd& w) noexcept {
+    const auto i = std::size_t(model_->vertex_to_collision[std::size_t(v)]);
+    if (linear_stamp_[i] != stamp_) {
+      linear_stamp_[i] = stamp_;
+      for (int c = 0; c < 3; ++c)
+        linear_cache_(c, Eigen::Index(i)) = model_->rig.neutral(c, v) + collision_deltas_.col(3 * Eigen::Index(i) + c).dot(w);
+    }
+    return linear_cache_.col(Eigen::Index(i));
+  }
+
+  // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; column = A0^-1 u. The
+  // right-hand side gains d u target^T (a pin's target; zero for a marker dropping out).
   struct Modification {
     std::array<int, 3> vertices;
     Eigen::Vector3d weights;
     const double* column;
     double scale;
+    Eigen::Vector3d target = Eigen::Vector3d::Zero();
   };
 
   void add_modification(const Modification& modification) noexcept { modifications_[std::size_t(modification_count_++)] = modification; }
 
-  // x = y - Z_S (D^-1 + U_S^T Z_S)^-1 U_S^T y: A0 modified by sum d_i u_i u_i^T, solved
-  // without refactoring (Woodbury). y: A0^-1 r, 3 x N.
+  // The solve of A0 + U D U^T with right-hand side r + U D T from y = A0^-1 r, without
+  // refactoring (Woodbury): with Z = A0^-1 U and y' = y + Z D T,
+  //   x = y' - Z (D^-1 + U^T Z)^-1 U^T y' = y + Z (D T - (D^-1 + U^T Z)^-1 U^T y'),
+  // where U^T y' = U^T y + (U^T Z) D T needs Z only at the modified vertices, so the
+  // whole mesh is touched once, by the last sum. y, x: 3 x N.
   void apply_modifications(const Eigen::Matrix3Xd& y, Eigen::Matrix3Xd& x) noexcept {
     const SolverModel& m = *model_;
     x = y;
@@ -468,10 +510,14 @@ class PoissonSolver : public FaceSolver {
     };
     for (Eigen::Index i = 0; i < s; ++i) {
       const Modification& mi = modifications_[std::size_t(i)];
-      for (Eigen::Index j = 0; j < s; ++j) small_(i, j) = u_dot(mi, modifications_[std::size_t(j)].column);
-      small_(i, i) += 1.0 / mi.scale;
       Eigen::Vector3d uy = Eigen::Vector3d::Zero();
       for (int a = 0; a < 3; ++a) uy += mi.weights[a] * y.col(mi.vertices[a]);
+      for (Eigen::Index j = 0; j < s; ++j) {
+        const Modification& mj = modifications_[std::size_t(j)];
+        small_(i, j) = u_dot(mi, mj.column);
+        uy += small_(i, j) * mj.scale * mj.target;
+      }
+      small_(i, i) += 1.0 / mi.scale;
       small_rhs_.row(i) = uy.transpose();
     }
     // Gaussian elimination with partial pivoting (the system is symmetric indefinite).
@@ -495,8 +541,19 @@ class PoissonSolver : public FaceSolver {
       small_rhs_.row(c) = v / small_(c, c);
     }
     for (Eigen::Index i = 0; i < s; ++i) {
-      const Eigen::Map<const Eigen::RowVectorXd> z(modifications_[std::size_t(i)].column, m.vertex_count());
-      x.noalias() -= small_rhs_.row(i).transpose() * z;
+      const Modification& mi = modifications_[std::size_t(i)];
+      small_rhs_.row(i) = mi.scale * mi.target.transpose() - small_rhs_.row(i);
+    }
+    // x += Z C in chunks of vertices, so each chunk of x stays in L1 while the columns stream.
+    constexpr Eigen::Index kChunk = 256;
+    const Eigen::Index N = m.vertex_count();
+    for (Eigen::Index first = 0; first < N; first += kChunk) {
+      const Eigen::Index count = std::min(kChunk, N - first);
+      auto chunk = x.middleCols(first, count);
+      for (Eigen::Index i = 0; i < s; ++i) {
+        const Eigen::Map<const Eigen::RowVectorXd> z(modifications_[std::size_t(i)].column + first, count);
+        chunk.noalias() += small_rhs_.row(i).transpose() * z;
+      }
     }
   }
 
@@ -513,6 +570,10 @@ class PoissonSolver : public FaceSolver {
   CollisionResult collisions_;
   Eigen::Index pin_capacity_ = 0;
   Eigen::MatrixXd pin_columns_;  // A0^-1 e_v solved per frame when not precomputed
+  Eigen::MatrixXd collision_deltas_;  // M x 3C: B's rows of the collision vertices, one column per coordinate
+  Eigen::Matrix3Xd linear_cache_;     // 3 x C: this frame's linear blend there
+  std::vector<uint32_t> linear_stamp_, pin_stamp_;  // frame stamps: linear_cache_ valid, vertex pinned
+  uint32_t stamp_ = 0;
   Eigen::VectorXd pin_work_;
 };
 

@@ -413,6 +413,54 @@ TEST_CASE("the collider over the whole face equals brute force") {
   CHECK(intersecting_pairs(rig.triangles, x) == crossing);
 }
 
+// Mesh-edge distance between the nearest vertices of two triangles (0: shared vertex).
+int edge_distance(const Eigen::Matrix3Xi& triangles, Eigen::Index vertex_count, int32_t a, int32_t b, int limit) {
+  auto adjacent = std::vector<std::vector<int>>(std::size_t(vertex_count));
+  for (Eigen::Index t = 0; t < triangles.cols(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      adjacent[std::size_t(triangles(k, t))].push_back(triangles((k + 1) % 3, t));
+      adjacent[std::size_t(triangles((k + 1) % 3, t))].push_back(triangles(k, t));
+    }
+  auto distance = std::vector<int>(std::size_t(vertex_count), -1);
+  std::vector<int> frontier;
+  for (int k = 0; k < 3; ++k) { distance[std::size_t(triangles(k, a))] = 0; frontier.push_back(triangles(k, a)); }
+  for (int d = 0; d <= limit; ++d) {
+    for (int k = 0; k < 3; ++k)
+      if (distance[std::size_t(triangles(k, b))] == d) return d;
+    std::vector<int> next;
+    for (int v : frontier)
+      for (int u : adjacent[std::size_t(v)])
+        if (distance[std::size_t(u)] < 0) { distance[std::size_t(u)] = d + 1; next.push_back(u); }
+    frontier = std::move(next);
+  }
+  return limit + 1;
+}
+
+TEST_CASE("neighbour_edges leaves out exactly the pairs that near on the mesh") {
+  const Rig& rig = face().rig();
+  const std::vector<int> lips = lip_region_triangles(rig);
+  const Eigen::Matrix3Xd x = perturbed(rig.shape_positions(*rig.shape_index("mouthClose")), rig.triangles, lips, 0.08, 5);
+  constexpr double kEpsilon = 0.3;  // wide, so that near neighbours on the mesh count too
+  const auto all = brute_force_pairs(rig.triangles, x, lips, kEpsilon);
+  for (const int edges : {1, 2}) {
+    TriangleCollider collider;
+    ColliderConfig config;
+    config.epsilon = kEpsilon;
+    config.max_pairs = 100000;
+    config.neighbour_edges = edges;
+    collider.configure(rig.triangles, rig.neutral, lips, config);
+    CollisionResult result = collider.make_result();
+    REQUIRE(collider.detect(x, result));
+    std::vector<TrianglePair> expected;
+    for (const auto& p : all)
+      if (edge_distance(rig.triangles, rig.vertex_count(), p.first, p.second, edges) > edges) expected.push_back(p);
+    INFO(edges << " edges: " << all.size() << " pairs in all, " << expected.size() << " farther apart on the mesh");
+    CHECK(expected.size() < all.size());  // some pairs are mesh neighbours ...
+    CHECK_FALSE(expected.empty());        // ... and some are not
+    CHECK(collider_pairs(result) == expected);
+  }
+}
+
 TEST_CASE("pairs sharing a vertex are never reported") {
   const Rig& rig = face().rig();
   TriangleCollider collider;

@@ -103,6 +103,7 @@ void run_bench(const Options& o) {
     const std::size_t frames = name == "meshik" ? std::min<std::size_t>(F, std::size_t(std::max(1L, o.meshik_frames))) : F;
     std::vector<double> total_us(frames), cpu_us(frames);
     std::vector<std::vector<double>> stage_us(kSolveStageCount, std::vector<double>(frames));
+    std::vector<double> collision_pairs(frames), collision_pins(frames);
     uint64_t allocations = 0;
     std::size_t held = 0;
     solver->reset();
@@ -117,6 +118,8 @@ void run_bench(const Options& o) {
       held += result.held;
       total_us[f] = double(result.total_ns) * 1e-3;
       for (std::size_t s = 0; s < kSolveStageCount; ++s) stage_us[s][f] = double(result.stage_ns[s]) * 1e-3;
+      collision_pairs[f] = result.collision_pairs;
+      collision_pins[f] = result.collision_constraints;
     }
     double sum_us = 0;
     for (double t : total_us) sum_us += t;
@@ -135,6 +138,12 @@ void run_bench(const Options& o) {
       const std::string stage_name(solve_stage_name(stage));
       entry["stages_us"][stage_name] = {{"median", p.median}, {"p99", p.p99}};
       stage_text += fmt::format("  {} {:.1f}", stage_name, p.median);
+    }
+    if (reported_stage(name, SolveStage::kCollide, stage_us[std::size_t(SolveStage::kCollide)])) {
+      const Percentiles pairs = summarise(collision_pairs), pins = summarise(collision_pins);
+      entry["collisions"] = {{"pairs", {{"median", pairs.median}, {"p99", pairs.p99}}},
+                             {"pins", {{"median", pins.median}, {"p99", pins.p99}}}};
+      stage_text += fmt::format("  (pairs {:.0f}, pins {:.0f})", pairs.median, pins.median);
     }
     const double per_frame = double(allocations) / double(frames);
     entry["allocations_per_frame"] = counting ? nlohmann::json(per_frame) : nlohmann::json(nullptr);
