@@ -564,7 +564,7 @@ class PoissonSolver : public FaceSolver {
   Eigen::Matrix4Xd work_;
   std::vector<Modification> modifications_;
   Eigen::Index modification_count_ = 0;
-  Eigen::MatrixXd small_;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> small_;  // row operations in the elimination
   Eigen::Matrix<double, Eigen::Dynamic, 3> small_rhs_;
   TriangleCollider collider_;
   CollisionResult collisions_;
