@@ -267,7 +267,10 @@ class PoissonSolver : public FaceSolver {
       config.epsilon = m.params.collision_epsilon;
       config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
       config.neighbour_edges = 2;
-      collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config);
+      // At the lips, contacts are between the upper and the lower lip.
+      const std::vector<uint8_t> sides =
+          m.params.collision_region == CollisionRegion::kLips ? jaw_sides(m.rig, m.collision_triangles) : std::vector<uint8_t>{};
+      collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config, sides);
       const auto C = Eigen::Index(m.collision_vertices.size());
       collision_deltas_.resize(m.shape_count(), 3 * C);
       for (Eigen::Index i = 0; i < C; ++i)
