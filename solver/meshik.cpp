@@ -178,7 +178,7 @@ struct MeshIkSolver::State {
     for (Eigen::Index i = 0; i < s; ++i)
       for (Eigen::Index j = 0; j < s; ++j) {
         const auto& marker = m.markers[std::size_t(missing[std::size_t(i)])];  // c_i^T A0^-1 c_j
-        const auto z = m.modification_solution.col(missing[std::size_t(j)]);
+        const auto z = m.marker_solution.col(missing[std::size_t(j)]);
         small(i, j) = marker.barycentric[0] * z[marker.vertices[0]] + marker.barycentric[1] * z[marker.vertices[1]] +
                       marker.barycentric[2] * z[marker.vertices[2]];
       }
@@ -201,7 +201,7 @@ struct MeshIkSolver::State {
     }
     small_solution = woodbury.solve(small_rhs);
     for (Eigen::Index i = 0; i < s; ++i) {
-      const auto z = m.modification_solution.col(missing[std::size_t(i)]);
+      const auto z = m.marker_solution.col(missing[std::size_t(i)]);
       b.noalias() -= small_solution.row(i).transpose() * z.transpose();
     }
   }

@@ -448,13 +448,28 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
     constexpr std::size_t kMaxPrecomputedPins = 3000;
     const Eigen::Index C = model->collision_vertices.size() <= kMaxPrecomputedPins
                                ? Eigen::Index(model->collision_vertices.size()) : 0;
-    Eigen::MatrixXd& Z = model->modification_solution;
-    Z.setZero(N, K + C);
-    for (Eigen::Index k = 0; k < K; ++k)
-      for (int a = 0; a < 3; ++a) Z(model->markers[std::size_t(k)].vertices[a], k) += model->markers[std::size_t(k)].barycentric[a];
-    for (Eigen::Index c = 0; c < C; ++c) Z(model->collision_vertices[std::size_t(c)], K + c) = 1.0;
-    Eigen::VectorXd work(N);
-    for (Eigen::Index i = 0; i < K + C; ++i) model->factor->solve_in_place(Z.col(i), work);
+    // Three columns per back-substitution (the solver's x, y, z kernel).
+    auto solve_columns = [&](Eigen::Index count, auto&& unit, auto&& store) {
+      Eigen::Matrix3Xd b(3, N);
+      Eigen::Matrix4Xd work(4, N);
+      for (Eigen::Index first = 0; first < count; first += 3) {
+        b.setZero();
+        for (Eigen::Index r = 0; r < 3 && first + r < count; ++r) unit(first + r, b.row(r));
+        model->factor->solve_in_place(b, work);
+        for (Eigen::Index r = 0; r < 3 && first + r < count; ++r) store(first + r, b.row(r).transpose());
+      }
+    };
+    model->marker_solution.resize(N, K);
+    solve_columns(
+        K,
+        [&](Eigen::Index k, auto row) {
+          for (int a = 0; a < 3; ++a) row[model->markers[std::size_t(k)].vertices[a]] += model->markers[std::size_t(k)].barycentric[a];
+        },
+        [&](Eigen::Index k, const auto& column) { model->marker_solution.col(k) = column; });
+    model->pin_solution.resize(N, C);
+    solve_columns(
+        C, [&](Eigen::Index c, auto row) { row[model->collision_vertices[std::size_t(c)]] = 1.0; },
+        [&](Eigen::Index c, const auto& column) { model->pin_solution.col(c) = column.template cast<float>(); });
     model->setup.modifications_s = seconds_since(t0);
   }
   model->setup.total_s = seconds_since(start);

@@ -111,16 +111,18 @@ class SolverModel {
   std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
 
   // Low-rank modifications of A0 without refactoring: a marker dropping out removes
-  // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Columns 0..K-1 of
-  // modification_solution are A0^-1 c_k; column K + i is A0^-1 e_v for
-  // v = collision_vertices[i] when the region is small enough to precompute (the lips),
-  // otherwise pins are solved for as they occur.
+  // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Column k of marker_solution is
+  // A0^-1 c_k; column i of pin_solution is A0^-1 e_v for v = collision_vertices[i] when
+  // the region is small enough to precompute (the lips), otherwise pins are solved for as
+  // they occur. pin_solution is float: it multiplies pin forces beta (t_v - x_v), small
+  // next to positions, and the per-frame correction streams it.
   std::vector<int> collision_triangles;  // triangles the collision stage checks
   std::vector<int> collision_vertices;   // their vertices: the ones it may pin
   std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
-  Eigen::MatrixXd modification_solution;  // N x (K + C) or N x K
+  Eigen::MatrixXd marker_solution;       // N x K
+  Eigen::MatrixXf pin_solution;          // N x C, or empty
   bool collision_columns_precomputed() const {
-    return modification_solution.cols() == marker_count() + Eigen::Index(collision_vertices.size());
+    return !collision_vertices.empty() && pin_solution.cols() == Eigen::Index(collision_vertices.size());
   }
 
   SolverSetupTimes setup;

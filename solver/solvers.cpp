@@ -328,7 +328,7 @@ class PoissonSolver : public FaceSolver {
       if (present[std::size_t(k)] && targets.col(k).allFinite()) {
         for (int a = 0; a < 3; ++a) rhs_.col(b.vertices[a]) += beta * b.barycentric[a] * targets.col(k);
       } else {
-        add_modification({b.vertices, b.barycentric, m.modification_solution.col(k).data(), -beta});
+        add_modification({b.vertices, b.barycentric, m.marker_solution.col(k).data(), nullptr, -beta});
       }
     }
     clock.lap(SolveStage::kRhs);
@@ -446,7 +446,6 @@ class PoissonSolver : public FaceSolver {
       stamp_ = 1;
     }
     const double beta = m.params.beta;
-    const Eigen::Index K = m.marker_count();
     Eigen::Index pins = 0;
     for (const TrianglePair& pair : collisions_.valid_pairs()) {
       const auto ta = m.rig.triangles.col(pair.first), tb = m.rig.triangles.col(pair.second);
@@ -458,8 +457,9 @@ class PoissonSolver : public FaceSolver {
         if (pin_stamp_[std::size_t(v)] == stamp_ || pins == pin_capacity_) continue;
         pin_stamp_[std::size_t(v)] = stamp_;
         const double* column = nullptr;
+        const float* float_column = nullptr;
         if (m.collision_columns_precomputed()) {
-          column = m.modification_solution.col(K + m.vertex_to_collision[std::size_t(v)]).data();
+          float_column = m.pin_solution.col(m.vertex_to_collision[std::size_t(v)]).data();
         } else {
           auto z = pin_columns_.col(pins);
           z.setZero();
@@ -467,7 +467,7 @@ class PoissonSolver : public FaceSolver {
           m.factor->solve_in_place(z, pin_work_);
           column = z.data();
         }
-        add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, beta, linear_position(v, out.weights)});
+        add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, float_column, beta, linear_position(v, out.weights)});
         ++pins;
       }
     }
@@ -486,14 +486,17 @@ class PoissonSolver : public FaceSolver {
     return linear_cache_.col(Eigen::Index(i));
   }
 
-  // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; column = A0^-1 u. The
-  // right-hand side gains d u target^T (a pin's target; zero for a marker dropping out).
+  // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; A0^-1 u is `column`, or
+  // `float_column` for a precomputed pin. The right-hand side gains d u target^T (a pin's
+  // target; zero for a marker dropping out).
   struct Modification {
     std::array<int, 3> vertices;
     Eigen::Vector3d weights;
     const double* column;
+    const float* float_column;
     double scale;
     Eigen::Vector3d target = Eigen::Vector3d::Zero();
+    double column_at(int v) const noexcept { return column ? column[v] : double(float_column[v]); }
   };
 
   void add_modification(const Modification& modification) noexcept { modifications_[std::size_t(modification_count_++)] = modification; }
@@ -508,8 +511,9 @@ class PoissonSolver : public FaceSolver {
     x = y;
     const Eigen::Index s = modification_count_;
     if (s == 0) return;
-    auto u_dot = [](const Modification& u, const double* z) {
-      return u.weights[0] * z[u.vertices[0]] + u.weights[1] * z[u.vertices[1]] + u.weights[2] * z[u.vertices[2]];
+    auto u_dot = [](const Modification& u, const Modification& z) {
+      return u.weights[0] * z.column_at(u.vertices[0]) + u.weights[1] * z.column_at(u.vertices[1]) +
+             u.weights[2] * z.column_at(u.vertices[2]);
     };
     for (Eigen::Index i = 0; i < s; ++i) {
       const Modification& mi = modifications_[std::size_t(i)];
@@ -517,7 +521,7 @@ class PoissonSolver : public FaceSolver {
       for (int a = 0; a < 3; ++a) uy += mi.weights[a] * y.col(mi.vertices[a]);
       for (Eigen::Index j = 0; j < s; ++j) {
         const Modification& mj = modifications_[std::size_t(j)];
-        small_(i, j) = u_dot(mi, mj.column);
+        small_(i, j) = u_dot(mi, mj);
         uy += small_(i, j) * mj.scale * mj.target;
       }
       small_(i, i) += 1.0 / mi.scale;
@@ -547,16 +551,32 @@ class PoissonSolver : public FaceSolver {
       const Modification& mi = modifications_[std::size_t(i)];
       small_rhs_.row(i) = mi.scale * mi.target.transpose() - small_rhs_.row(i);
     }
-    // x += Z C in chunks of vertices, so each chunk of x stays in L1 while the columns stream.
+    // x += Z C, in chunks of vertices summed coordinate by coordinate (contiguous, so
+    // vectorised) in L1 while the columns stream through once.
     constexpr Eigen::Index kChunk = 256;
     const Eigen::Index N = m.vertex_count();
+    Eigen::Array<double, kChunk, 3> sum;
     for (Eigen::Index first = 0; first < N; first += kChunk) {
       const Eigen::Index count = std::min(kChunk, N - first);
-      auto chunk = x.middleCols(first, count);
+      sum.setZero();
+      double* __restrict sx = sum.col(0).data();
+      double* __restrict sy = sum.col(1).data();
+      double* __restrict sz = sum.col(2).data();
       for (Eigen::Index i = 0; i < s; ++i) {
-        const Eigen::Map<const Eigen::RowVectorXd> z(modifications_[std::size_t(i)].column + first, count);
-        chunk.noalias() += small_rhs_.row(i).transpose() * z;
+        const Modification& mi = modifications_[std::size_t(i)];
+        const double cx = small_rhs_(i, 0), cy = small_rhs_(i, 1), cz = small_rhs_(i, 2);
+        auto add = [&](const auto* __restrict z) {
+          for (Eigen::Index j = 0; j < count; ++j) {
+            const double zj = double(z[first + j]);
+            sx[j] += cx * zj;
+            sy[j] += cy * zj;
+            sz[j] += cz * zj;
+          }
+        };
+        if (mi.column) add(mi.column);
+        else add(mi.float_column);
       }
+      x.middleCols(first, count) += sum.topRows(count).matrix().transpose();
     }
   }
 
