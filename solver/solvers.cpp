@@ -432,9 +432,10 @@ class PoissonSolver : public FaceSolver {
   // Triangle pairs closer than epsilon pin their vertices to the linear blend
   // (x0 + B w)_v, the paper's collision-free reference: A0 gains beta e_v e_v^T, the
   // right-hand side beta e_v p_v^T, and the mesh is solved again through the same
-  // low-rank update.
-  // A pair the linear blend makes cross has no such reference (ICT's own shapes cross at
-  // the lips): pinning it would cost time and change nothing, so it is left.
+  // low-rank update. Only pairs in a worse state than in the reference are pinned:
+  // closer than epsilon where the linear blend keeps them apart, or crossing where it
+  // only touches. Lips that rest in contact (ICT) touch in both, and where the linear
+  // blend itself crosses (ICT's own shapes do) it is no reference.
   void collide(SolveResult& out) noexcept {
     const SolverModel& m = *model_;
     if (!collider_.configured() || !collider_.detect(out.vertices, collisions_)) return;
@@ -445,14 +446,21 @@ class PoissonSolver : public FaceSolver {
       std::fill(linear_stamp_.begin(), linear_stamp_.end(), 0u);
       stamp_ = 1;
     }
-    const double beta = m.params.beta;
+    const double beta = m.params.beta, epsilon = m.params.collision_epsilon;
     Eigen::Index pins = 0;
     for (const TrianglePair& pair : collisions_.valid_pairs()) {
       const auto ta = m.rig.triangles.col(pair.first), tb = m.rig.triangles.col(pair.second);
-      if (triangles_intersect(linear_position(ta[0], out.weights), linear_position(ta[1], out.weights),
-                              linear_position(ta[2], out.weights), linear_position(tb[0], out.weights),
-                              linear_position(tb[1], out.weights), linear_position(tb[2], out.weights)))
-        continue;
+      const Eigen::Vector3d a[3] = {linear_position(ta[0], out.weights), linear_position(ta[1], out.weights),
+                                    linear_position(ta[2], out.weights)};
+      const Eigen::Vector3d b[3] = {linear_position(tb[0], out.weights), linear_position(tb[1], out.weights),
+                                    linear_position(tb[2], out.weights)};
+      if (triangles_closer_than(a[0], a[1], a[2], b[0], b[1], b[2], epsilon)) {
+        // The reference is in contact too: pin only if the solve crosses where it does not.
+        if (triangles_intersect(a[0], a[1], a[2], b[0], b[1], b[2]) ||
+            !triangles_intersect(out.vertices.col(ta[0]), out.vertices.col(ta[1]), out.vertices.col(ta[2]),
+                                 out.vertices.col(tb[0]), out.vertices.col(tb[1]), out.vertices.col(tb[2])))
+          continue;
+      }
       for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) {
         if (pin_stamp_[std::size_t(v)] == stamp_ || pins == pin_capacity_) continue;
         pin_stamp_[std::size_t(v)] = stamp_;
