@@ -469,7 +469,6 @@ class Bvh {
     while (top > 0) {
       const auto [a, b] = stack_[--top];
       if (top + 16 > capacity) return false;
-      if (two_sided_ && !may_pair_sides(a, b)) continue;
       if (a == b) {
         if (is_leaf(a)) {
           visit_within_leaf(leaf_of(a), visit);
@@ -503,24 +502,6 @@ class Bvh {
   // Also skip these triangle pairs from now on (pairs of triangles not in the tree are
   // ignored). Not real-time.
   void skip_pairs(std::span<const TrianglePair> pairs) { build_skip_masks(pairs); }
-
-  // From now on only pairs of triangles on different sides (triangle_side: 0 or 1 per
-  // mesh triangle) are visited; subtrees holding one side only are not descended into
-  // for pairs within themselves. Not real-time.
-  void split_sides(std::span<const uint8_t> triangle_side) {
-    two_sided_ = true;
-    leaf_side1_.assign(leaves_.size(), 0);
-    leaf_sides_.assign(leaves_.size(), 0);
-    for (std::size_t l = 0; l < leaves_.size(); ++l)
-      for (int32_t i = 0; i < leaves_[l].count; ++i) {
-        const bool one = triangle_side[std::size_t(slot_triangle_[std::size_t(leaves_[l].first + i)])] != 0;
-        leaf_side1_[l] |= uint32_t(one) << i;
-        leaf_sides_[l] |= one ? 2 : 1;
-      }
-    node_sides_.assign(nodes_.size(), 0);
-    for (std::size_t n = nodes_.size(); n-- > 0;)  // pre-order: children come after their parent
-      for (int i = 0; i < nodes_[n].child_count; ++i) node_sides_[n] |= sides_of(nodes_[n].child[i]);
-  }
 
   std::span<const int32_t> slot_triangles() const noexcept { return slot_triangle_; }
   const std::array<int32_t, 3>& slot_vertices(int32_t slot) const noexcept { return slot_vertices_[std::size_t(slot)]; }
@@ -701,19 +682,6 @@ class Bvh {
     for (std::size_t a = 0; a < std::size_t(leaf_count); ++a) skip_offset_[a + 1] += skip_offset_[a];
   }
 
-  uint8_t sides_of(Ref r) const noexcept { return is_leaf(r) ? leaf_sides_[std::size_t(leaf_of(r))] : node_sides_[std::size_t(r)]; }
-  // Whether the elements can hold a pair from different sides (a == b: within one).
-  bool may_pair_sides(Ref a, Ref b) const noexcept {
-    const uint8_t sa = sides_of(a), sb = sides_of(b);
-    return a == b ? sa == 3 : ((sa & 1) && (sb & 2)) || ((sa & 2) && (sb & 1));
-  }
-  // Slots of leaf `l` that may pair with a slot on side `side`: all, or the other side's.
-  uint32_t partners(int32_t l, bool side) const noexcept {
-    if (!two_sided_) return ~0u;
-    return side ? ~leaf_side1_[std::size_t(l)] : leaf_side1_[std::size_t(l)];
-  }
-  bool slot_side(int32_t l, int s) const noexcept { return two_sided_ && ((leaf_side1_[std::size_t(l)] >> s) & 1u); }
-
   PairMask skip_mask(int32_t leaf_a, int32_t leaf_b) const noexcept {
     const auto begin = skip_leaf_.begin() + skip_offset_[std::size_t(leaf_a)];
     const auto end = skip_leaf_.begin() + skip_offset_[std::size_t(leaf_a) + 1];
@@ -735,7 +703,7 @@ class Bvh {
     for (; a_slots != 0; a_slots &= a_slots - 1) {
       const int s = std::countr_zero(a_slots);
       uint32_t row = slots_overlapping(boxes_b, slot_box_[std::size_t(a.first + s)]) & b_slots &
-                     ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow) & partners(lb, slot_side(la, s));
+                     ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow);
       for (; row != 0; row &= row - 1) visit(a.first + s, b.first + std::countr_zero(row));
     }
   }
@@ -748,7 +716,7 @@ class Bvh {
     for (int s = 0; s + 1 < a.count; ++s) {
       // Slots after s (unused lanes never overlap), not skipped.
       uint32_t row = slots_overlapping(boxes, slot_box_[std::size_t(a.first + s)]) & ~((2u << s) - 1) &
-                     ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow) & partners(l, slot_side(l, s));
+                     ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow);
       for (; row != 0; row &= row - 1) visit(a.first + s, a.first + std::countr_zero(row));
     }
   }
@@ -767,9 +735,6 @@ class Bvh {
   std::vector<PairMask> skip_mask_;                   // slot pairs to skip
   std::vector<std::pair<Ref, Ref>> stack_;            // traversal scratch, sized at build
   int depth_ = 0;
-  bool two_sided_ = false;                            // split_sides() was called
-  std::vector<uint32_t> leaf_side1_;                  // per leaf: bit i set when slot i is on side 1
-  std::vector<uint8_t> leaf_sides_, node_sides_;      // sides present below: bit 0 side 0, bit 1 side 1
 };
 
 // Pairs of `candidates` with a vertex of one within `edges` mesh edges of a vertex of the
@@ -993,21 +958,6 @@ std::vector<int> lip_region_triangles(const Rig& rig, const LipRegionOptions& op
   return triangles_near_vertices(rig.triangles, rig.neutral, seeds, radius);
 }
 
-std::vector<uint8_t> jaw_sides(const Rig& rig, std::span<const int> candidate_triangles) {
-  const std::optional<Eigen::Index> jaw = rig.shape_index("jawOpen");
-  if (!jaw) return {};
-  double largest = 0.0;
-  for (int t : candidate_triangles)
-    for (int k = 0; k < 3; ++k) largest = std::max(largest, shape_delta(rig, *jaw, rig.triangles(k, t)).norm());
-  std::vector<uint8_t> side(std::size_t(rig.triangle_count()), 0);
-  for (int t : candidate_triangles) {
-    int moving = 0;
-    for (int k = 0; k < 3; ++k) moving += shape_delta(rig, *jaw, rig.triangles(k, t)).norm() > 0.5 * largest;
-    side[std::size_t(t)] = moving >= 2;
-  }
-  return side;
-}
-
 // ---- TriangleCollider ------------------------------------------------------------
 
 struct TriangleCollider::State {
@@ -1028,8 +978,7 @@ TriangleCollider::TriangleCollider(TriangleCollider&&) noexcept = default;
 TriangleCollider& TriangleCollider::operator=(TriangleCollider&&) noexcept = default;
 
 void TriangleCollider::configure(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
-                                 std::span<const int> candidate_triangles, const ColliderConfig& config,
-                                 std::span<const uint8_t> triangle_side) {
+                                 std::span<const int> candidate_triangles, const ColliderConfig& config) {
   const Eigen::Index n = rest_positions.cols();
   check_triangles(triangles, n);
   if (!(config.epsilon >= 0.0) || !std::isfinite(config.epsilon))
@@ -1057,10 +1006,7 @@ void TriangleCollider::configure(const Eigen::Matrix3Xi& triangles, const Eigen:
   state->max_vertices = config.max_vertices < 0 ? all_vertices : std::min(config.max_vertices, all_vertices);
   state->vertex_stamp.assign(std::size_t(n), 0);
   if (config.neighbour_edges < 0) throw Error(fmt::format("collision neighbour_edges {} must be >= 0", config.neighbour_edges));
-  if (!triangle_side.empty() && Eigen::Index(triangle_side.size()) != triangles.cols())
-    throw Error(fmt::format("collision sides: {} given for {} triangles", triangle_side.size(), triangles.cols()));
   state->tree.build(triangles, rest_positions, state->candidate_triangles);
-  if (!triangle_side.empty()) state->tree.split_sides(triangle_side);
   std::vector<TrianglePair> skipped;
   if (config.neighbour_edges > 0) {
     skipped = neighbour_pairs(triangles, n, state->candidate_triangles, config.neighbour_edges);

@@ -85,12 +85,6 @@ struct LipRegionOptions {
 // Not real-time. Throws Error when no lip vertex can be found.
 std::vector<int> lip_region_triangles(const Rig& rig, const LipRegionOptions& options = {});
 
-// Per mesh triangle, 1 for the candidate triangles that move with the jaw (two of their
-// vertices move more than half as far as the farthest candidate vertex under "jawOpen":
-// the lower lip), 0 for the rest (the upper lip): lip contacts are between the two. Empty
-// when the rig has no "jawOpen". Not real-time.
-std::vector<uint8_t> jaw_sides(const Rig& rig, std::span<const int> candidate_triangles);
-
 // ---- The per-frame collider ------------------------------------------------------
 
 // Two triangles (indices into the rig's 3 x T triangle matrix), first < second.
@@ -145,12 +139,9 @@ class TriangleCollider {
   // same input always gives the same tree) and sizes every per-frame buffer.
   // triangles: 3 x T vertex indices; rest_positions: 3 x N; candidate_triangles:
   // indices into triangles (duplicates ignored; all_triangles() for the whole face).
-  // triangle_side: empty, or 0/1 per mesh triangle, and then only pairs of triangles on
-  // different sides are found (the two lips: jaw_sides()).
   // Not real-time: allocates; throws Error on out-of-range indices or bad limits.
   void configure(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
-                 std::span<const int> candidate_triangles, const ColliderConfig& config,
-                 std::span<const uint8_t> triangle_side = {});
+                 std::span<const int> candidate_triangles, const ColliderConfig& config);
 
   // A result with capacity for this configuration. Not real-time: allocates.
   CollisionResult make_result() const;

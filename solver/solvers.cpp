@@ -20,7 +20,7 @@ namespace {
 
 constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear", "dt", "meshik"};
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
-constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds the stage to about a millisecond
+constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds the stage's cost
 
 // One component of a ShapeBlocks block.
 using Lanes16 = float __attribute__((vector_size(64)));
@@ -157,8 +157,8 @@ class WeightsStage {
   Eigen::Array<bool, Eigen::Dynamic, 1> present_;
 };
 
-// sum over the active shapes' entries in `block` of w_s * value, one Lanes16 per component
-// (ShapeBlocks::kBlock is 16: one vector register per component with AVX-512).
+// sum over the active shapes' entries in `block` of w_s * value, component-major, summed
+// in Lanes16 (one AVX-512 register each) so the block's sum stays in registers.
 template <int Components>
 void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int block, const Eigen::VectorXd& w,
                double active_weight, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
@@ -267,10 +267,7 @@ class PoissonSolver : public FaceSolver {
       config.epsilon = m.params.collision_epsilon;
       config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
       config.neighbour_edges = 2;
-      // At the lips, contacts are between the upper and the lower lip.
-      const std::vector<uint8_t> sides =
-          m.params.collision_region == CollisionRegion::kLips ? jaw_sides(m.rig, m.collision_triangles) : std::vector<uint8_t>{};
-      collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config, sides);
+      collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config);
       const auto C = Eigen::Index(m.collision_vertices.size());
       collision_deltas_.resize(m.shape_count(), 3 * C);
       for (Eigen::Index i = 0; i < C; ++i)
@@ -385,27 +382,27 @@ class PoissonSolver : public FaceSolver {
   // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4).
   static void nonlinear_block(const float* sum, const double* Q, double* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-      for (int t = 0; t < B; ++t) {
-        const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
-        const double x = rx * rx + ry * ry + rz * rz;
-        // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to 1e-10
-        // for theta <= 2.5; larger turns are redone with sin and cos below.
-        double a = 1.0 / 6227020800.0, b = 1.0 / 87178291200.0;  // 1/13!, 1/14!
-        constexpr double kInvFactorial[] = {1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0, 1.0 / 6.0, 1.0};
-        constexpr double kInvFactorialEven[] = {1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5};
-        for (int i = 0; i < 6; ++i) {
-          a = kInvFactorial[i] - x * a;
-          b = kInvFactorialEven[i] - x * b;
-        }
-        finish_triangle(t, rx, ry, rz, x, a, b, sum, Q, out);
+    for (int t = 0; t < B; ++t) {
+      const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
+      const double x = rx * rx + ry * ry + rz * rz;
+      // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to 1e-10
+      // for theta <= 2.5; larger turns are redone with sin and cos below.
+      double a = 1.0 / 6227020800.0, b = 1.0 / 87178291200.0;  // 1/13!, 1/14!
+      constexpr double kInvFactorial[] = {1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0, 1.0 / 6.0, 1.0};
+      constexpr double kInvFactorialEven[] = {1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5};
+      for (int i = 0; i < 6; ++i) {
+        a = kInvFactorial[i] - x * a;
+        b = kInvFactorialEven[i] - x * b;
       }
-      for (int t = 0; t < B; ++t) {
-        const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
-        const double x = rx * rx + ry * ry + rz * rz;
-        if (x <= 6.25) continue;
-        const double theta = std::sqrt(x);
-        finish_triangle(t, rx, ry, rz, x, std::sin(theta) / theta, (1.0 - std::cos(theta)) / x, sum, Q, out);
-      }
+      finish_triangle(t, rx, ry, rz, x, a, b, sum, Q, out);
+    }
+    for (int t = 0; t < B; ++t) {
+      const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
+      const double x = rx * rx + ry * ry + rz * rz;
+      if (x <= 6.25) continue;
+      const double theta = std::sqrt(x);
+      finish_triangle(t, rx, ry, rz, x, std::sin(theta) / theta, (1.0 - std::cos(theta)) / x, sum, Q, out);
+    }
   }
 
   // out = (R (I + S) - I) Q for triangle t of a block, R = I + a [r]x + b [r]x^2.

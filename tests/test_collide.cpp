@@ -461,33 +461,6 @@ TEST_CASE("neighbour_edges leaves out exactly the pairs that near on the mesh") 
   }
 }
 
-TEST_CASE("with sides the collider finds exactly the brute-force pairs between the lips") {
-  const Rig& rig = face().rig();
-  const std::vector<int> lips = lip_region_triangles(rig);
-  const std::vector<uint8_t> sides = jaw_sides(rig, lips);
-  REQUIRE(sides.size() == std::size_t(rig.triangle_count()));
-  std::size_t lower = 0;
-  for (int t : lips) lower += sides[std::size_t(t)];
-  CHECK(lower > lips.size() / 5);  // both lips are there
-  CHECK(lower < lips.size() * 4 / 5);
-  const Eigen::Matrix3Xd x = perturbed(pose(rig, {{"mouthClose", 1.0}, {"mouthPucker", 1.0}}), rig.triangles, lips, 0.05, 3);
-  TriangleCollider collider;
-  ColliderConfig config;
-  config.epsilon = 0.3;  // wide, so that pairs within one lip count too
-  config.max_pairs = 100000;
-  collider.configure(rig.triangles, rig.neutral, lips, config, sides);
-  CollisionResult result = collider.make_result();
-  REQUIRE(collider.detect(x, result));
-  std::vector<TrianglePair> expected;
-  const auto all = brute_force_pairs(rig.triangles, x, lips, config.epsilon);
-  for (const auto& p : all)
-    if (sides[std::size_t(p.first)] != sides[std::size_t(p.second)]) expected.push_back(p);
-  INFO(all.size() << " pairs in all, " << expected.size() << " between the lips");
-  CHECK_FALSE(expected.empty());
-  CHECK(expected.size() < all.size());
-  CHECK(collider_pairs(result) == expected);
-}
-
 TEST_CASE("pairs sharing a vertex are never reported") {
   const Rig& rig = face().rig();
   TriangleCollider collider;
