@@ -252,6 +252,7 @@ class PoissonSolver : public FaceSolver {
     const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
     constexpr std::size_t B = ShapeBlocks::kBlock;
     operator_.assign(std::size_t(m.triangle_blocks.block_count()) * 9 * B, 0.0);
+    slot_corners_.assign(m.triangle_blocks.element_of_slot.size(), {-1, -1, -1});
     // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied in blocks like the terms.
     identity_rhs_.setZero(3, N);
     for (Eigen::Index t = 0; t < T; ++t) {
@@ -259,6 +260,7 @@ class PoissonSolver : public FaceSolver {
       for (int k = 0; k < 3; ++k) identity_rhs_.col(m.rig.triangles(k, t)) += Q.col(k);
       const auto slot = std::size_t(m.triangle_blocks.slot_of_element[std::size_t(t)]);
       for (int c = 0; c < 9; ++c) operator_[(slot / B * 9 + std::size_t(c)) * B + slot % B] = Q.data()[c];
+      slot_corners_[slot] = {m.rig.triangles(0, t), m.rig.triangles(1, t), m.rig.triangles(2, t)};
     }
     rhs_.resize(3, N);
     work_.resize(4, N);
@@ -358,11 +360,11 @@ class PoissonSolver : public FaceSolver {
         transfer_block(sum, Q, out);
       else
         nonlinear_block(sum, Q, out);
+      const std::array<int32_t, 3>* corners = slot_corners_.data() + std::size_t(block) * B;
       for (int i = 0; i < B; ++i) {
-        const int32_t t = blocks.element_of_slot[std::size_t(block) * B + std::size_t(i)];
-        if (t < 0) continue;
+        if (corners[i][0] < 0) continue;  // padding
         for (int k = 0; k < 3; ++k) {
-          double* column = rhs_.col(m.rig.triangles(k, t)).data();
+          double* column = rhs_.data() + 3 * std::size_t(corners[i][std::size_t(k)]);
           for (int r = 0; r < 3; ++r) column[r] += out[(3 * k + r) * B + i];
         }
       }
@@ -588,6 +590,7 @@ class PoissonSolver : public FaceSolver {
   Blend blend_;
   WeightsStage weights_;
   std::vector<double> operator_;       // Q_j, in triangle_blocks' slots, component-major per block
+  std::vector<std::array<int32_t, 3>> slot_corners_;  // per slot of triangle_blocks: its vertices, -1 for padding
   Eigen::Matrix3Xd identity_rhs_, rhs_;
   Eigen::Matrix4Xd work_;
   std::vector<Modification> modifications_;
