@@ -311,7 +311,8 @@ void build_marker_paths(SolverModel& model) {
       // (exp(r) - I) arm = delta - axial with arm perpendicular to the axis.
       const Eigen::Matrix3d turn = (rotation_exp(r) - Eigen::Matrix3d::Identity()) *
                                        (Eigen::Matrix3d::Identity() - axis * axis.transpose()) + axis * axis.transpose();
-      model.marker_paths.push_back({int(k), int(s), r, turn.inverse() * (delta - axial), axial});
+      const Eigen::Vector3d arm = turn.inverse() * (delta - axial);
+      model.marker_paths.push_back({int(k), int(s), r, arm, axial, theta, axis.cross(arm)});
     }
   }
 }

@@ -78,6 +78,10 @@ struct MarkerPath {
   Eigen::Vector3d rotation = Eigen::Vector3d::Zero();  // r: the surface's rotation vector at the marker
   Eigen::Vector3d arm = Eigen::Vector3d::Zero();       // from the rotation axis, perpendicular to it
   Eigen::Vector3d axial = Eigen::Vector3d::Zero();     // slide along the axis at t = 1
+  // |r| and (r / |r|) x arm: with the arm perpendicular to the axis,
+  // (exp(t r) - I) arm = (cos(t |r|) - 1) arm + sin(t |r|) axis_cross_arm.
+  double angle = 0.0;
+  Eigen::Vector3d axis_cross_arm = Eigen::Vector3d::Zero();
 };
 
 struct SolverSetupTimes {

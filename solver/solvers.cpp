@@ -120,9 +120,10 @@ class WeightsStage {
       const MarkerPath& path = paths[i];
       if (!present_[path.marker]) { path_difference_.col(Eigen::Index(i)).setZero(); continue; }
       const double t = w[path.shape];
-      const Eigen::Vector3d turned = rotation_exp(t * path.rotation) * path.arm;
+      const double c = std::cos(t * path.angle), sn = std::sin(t * path.angle);
+      const Eigen::Vector3d turned = c * path.arm + sn * path.axis_cross_arm;  // exp(t r) arm
       const Eigen::Vector3d linear_delta = m.marker_basis.block<3, 1>(3 * path.marker, path.shape);
-      const Eigen::Vector3d slope = path.rotation.cross(turned) + path.axial;
+      const Eigen::Vector3d slope = path.angle * (c * path.axis_cross_arm - sn * path.arm) + path.axial;  // r x turned + axial
       const Eigen::Vector3d difference = slope - linear_delta;  // D_p
       path_difference_.col(Eigen::Index(i)) = difference;
       // f(t) - t B~ replaced by its tangent: - (f(t) - t B~) + t D_p.
