@@ -252,7 +252,7 @@ class PoissonSolver : public FaceSolver {
     const SolverModel& m = *model_;
     const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
     constexpr std::size_t B = ShapeBlocks::kBlock;
-    operator_.assign(std::size_t(m.triangle_blocks.block_count()) * 9 * B, 0.0);
+    operator_.assign(std::size_t(m.triangle_blocks.block_count()) * 9 * B, 0.0f);
     slot_corners_.assign(m.triangle_blocks.element_of_slot.size(), {-1, -1, -1});
     // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied in blocks like the terms.
     identity_rhs_.setZero(3, N);
@@ -260,7 +260,7 @@ class PoissonSolver : public FaceSolver {
       const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
       for (int k = 0; k < 3; ++k) identity_rhs_.col(m.rig.triangles(k, t)) += Q.col(k);
       const auto slot = std::size_t(m.triangle_blocks.slot_of_element[std::size_t(t)]);
-      for (int c = 0; c < 9; ++c) operator_[(slot / B * 9 + std::size_t(c)) * B + slot % B] = Q.data()[c];
+      for (int c = 0; c < 9; ++c) operator_[(slot / B * 9 + std::size_t(c)) * B + slot % B] = float(Q.data()[c]);
       slot_corners_[slot] = {m.rig.triangles(0, t), m.rig.triangles(1, t), m.rig.triangles(2, t)};
     }
     rhs_.resize(3, N);
@@ -355,8 +355,8 @@ class PoissonSolver : public FaceSolver {
     alignas(64) float sum[E];
     for (int block = 0; block < blocks.block_count(); ++block) {
       sum_block<9>(blocks, values, block, w, m.params.active_weight, sum);
-      const double* Q = operator_.data() + std::size_t(block) * E;
-      alignas(64) double out[E];  // (T_j - I) Q_j, component-major like sum
+      const float* Q = operator_.data() + std::size_t(block) * E;
+      alignas(64) float out[E];  // (T_j - I) Q_j, component-major like sum
       if (blend_ == Blend::kDeformationTransfer)
         transfer_block(sum, Q, out);
       else
@@ -373,7 +373,7 @@ class PoissonSolver : public FaceSolver {
   }
 
   // out = sum Q per slot of a block: deformation transfer's T - I = sum w_i (F_i - I).
-  static void transfer_block(const float* sum, const double* Q, double* out) noexcept {
+  static void transfer_block(const float* sum, const float* Q, float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
     for (int t = 0; t < B; ++t)
       for (int r = 0; r < 3; ++r)
@@ -382,17 +382,18 @@ class PoissonSolver : public FaceSolver {
                                      sum[(6 + r) * B + t] * Q[(3 * k + 2) * B + t];
   }
 
-  // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4).
-  static void nonlinear_block(const float* sum, const double* Q, double* out) noexcept {
+  // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4), in float:
+  // 16 lanes per vector, and the rounding (1e-7 of T) is far below the stored terms'.
+  static void nonlinear_block(const float* sum, const float* Q, float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
     for (int t = 0; t < B; ++t) {
-      const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
-      const double x = rx * rx + ry * ry + rz * rz;
-      // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to 1e-10
-      // for theta <= 2.5; larger turns are redone with sin and cos below.
-      double a = 1.0 / 6227020800.0, b = 1.0 / 87178291200.0;  // 1/13!, 1/14!
-      constexpr double kInvFactorial[] = {1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0, 1.0 / 6.0, 1.0};
-      constexpr double kInvFactorialEven[] = {1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5};
+      const float rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
+      const float x = rx * rx + ry * ry + rz * rz;
+      // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to float
+      // precision for theta <= 2.5; larger turns are redone with sin and cos below.
+      float a = 1.0f / 6227020800.0f, b = 1.0f / 87178291200.0f;  // 1/13!, 1/14!
+      constexpr float kInvFactorial[] = {1.0f / 39916800.0f, 1.0f / 362880.0f, 1.0f / 5040.0f, 1.0f / 120.0f, 1.0f / 6.0f, 1.0f};
+      constexpr float kInvFactorialEven[] = {1.0f / 479001600.0f, 1.0f / 3628800.0f, 1.0f / 40320.0f, 1.0f / 720.0f, 1.0f / 24.0f, 0.5f};
       for (int i = 0; i < 6; ++i) {
         a = kInvFactorial[i] - x * a;
         b = kInvFactorialEven[i] - x * b;
@@ -400,29 +401,29 @@ class PoissonSolver : public FaceSolver {
       finish_triangle(t, rx, ry, rz, x, a, b, sum, Q, out);
     }
     for (int t = 0; t < B; ++t) {
-      const double rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
-      const double x = rx * rx + ry * ry + rz * rz;
-      if (x <= 6.25) continue;
-      const double theta = std::sqrt(x);
-      finish_triangle(t, rx, ry, rz, x, std::sin(theta) / theta, (1.0 - std::cos(theta)) / x, sum, Q, out);
+      const float rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
+      const float x = rx * rx + ry * ry + rz * rz;
+      if (x <= 6.25f) continue;
+      const double theta = std::sqrt(double(x));
+      finish_triangle(t, rx, ry, rz, x, float(std::sin(theta) / theta), float((1.0 - std::cos(theta)) / x), sum, Q, out);
     }
   }
 
   // out = (R (I + S) - I) Q for triangle t of a block, R = I + a [r]x + b [r]x^2.
-  static void finish_triangle(int t, double rx, double ry, double rz, double x, double a, double b, const float* S,
-                              const double* Q, double* out) noexcept {
+  static void finish_triangle(int t, float rx, float ry, float rz, float x, float a, float b, const float* S,
+                              const float* Q, float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-    double R[9];  // column-major
-    R[0] = 1 + b * (rx * rx - x); R[3] = -a * rz + b * rx * ry;  R[6] = a * ry + b * rx * rz;
-    R[1] = a * rz + b * rx * ry;  R[4] = 1 + b * (ry * ry - x);  R[7] = -a * rx + b * ry * rz;
-    R[2] = -a * ry + b * rx * rz; R[5] = a * rx + b * ry * rz;   R[8] = 1 + b * (rz * rz - x);
-    const double sxx = 1 + S[3 * B + t], syy = 1 + S[4 * B + t], szz = 1 + S[5 * B + t];
-    const double sxy = S[6 * B + t], sxz = S[7 * B + t], syz = S[8 * B + t];
-    const double Sm[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};
-    double M[9];  // R S - I
+    float D[9];  // R - I, column-major: small, so no precision is lost against I
+    D[0] = b * (rx * rx - x);     D[3] = -a * rz + b * rx * ry;  D[6] = a * ry + b * rx * rz;
+    D[1] = a * rz + b * rx * ry;  D[4] = b * (ry * ry - x);      D[7] = -a * rx + b * ry * rz;
+    D[2] = -a * ry + b * rx * rz; D[5] = a * rx + b * ry * rz;   D[8] = b * (rz * rz - x);
+    const float sxx = S[3 * B + t], syy = S[4 * B + t], szz = S[5 * B + t];
+    const float sxy = S[6 * B + t], sxz = S[7 * B + t], syz = S[8 * B + t];
+    const float E[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};  // S - I
+    float M[9];  // R S - I = D + E + D E
     for (int c = 0; c < 3; ++c)
       for (int r = 0; r < 3; ++r)
-        M[3 * c + r] = R[r] * Sm[3 * c] + R[3 + r] * Sm[3 * c + 1] + R[6 + r] * Sm[3 * c + 2] - (r == c ? 1.0 : 0.0);
+        M[3 * c + r] = D[3 * c + r] + E[3 * c + r] + D[r] * E[3 * c] + D[3 + r] * E[3 * c + 1] + D[6 + r] * E[3 * c + 2];
     for (int k = 0; k < 3; ++k)
       for (int r = 0; r < 3; ++r)
         out[(3 * k + r) * B + t] =
@@ -590,7 +591,7 @@ class PoissonSolver : public FaceSolver {
 
   Blend blend_;
   WeightsStage weights_;
-  std::vector<double> operator_;       // Q_j, in triangle_blocks' slots, component-major per block
+  std::vector<float> operator_;        // Q_j, in triangle_blocks' slots, component-major per block
   std::vector<std::array<int32_t, 3>> slot_corners_;  // per slot of triangle_blocks: its vertices, -1 for padding
   Eigen::Matrix3Xd identity_rhs_, rhs_;
   Eigen::Matrix4Xd work_;
