@@ -31,7 +31,7 @@ void sleep_until(int64_t deadline_ns) noexcept {
 void sleep_for(int64_t ns) noexcept { sleep_until(monotonic_now_ns() + ns); }
 
 [[gnu::noinline]] void prefault_stack() noexcept {
-  volatile unsigned char stack[kStackPrefaultBytes];
+  [[maybe_unused]] volatile unsigned char stack[kStackPrefaultBytes];
   for (std::size_t i = 0; i < kStackPrefaultBytes; i += 4096) stack[i] = 0;
 }
 
