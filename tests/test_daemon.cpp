@@ -19,6 +19,7 @@
 #include "drivers/sim/sim_source.hpp"
 #include "formats/recording.hpp"
 #include "solver/builtin_face.hpp"
+#include "tests/daemon_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -164,19 +165,7 @@ TEST_CASE("lockstep replay solves every frame and the recorder writes them all")
   const config::DaemonConfig defaults = config::default_config();
   const auto rig = builtin_rig();
   const MarkerCalibration calibration = load_calibration(defaults.calibration, *rig);
-  drivers::SimSource sim(defaults.source.sim, rig, calibration.markers);
-  sim.open();
-  formats::MarkerTake take;
-  take.format = formats::TakeFormat::kRecording;
-  take.labels = sim.info().labels;
-  take.rate_hz = 120;
-  take.units = sim.info().units;
-  for (int64_t n = 0; n < 90; ++n) {
-    MarkerFrame f = drivers::make_marker_frame(take.labels);
-    sim.render_frame(n, f);
-    take.frames.push_back(f);
-  }
-  formats::write_take(dir / "take.fcrec", take);
+  test::write_sim_take(dir / "take.fcrec", defaults.source.sim, rig, calibration.markers, 90);
 
   Daemon d({.handle_signals = false},
            loaded({"source.driver=replay", "source.replay.file=" + (dir / "take.fcrec").string(), "loop.mode=lockstep",
@@ -274,18 +263,7 @@ TEST_CASE("the fixed-rate loop stays on its deadline grid and counts what it ski
   const config::DaemonConfig c = config::default_config();
   const auto rig = builtin_rig();
   const MarkerCalibration calibration = load_calibration(c.calibration, *rig);
-  drivers::SimSource sim(c.source.sim, rig, calibration.markers);
-  sim.open();
-  formats::MarkerTake take;
-  take.format = formats::TakeFormat::kRecording;
-  take.labels = sim.info().labels;
-  take.rate_hz = 120;
-  for (int64_t n = 0; n < 20; ++n) {
-    MarkerFrame f = drivers::make_marker_frame(take.labels);
-    sim.render_frame(n, f);
-    take.frames.push_back(f);
-  }
-  formats::write_take(dir / "take.fcrec", take);
+  test::write_sim_take(dir / "take.fcrec", c.source.sim, rig, calibration.markers, 20);
   drivers::ReplayOptions replay_options;
   replay_options.file = (dir / "take.fcrec").string();
   replay_options.speed = 0.0;  // a frame for every tick

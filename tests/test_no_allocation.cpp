@@ -15,9 +15,9 @@
 #include "daemon/solve_loop.hpp"
 #include "drivers/replay/replay_source.hpp"
 #include "drivers/sim/sim_source.hpp"
-#include "formats/take.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/alloc_counter.hpp"
+#include "tests/daemon_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -111,19 +111,8 @@ TEST_CASE("a tick pulling from a replay allocates nothing") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
   const MarkerCalibration calibration = load_calibration(c.calibration, *rig);
-  drivers::SimSource sim(c.source.sim, rig, calibration.markers);
-  sim.open();
-  formats::MarkerTake take;
-  take.format = formats::TakeFormat::kRecording;
-  take.labels = sim.info().labels;
-  take.rate_hz = 120;
-  for (int64_t n = 0; n < 50; ++n) {
-    MarkerFrame f = drivers::make_marker_frame(take.labels);
-    sim.render_frame(n, f);
-    take.frames.push_back(f);
-  }
   const auto file = test::scratch_dir("noalloc-replay") / "take.fcrec";
-  formats::write_take(file, take);
+  test::write_sim_take(file, c.source.sim, rig, calibration.markers, 50);
   drivers::ReplayOptions replay_options;
   replay_options.file = file.string();
   replay_options.loop = true;
