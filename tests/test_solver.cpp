@@ -254,6 +254,24 @@ TEST_CASE("collision handling removes the lip intersections the nonlinear blend 
   CHECK(b.collision_constraints == 0);
 }
 
+TEST_CASE("whole-face collision handling solves its pins per frame and removes the built-in lip crossings") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  SolverParams face;
+  face.collision_region = CollisionRegion::kFace;  // too many vertices to precompute columns for
+  const auto model = build_solver_model(rig, layout, face);
+  REQUIRE_FALSE(model->collision_columns_precomputed());
+  auto solver = make_solver("nonlinear", model);
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+  w[*rig.shape_index("mouthPucker")] = 1.0;
+  w[*rig.shape_index("mouthClose")] = 1.0;
+  SolveResult out = solver->make_result();
+  solver->solve_with_weights(w, markers_of(rig.linear_blend(w), layout), all_present(60), out);
+  INFO("pins " << out.collision_constraints << ", pairs " << out.collision_pairs);
+  CHECK(out.collision_constraints > 0);
+  CHECK(count_intersecting_pairs(rig.triangles, out.vertices) == 0);
+}
+
 // ICT FaceKit's own shapes cross at the lips (its linear blend does, and most of the
 // crossing pairs reach beyond the lip region into the mouth), so zero crossings is out of
 // reach of pins to the linear blend. The stage must still not make things worse overall,
