@@ -312,7 +312,7 @@ void build_marker_paths(SolverModel& model) {
       const Eigen::Matrix3d turn = (rotation_exp(r) - Eigen::Matrix3d::Identity()) *
                                        (Eigen::Matrix3d::Identity() - axis * axis.transpose()) + axis * axis.transpose();
       const Eigen::Vector3d arm = turn.inverse() * (delta - axial);
-      model.marker_paths.push_back({int(k), int(s), r, arm, axial, theta, axis.cross(arm)});
+      model.marker_paths.push_back({int(k), int(s), arm, axial, theta, axis.cross(arm)});
     }
   }
 }
@@ -333,6 +333,12 @@ void choose_collision_region(SolverModel& model) {
       model.vertex_to_collision[std::size_t(v)] = int(model.collision_vertices.size());
       model.collision_vertices.push_back(v);
     }
+  // Contiguous per vertex, for the collision stage's linear-blend targets.
+  const auto C = Eigen::Index(model.collision_vertices.size());
+  model.collision_basis.resize(rig.shape_count(), 3 * C);
+  for (Eigen::Index i = 0; i < C; ++i)
+    for (int c = 0; c < 3; ++c)
+      model.collision_basis.col(3 * i + c) = rig.deltas.row(3 * Eigen::Index(model.collision_vertices[std::size_t(i)]) + c).transpose();
 }
 
 }  // namespace

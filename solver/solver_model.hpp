@@ -75,12 +75,11 @@ struct QuantisedValues {
 struct MarkerPath {
   int marker = 0;
   int shape = 0;
-  Eigen::Vector3d rotation = Eigen::Vector3d::Zero();  // r: the surface's rotation vector at the marker
-  Eigen::Vector3d arm = Eigen::Vector3d::Zero();       // from the rotation axis, perpendicular to it
-  Eigen::Vector3d axial = Eigen::Vector3d::Zero();     // slide along the axis at t = 1
-  // |r| and (r / |r|) x arm: with the arm perpendicular to the axis,
-  // (exp(t r) - I) arm = (cos(t |r|) - 1) arm + sin(t |r|) axis_cross_arm.
-  double angle = 0.0;
+  // The surface under the marker turns by r = angle * axis; with the arm perpendicular to
+  // the axis, (exp(t r) - I) arm = (cos(t angle) - 1) arm + sin(t angle) axis_cross_arm.
+  Eigen::Vector3d arm = Eigen::Vector3d::Zero();     // from the rotation axis, perpendicular to it
+  Eigen::Vector3d axial = Eigen::Vector3d::Zero();   // slide along the axis at t = 1
+  double angle = 0.0;                                // |r|
   Eigen::Vector3d axis_cross_arm = Eigen::Vector3d::Zero();
 };
 
@@ -123,6 +122,7 @@ class SolverModel {
   std::vector<int> collision_triangles;  // triangles the collision stage checks
   std::vector<int> collision_vertices;   // their vertices: the ones it may pin
   std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
+  Eigen::MatrixXd collision_basis;       // M x 3C: B's rows of collision vertex i in columns 3i..3i+2
   Eigen::MatrixXd marker_solution;       // N x K
   Eigen::MatrixXf pin_solution;          // N x C, or empty
   bool collision_columns_precomputed() const {

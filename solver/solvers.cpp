@@ -272,10 +272,6 @@ class PoissonSolver : public FaceSolver {
       config.neighbour_edges = 2;
       collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config);
       const auto C = Eigen::Index(m.collision_vertices.size());
-      collision_deltas_.resize(m.shape_count(), 3 * C);
-      for (Eigen::Index i = 0; i < C; ++i)
-        for (int c = 0; c < 3; ++c)
-          collision_deltas_.col(3 * i + c) = m.rig.deltas.row(3 * Eigen::Index(m.collision_vertices[std::size_t(i)]) + c).transpose();
       linear_cache_.resize(3, C);
       linear_stamp_.assign(std::size_t(C), 0);
       pin_stamp_.assign(std::size_t(N), 0);
@@ -490,7 +486,7 @@ class PoissonSolver : public FaceSolver {
     if (linear_stamp_[i] != stamp_) {
       linear_stamp_[i] = stamp_;
       for (int c = 0; c < 3; ++c)
-        linear_cache_(c, Eigen::Index(i)) = model_->rig.neutral(c, v) + collision_deltas_.col(3 * Eigen::Index(i) + c).dot(w);
+        linear_cache_(c, Eigen::Index(i)) = model_->rig.neutral(c, v) + model_->collision_basis.col(3 * Eigen::Index(i) + c).dot(w);
     }
     return linear_cache_.col(Eigen::Index(i));
   }
@@ -603,7 +599,6 @@ class PoissonSolver : public FaceSolver {
   CollisionResult collisions_;
   Eigen::Index pin_capacity_ = 0;
   Eigen::MatrixXd pin_columns_;  // A0^-1 e_v solved per frame when not precomputed
-  Eigen::MatrixXd collision_deltas_;  // M x 3C: B's rows of the collision vertices, one column per coordinate
   Eigen::Matrix3Xd linear_cache_;     // 3 x C: this frame's linear blend there
   std::vector<uint32_t> linear_stamp_, pin_stamp_;  // frame stamps: linear_cache_ valid, vertex pinned
   uint32_t stamp_ = 0;
