@@ -343,6 +343,15 @@ void choose_collision_region(SolverModel& model) {
 
 }  // namespace
 
+void PinColumns::set_column(Eigen::Index c, const Eigen::Ref<const Eigen::VectorXd>& column) {
+  const double largest = column.cwiseAbs().maxCoeff();
+  const double step = largest > 0.0 ? largest / 32767.0 : 1.0;
+  scale[std::size_t(c)] = float(step);
+  int16_t* q = values.data() + std::size_t(c * rows);
+  for (Eigen::Index r = 0; r < rows; ++r)
+    q[r] = int16_t(std::clamp(std::lround(column[r] / double(float(step))), -32767L, 32767L));
+}
+
 int32_t ShapeBlocks::find_entry(Eigen::Index shape, int block) const noexcept {
   for (int32_t e = block_begin[std::size_t(block)]; e < block_begin[std::size_t(block) + 1]; ++e)
     if (entries[std::size_t(e)].shape == shape) return e;
@@ -476,7 +485,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
     model->pin_solution.resize(N, C);
     solve_columns(
         C, [&](Eigen::Index c, auto row) { row[model->collision_vertices[std::size_t(c)]] = 1.0; },
-        [&](Eigen::Index c, const auto& column) { model->pin_solution.col(c) = column.template cast<float>(); });
+        [&](Eigen::Index c, const auto& column) { model->pin_solution.set_column(c, column); });
     model->setup.modifications_s = seconds_since(t0);
   }
   model->setup.total_s = seconds_since(start);

@@ -69,6 +69,27 @@ struct QuantisedValues {
   }
 };
 
+// Columns of an N-row matrix as 16-bit fixed point, scale * q with one scale per column
+// spanning its largest magnitude: rounding is at most 1/65534 of that, and a quarter of
+// double's bytes stream through the per-frame sum.
+struct PinColumns {
+  Eigen::Index rows = 0;
+  std::vector<int16_t> values;  // column-major
+  std::vector<float> scale;     // per column
+
+  Eigen::Index cols() const noexcept { return Eigen::Index(scale.size()); }
+  void resize(Eigen::Index row_count, Eigen::Index col_count) {
+    rows = row_count;
+    values.assign(std::size_t(row_count * col_count), 0);
+    scale.assign(std::size_t(col_count), 0.0f);
+  }
+  const int16_t* column(Eigen::Index c) const noexcept { return values.data() + std::size_t(c * rows); }
+  void set_column(Eigen::Index c, const Eigen::Ref<const Eigen::VectorXd>& column);
+  double at(Eigen::Index row, Eigen::Index c) const noexcept {
+    return double(scale[std::size_t(c)]) * double(values[std::size_t(c * rows + row)]);
+  }
+};
+
 // How a marker moves with one shape's weight t under Eq. 4 where the shape turns the
 // surface under it: f(t) = (exp(t r) - I) arm + t axial, a screw motion that reaches the
 // shape's delta at t = 1. Markers on shapes that do not turn move linearly (t delta).
@@ -117,14 +138,14 @@ class SolverModel {
   // beta c_k c_k^T, a collision pin adds beta e_v e_v^T. Column k of marker_solution is
   // A0^-1 c_k; column i of pin_solution is A0^-1 e_v for v = collision_vertices[i] when
   // the region is small enough to precompute (the lips), otherwise pins are solved for as
-  // they occur. pin_solution is float: it multiplies pin forces beta (t_v - x_v), small
-  // next to positions, and the per-frame correction streams it.
+  // they occur. pin_solution is 16-bit (PinColumns): it multiplies pin forces
+  // beta (t_v - x_v), small next to positions, and the per-frame correction streams it.
   std::vector<int> collision_triangles;  // triangles the collision stage checks
   std::vector<int> collision_vertices;   // their vertices: the ones it may pin
   std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
   Eigen::MatrixXd collision_basis;       // M x 3C: B's rows of collision vertex i in columns 3i..3i+2
   Eigen::MatrixXd marker_solution;       // N x K
-  Eigen::MatrixXf pin_solution;          // N x C, or empty
+  PinColumns pin_solution;               // N x C, or empty
   bool collision_columns_precomputed() const {
     return !collision_vertices.empty() && pin_solution.cols() == Eigen::Index(collision_vertices.size());
   }

@@ -285,6 +285,7 @@ class PoissonSolver : public FaceSolver {
     small_rhs_.resize(capacity, 3);
     if (!m.collision_columns_precomputed()) pin_columns_.resize(N, pin_capacity_);
     pin_work_.resize(N);
+    correction_.resize(N, 3);
   }
 
   std::string_view name() const noexcept override { return blend_ == Blend::kNonlinear ? "nonlinear" : "dt"; }
@@ -324,7 +325,7 @@ class PoissonSolver : public FaceSolver {
       if (present[std::size_t(k)] && targets.col(k).allFinite()) {
         for (int a = 0; a < 3; ++a) rhs_.col(b.vertices[a]) += beta * b.barycentric[a] * targets.col(k);
       } else {
-        add_modification({b.vertices, b.barycentric, m.marker_solution.col(k).data(), nullptr, -beta});
+        add_modification({b.vertices, b.barycentric, m.marker_solution.col(k).data(), nullptr, 0.0f, -beta});
       }
     }
     clock.lap(SolveStage::kRhs);
@@ -462,9 +463,12 @@ class PoissonSolver : public FaceSolver {
         if (pin_stamp_[std::size_t(v)] == stamp_ || pins == pin_capacity_) continue;
         pin_stamp_[std::size_t(v)] = stamp_;
         const double* column = nullptr;
-        const float* float_column = nullptr;
+        const int16_t* pin_column = nullptr;
+        float pin_scale = 0.0f;
         if (m.collision_columns_precomputed()) {
-          float_column = m.pin_solution.col(m.vertex_to_collision[std::size_t(v)]).data();
+          const auto c = Eigen::Index(m.vertex_to_collision[std::size_t(v)]);
+          pin_column = m.pin_solution.column(c);
+          pin_scale = m.pin_solution.scale[std::size_t(c)];
         } else {
           auto z = pin_columns_.col(pins);
           z.setZero();
@@ -472,7 +476,7 @@ class PoissonSolver : public FaceSolver {
           m.factor->solve_in_place(z, pin_work_);
           column = z.data();
         }
-        add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, float_column, beta, linear_position(v, out.weights)});
+        add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, pin_column, pin_scale, beta, linear_position(v, out.weights)});
         ++pins;
       }
     }
@@ -492,16 +496,17 @@ class PoissonSolver : public FaceSolver {
   }
 
   // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; A0^-1 u is `column`, or
-  // `float_column` for a precomputed pin. The right-hand side gains d u target^T (a pin's
-  // target; zero for a marker dropping out).
+  // pin_scale * pin_column for a precomputed pin. The right-hand side gains d u target^T
+  // (a pin's target; zero for a marker dropping out).
   struct Modification {
     std::array<int, 3> vertices;
     Eigen::Vector3d weights;
     const double* column;
-    const float* float_column;
+    const int16_t* pin_column;  // with pin_scale
+    float pin_scale;
     double scale;
     Eigen::Vector3d target = Eigen::Vector3d::Zero();
-    double column_at(int v) const noexcept { return column ? column[v] : double(float_column[v]); }
+    double column_at(int v) const noexcept { return column ? column[v] : double(pin_scale) * double(pin_column[v]); }
   };
 
   void add_modification(const Modification& modification) noexcept { modifications_[std::size_t(modification_count_++)] = modification; }
@@ -556,33 +561,52 @@ class PoissonSolver : public FaceSolver {
       const Modification& mi = modifications_[std::size_t(i)];
       small_rhs_.row(i) = mi.scale * mi.target.transpose() - small_rhs_.row(i);
     }
-    // x += Z C, in chunks of vertices summed coordinate by coordinate (contiguous, so
-    // vectorised) in L1 while the columns stream through once.
-    constexpr Eigen::Index kChunk = 256;
+    // x += Z C, summed coordinate by coordinate (contiguous, so vectorised) into sums that
+    // stay in L2 while each column streams through once, front to back.
     const Eigen::Index N = m.vertex_count();
-    Eigen::Array<double, kChunk, 3> sum;
-    for (Eigen::Index first = 0; first < N; first += kChunk) {
-      const Eigen::Index count = std::min(kChunk, N - first);
-      sum.setZero();
-      double* __restrict sx = sum.col(0).data();
-      double* __restrict sy = sum.col(1).data();
-      double* __restrict sz = sum.col(2).data();
-      for (Eigen::Index i = 0; i < s; ++i) {
-        const Modification& mi = modifications_[std::size_t(i)];
-        const double cx = small_rhs_(i, 0), cy = small_rhs_(i, 1), cz = small_rhs_(i, 2);
-        auto add = [&](const auto* __restrict z) {
-          for (Eigen::Index j = 0; j < count; ++j) {
-            const double zj = double(z[first + j]);
-            sx[j] += cx * zj;
-            sy[j] += cy * zj;
-            sz[j] += cz * zj;
-          }
-        };
-        if (mi.column) add(mi.column);
-        else add(mi.float_column);
+    correction_.setZero();
+    double* __restrict sx = correction_.col(0).data();
+    double* __restrict sy = correction_.col(1).data();
+    double* __restrict sz = correction_.col(2).data();
+    Eigen::Index i = 0;
+    // Double columns first (markers, pins solved this frame), then precomputed pins.
+    for (; i < s && modifications_[std::size_t(i)].column; ++i) {
+      const double* __restrict z = modifications_[std::size_t(i)].column;
+      const double cx = small_rhs_(i, 0), cy = small_rhs_(i, 1), cz = small_rhs_(i, 2);
+      for (Eigen::Index j = 0; j < N; ++j) {
+        sx[j] += cx * z[j];
+        sy[j] += cy * z[j];
+        sz[j] += cz * z[j];
       }
-      x.middleCols(first, count) += sum.topRows(count).matrix().transpose();
     }
+    // Float sums of four pin columns at a time: one pass over the sums per four columns.
+    auto add_pins = [&]<int Count>(std::integral_constant<int, Count>) {
+      const int16_t* __restrict z[Count];
+      float cx[Count], cy[Count], cz[Count];
+      for (int k = 0; k < Count; ++k) {
+        const Modification& mk = modifications_[std::size_t(i + k)];
+        z[k] = mk.pin_column;
+        cx[k] = float(mk.pin_scale * small_rhs_(i + k, 0));
+        cy[k] = float(mk.pin_scale * small_rhs_(i + k, 1));
+        cz[k] = float(mk.pin_scale * small_rhs_(i + k, 2));
+      }
+      for (Eigen::Index j = 0; j < N; ++j) {
+        float x_sum = 0.0f, y_sum = 0.0f, z_sum = 0.0f;
+        for (int k = 0; k < Count; ++k) {
+          const float zj = float(z[k][j]);
+          x_sum += cx[k] * zj;
+          y_sum += cy[k] * zj;
+          z_sum += cz[k] * zj;
+        }
+        sx[j] += x_sum;
+        sy[j] += y_sum;
+        sz[j] += z_sum;
+      }
+      i += Count;
+    };
+    while (i + 4 <= s) add_pins(std::integral_constant<int, 4>{});
+    while (i < s) add_pins(std::integral_constant<int, 1>{});
+    x += correction_.transpose();
   }
 
   Blend blend_;
@@ -603,6 +627,7 @@ class PoissonSolver : public FaceSolver {
   std::vector<uint32_t> linear_stamp_, pin_stamp_;  // frame stamps: linear_cache_ valid, vertex pinned
   uint32_t stamp_ = 0;
   Eigen::VectorXd pin_work_;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> correction_;  // N x 3: Z C, coordinate by coordinate
 };
 
 }  // namespace
