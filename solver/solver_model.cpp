@@ -5,6 +5,7 @@
 #include <limits>
 #include <cmath>
 #include <numbers>
+#include <numeric>
 #include <queue>
 #include <thread>
 
@@ -212,44 +213,71 @@ ShapeBlocks make_shape_blocks(const Eigen::Matrix3Xd& positions, Eigen::Index sh
   return out;
 }
 
-// value(shape, element, component) quantised entry by entry (QuantisedValues); entries
-// whose rounding error (half a step) would exceed `tolerance` get the fine plane.
+// value(shape, element, component) quantised entry by entry (QuantisedValues): 8-bit
+// where half a step stays within `tolerance`, else 16-bit, with the fine plane where
+// half a 16-bit step would exceed it.
 template <class Value>
 QuantisedValues quantise(const ShapeBlocks& blocks, int components, double tolerance, Value&& value) {
   constexpr int B = ShapeBlocks::kBlock;
   QuantisedValues out;
   out.components = components;
-  out.value.assign(blocks.entries.size() * out.entry_size(), 0);
+  const std::size_t size = out.entry_size();
+  out.value_index.assign(blocks.entries.size(), 0);
   out.fine_of_entry.assign(blocks.entries.size(), -1);
-  std::vector<double> exact(out.entry_size());
+  out.offset.resize(blocks.entries.size() * std::size_t(components));
+  out.scale.resize(out.offset.size());
+  const auto component_count = static_cast<std::size_t>(components);
+  std::vector<double> exact(size), low(component_count), high(component_count);
+  std::vector<long> q(size);
   for (std::size_t e = 0; e < blocks.entries.size(); ++e) {
     const auto [shape, block] = blocks.entries[e];
     const int32_t* slots = blocks.element_of_slot.data() + std::size_t(block) * B;
-    bool needs_fine = false;
+    bool narrow = true, needs_fine = false;
     for (int c = 0; c < components; ++c) {
-      double low = std::numeric_limits<double>::infinity(), high = -low;
+      low[std::size_t(c)] = std::numeric_limits<double>::infinity();
+      high[std::size_t(c)] = -low[std::size_t(c)];
       for (int i = 0; i < B; ++i) {
         if (slots[i] < 0) continue;
-        low = std::min(low, value(shape, slots[i], c));
-        high = std::max(high, value(shape, slots[i], c));
+        low[std::size_t(c)] = std::min(low[std::size_t(c)], value(shape, slots[i], c));
+        high[std::size_t(c)] = std::max(high[std::size_t(c)], value(shape, slots[i], c));
       }
-      const float offset = float(0.5 * (low + high));
-      const float scale = high > low ? float((high - low) / 65534.0) : 1.0f;
-      needs_fine = needs_fine || (high > low && 0.5 * scale > tolerance);
-      out.offset.push_back(offset);
-      out.scale.push_back(scale);
-      int16_t* q = out.value.data() + e * out.entry_size() + std::size_t(c) * B;
-      for (int i = 0; i < B; ++i) {
-        if (slots[i] < 0) continue;
-        exact[std::size_t(c) * B + std::size_t(i)] = (value(shape, slots[i], c) - offset) / scale;
-        q[i] = int16_t(std::clamp(std::lround(exact[std::size_t(c) * B + std::size_t(i)]), -32767L, 32767L));
-      }
+      const double range = std::max(0.0, high[std::size_t(c)] - low[std::size_t(c)]);
+      narrow = narrow && 0.5 * range / 254.0 <= tolerance;
+      needs_fine = needs_fine || 0.5 * range / 65534.0 > tolerance;
     }
+    const double levels = narrow ? 254.0 : 65534.0;
+    const long limit = narrow ? 127 : 32767;
+    for (int c = 0; c < components; ++c) {
+      const double range = high[std::size_t(c)] - low[std::size_t(c)];
+      const float offset = float(0.5 * (low[std::size_t(c)] + high[std::size_t(c)]));
+      const float scale = range > 0.0 ? float(range / levels) : 1.0f;
+      out.offset[e * std::size_t(components) + std::size_t(c)] = offset;
+      out.scale[e * std::size_t(components) + std::size_t(c)] = scale;
+      for (int i = 0; i < B; ++i)
+        exact[std::size_t(c) * B + std::size_t(i)] = slots[i] < 0 ? 0.0 : (value(shape, slots[i], c) - offset) / scale;
+    }
+    for (std::size_t k = 0; k < size; ++k) q[k] = std::clamp(std::lround(exact[k]), -limit, limit);
+    if (narrow) {
+      out.value_index[e] = ~int32_t(out.narrow.size() / size);
+      for (long v : q) out.narrow.push_back(int8_t(v));
+      continue;
+    }
+    out.value_index[e] = int32_t(out.wide.size() / size);
+    for (long v : q) out.wide.push_back(int16_t(v));
     if (!needs_fine) continue;
-    out.fine_of_entry[e] = int32_t(out.fine.size() / out.entry_size());
-    const int16_t* q = out.value.data() + e * out.entry_size();
-    for (std::size_t k = 0; k < out.entry_size(); ++k)
-      out.fine.push_back(slots[k % B] < 0 ? int16_t(0) : int16_t(std::clamp(std::lround((exact[k] - q[k]) * 65534.0), -32767L, 32767L)));
+    out.fine_of_entry[e] = int32_t(out.fine.size() / size);
+    for (std::size_t k = 0; k < size; ++k)
+      out.fine.push_back(slots[k % B] < 0 ? int16_t(0) : int16_t(std::clamp(std::lround((exact[k] - double(q[k])) * 65534.0), -32767L, 32767L)));
+  }
+  // Narrow entries first within each block, shapes ascending otherwise.
+  out.block_entries.resize(blocks.entries.size());
+  std::iota(out.block_entries.begin(), out.block_entries.end(), 0);
+  out.narrow_end.resize(std::size_t(blocks.block_count()));
+  for (int b = 0; b < blocks.block_count(); ++b) {
+    const auto first = out.block_entries.begin() + blocks.block_begin[std::size_t(b)];
+    const auto last = out.block_entries.begin() + blocks.block_begin[std::size_t(b) + 1];
+    const auto middle = std::stable_partition(first, last, [&](int32_t e) { return out.is_narrow(e); });
+    out.narrow_end[std::size_t(b)] = int32_t(middle - out.block_entries.begin());
   }
   return out;
 }

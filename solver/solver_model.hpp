@@ -40,21 +40,33 @@ struct ShapeBlocks {
 };
 
 // `components` values per element for every entry of a ShapeBlocks, component-major
-// (component c of slot i of entry e at value[(e * components + c) * kBlock + i]), as
-// 16-bit fixed point offset + scale * q with one offset and scale per entry and
-// component spanning that block's values: half the bytes of float, and as a block holds
-// neighbours its range is usually small. Entries whose step would exceed the tolerance
-// given at build time carry a second 16-bit plane, offset + scale * (q + fine / 65534),
-// which makes them finer than float.
+// (component c of slot i at [c * kBlock + i] of the entry's values), as fixed point
+// offset + scale * q with one offset and scale per entry and component spanning that
+// block's values: as a block holds neighbours its range is usually small. An entry is
+// stored in 8 bits (`narrow`) where half a step of range / 254 stays within the
+// tolerance given at build time, otherwise in 16 bits (`wide`); a wide entry whose step
+// would still exceed it carries a second 16-bit plane, offset + scale * (q + fine / 65534),
+// which makes it finer than float. Per block, the narrow entries are listed first.
 struct QuantisedValues {
   int components = 0;
-  std::vector<int16_t> value;
-  std::vector<float> offset, scale;  // components per entry
-  std::vector<int32_t> fine_of_entry;  // index into `fine` (in units of components * kBlock), or -1
+  std::vector<int32_t> value_index;  // per entry: index into narrow or wide (units of entry_size())
+  std::vector<int8_t> narrow;
+  std::vector<int16_t> wide;
+  std::vector<float> offset, scale;    // components per entry
+  std::vector<int32_t> fine_of_entry;  // index into `fine` (units of entry_size()), or -1
   std::vector<int16_t> fine;
+  // The entries of block b are block_entries[block_begin[b] .. block_begin[b + 1]) (the
+  // ShapeBlocks' ranges), the narrow ones up to narrow_end[b].
+  std::vector<int32_t> block_entries, narrow_end;
 
   std::size_t entry_size() const noexcept { return std::size_t(components) * ShapeBlocks::kBlock; }
-  const int16_t* values_of(int32_t entry) const noexcept { return value.data() + std::size_t(entry) * entry_size(); }
+  bool is_narrow(int32_t entry) const noexcept { return value_index[std::size_t(entry)] < 0; }
+  const int8_t* narrow_values_of(int32_t entry) const noexcept {
+    return narrow.data() + std::size_t(~value_index[std::size_t(entry)]) * entry_size();
+  }
+  const int16_t* wide_values_of(int32_t entry) const noexcept {
+    return wide.data() + std::size_t(value_index[std::size_t(entry)]) * entry_size();
+  }
   const int16_t* fine_values_of(int32_t entry) const noexcept {
     const int32_t f = fine_of_entry[std::size_t(entry)];
     return f < 0 ? nullptr : fine.data() + std::size_t(f) * entry_size();
@@ -63,9 +75,11 @@ struct QuantisedValues {
   const float* scales_of(int32_t entry) const noexcept { return scale.data() + std::size_t(entry) * std::size_t(components); }
   double at(int32_t entry, int component, int i) const noexcept {
     const std::size_t k = std::size_t(component) * ShapeBlocks::kBlock + std::size_t(i);
+    const double base = double(offsets_of(entry)[component]);
+    const double step = double(scales_of(entry)[component]);
+    if (is_narrow(entry)) return base + step * double(narrow_values_of(entry)[k]);
     const int16_t* f = fine_values_of(entry);
-    return double(offsets_of(entry)[component]) +
-           double(scales_of(entry)[component]) * (double(values_of(entry)[k]) + (f ? double(f[k]) / 65534.0 : 0.0));
+    return base + step * (double(wide_values_of(entry)[k]) + (f ? double(f[k]) / 65534.0 : 0.0));
   }
 };
 

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <immintrin.h>
 
 #include <fmt/format.h>
 
@@ -25,6 +26,19 @@ constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds th
 // One component of a ShapeBlocks block.
 using Lanes16 = float __attribute__((vector_size(64)));
 using Shorts16 = int16_t __attribute__((vector_size(32)));
+using Bytes16 = int8_t __attribute__((vector_size(16)));
+
+// 16 bytes widened to floats (GCC 12 turns __builtin_convertvector from bytes into
+// scalar code, so AVX-512 gets the two instructions spelled out).
+Lanes16 widen(const int8_t* q) noexcept {
+#if defined(__AVX512F__)
+  return Lanes16(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(q)))));
+#else
+  Bytes16 v;
+  std::memcpy(&v, q, sizeof v);
+  return __builtin_convertvector(v, Lanes16);
+#endif
+}
 
 class StageClock {
  public:
@@ -159,7 +173,8 @@ class WeightsStage {
 };
 
 // sum over the active shapes' entries in `block` of w_s * value, component-major, summed
-// in Lanes16 (one AVX-512 register each) so the block's sum stays in registers.
+// in Lanes16 (one AVX-512 register each) so the block's sum stays in registers; the
+// narrow entries first, then the wide ones (QuantisedValues).
 template <int Components>
 void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int block, const Eigen::VectorXd& w,
                double active_weight, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
@@ -167,16 +182,34 @@ void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int blo
   static_assert(L * 16 == ShapeBlocks::kBlock);
   Lanes16 lanes[Components][L] = {};
   float offset_sum[Components] = {};
-  for (int32_t e = blocks.block_begin[std::size_t(block)]; e < blocks.block_begin[std::size_t(block) + 1]; ++e) {
+  const int32_t* entries = values.block_entries.data();
+  const int32_t narrow_end = values.narrow_end[std::size_t(block)], end = blocks.block_begin[std::size_t(block) + 1];
+  for (int32_t k = blocks.block_begin[std::size_t(block)]; k < narrow_end; ++k) {
+    const int32_t e = entries[k];
     const double ws = w[blocks.entries[std::size_t(e)].shape];
     if (ws <= active_weight) continue;
-    const int16_t* q = values.values_of(e);
+    const int8_t* q = values.narrow_values_of(e);
+    const float* scale = values.scales_of(e);
+    const float* offset = values.offsets_of(e);
+    for (int c = 0; c < Components; ++c) {
+      offset_sum[c] += float(ws) * offset[c];
+      const float f = float(ws) * scale[c];
+      for (int l = 0; l < L; ++l) {
+        lanes[c][l] += f * widen(q + (c * L + l) * 16);
+      }
+    }
+  }
+  for (int32_t k = narrow_end; k < end; ++k) {
+    const int32_t e = entries[k];
+    const double ws = w[blocks.entries[std::size_t(e)].shape];
+    if (ws <= active_weight) continue;
+    const int16_t* q = values.wide_values_of(e);
     const int16_t* fine = values.fine_values_of(e);
     const float* scale = values.scales_of(e);
     const float* offset = values.offsets_of(e);
     for (int c = 0; c < Components; ++c) {
-      const float f = float(ws) * scale[c];
       offset_sum[c] += float(ws) * offset[c];
+      const float f = float(ws) * scale[c];
       for (int l = 0; l < L; ++l) {
         Shorts16 v;
         std::memcpy(&v, q + (c * L + l) * 16, sizeof v);
