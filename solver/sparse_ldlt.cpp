@@ -46,17 +46,18 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A) : n_(A.rows()) {
   perm_.assign(perm, perm + n_);
   col_start_.resize(std::size_t(n_) + 1);
   inv_diagonal_.resize(std::size_t(n_));
-  row_.reserve(std::size_t(p[n_]));
+  const bool short_rows = n_ <= 65536;
   value_.reserve(std::size_t(p[n_]));
   for (Eigen::Index j = 0; j < n_; ++j) {
-    col_start_[std::size_t(j)] = int(row_.size());
+    col_start_[std::size_t(j)] = int(value_.size());
     inv_diagonal_[std::size_t(j)] = 1.0 / x[p[j]];  // first entry of each column is D_jj
     for (int k = p[j] + 1; k < p[j + 1]; ++k) {
-      row_.push_back(i[k]);
+      if (short_rows) row16_.push_back(uint16_t(i[k]));
+      else row32_.push_back(i[k]);
       value_.push_back(x[k]);
     }
   }
-  col_start_[std::size_t(n_)] = int(row_.size());
+  col_start_[std::size_t(n_)] = int(value_.size());
   cholmod_free_factor(&factor, &common);
   cholmod_finish(&common);
 }
@@ -64,28 +65,27 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A) : n_(A.rows()) {
 namespace {
 // x, y, z and a pad lane of one vertex: one vector operation per factor entry.
 using Lanes = double __attribute__((vector_size(32), aligned(8)));  // Eigen may align to 16 only
-}  // namespace
 
 // Both triangular solves walk L by columns. L y = b scatters each solved entry down its
 // column (independent updates, so no chain of dependent additions); L^T u = z gathers
 // with four partial sums to keep the adds' latency from bounding the loop.
-void SparseLdlt::solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) const noexcept {
+template <class Row>
+void solve_lanes(Eigen::Index n, const int* perm, const int* col_start, const Row* rows, const double* vals,
+                 const double* inv_diagonal, Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) noexcept {
   Lanes* w = reinterpret_cast<Lanes*>(work.data());
   const double* b = xyz.data();
-  for (Eigen::Index k = 0; k < n_; ++k) {
-    const double* src = b + 3 * perm_[std::size_t(k)];
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const double* src = b + 3 * perm[k];
     w[k] = Lanes{src[0], src[1], src[2], 0.0};
   }
-  const int* rows = row_.data();
-  const double* vals = value_.data();
-  for (Eigen::Index j = 0; j < n_; ++j) {
+  for (Eigen::Index j = 0; j < n; ++j) {
     const Lanes y = w[j];
-    for (int k = col_start_[std::size_t(j)]; k < col_start_[std::size_t(j) + 1]; ++k) w[rows[k]] -= vals[k] * y;
+    for (int k = col_start[j]; k < col_start[j + 1]; ++k) w[rows[k]] -= vals[k] * y;
   }
-  for (Eigen::Index j = n_ - 1; j >= 0; --j) {
-    Lanes s0 = w[j] * inv_diagonal_[std::size_t(j)], s1{}, s2{}, s3{};
-    int k = col_start_[std::size_t(j)];
-    const int end = col_start_[std::size_t(j) + 1];
+  for (Eigen::Index j = n - 1; j >= 0; --j) {
+    Lanes s0 = w[j] * inv_diagonal[j], s1{}, s2{}, s3{};
+    int k = col_start[j];
+    const int end = col_start[j + 1];
     for (; k + 4 <= end; k += 4) {
       s0 -= vals[k] * w[rows[k]];
       s1 -= vals[k + 1] * w[rows[k + 1]];
@@ -96,26 +96,44 @@ void SparseLdlt::solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) c
     w[j] = (s0 + s1) + (s2 + s3);
   }
   double* out = xyz.data();
-  for (Eigen::Index k = 0; k < n_; ++k) {
-    double* dst = out + 3 * perm_[std::size_t(k)];
+  for (Eigen::Index k = 0; k < n; ++k) {
+    double* dst = out + 3 * perm[k];
     const Lanes v = w[k];
     dst[0] = v[0]; dst[1] = v[1]; dst[2] = v[2];
   }
 }
 
-void SparseLdlt::solve_in_place(Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept {
+template <class Row>
+void solve_one(Eigen::Index n, const int* perm, const int* col_start, const Row* rows, const double* vals,
+               const double* inv_diagonal, Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) noexcept {
   double* w = work.data();
-  for (Eigen::Index k = 0; k < n_; ++k) w[k] = x[perm_[std::size_t(k)]];
-  for (Eigen::Index j = 0; j < n_; ++j) {
+  for (Eigen::Index k = 0; k < n; ++k) w[k] = x[perm[k]];
+  for (Eigen::Index j = 0; j < n; ++j) {
     const double y = w[j];
-    for (int k = col_start_[std::size_t(j)]; k < col_start_[std::size_t(j) + 1]; ++k) w[row_[std::size_t(k)]] -= value_[std::size_t(k)] * y;
+    for (int k = col_start[j]; k < col_start[j + 1]; ++k) w[rows[k]] -= vals[k] * y;
   }
-  for (Eigen::Index j = n_ - 1; j >= 0; --j) {
-    double s = w[j] * inv_diagonal_[std::size_t(j)];
-    for (int k = col_start_[std::size_t(j)]; k < col_start_[std::size_t(j) + 1]; ++k) s -= value_[std::size_t(k)] * w[row_[std::size_t(k)]];
+  for (Eigen::Index j = n - 1; j >= 0; --j) {
+    double s = w[j] * inv_diagonal[j];
+    for (int k = col_start[j]; k < col_start[j + 1]; ++k) s -= vals[k] * w[rows[k]];
     w[j] = s;
   }
-  for (Eigen::Index k = 0; k < n_; ++k) x[perm_[std::size_t(k)]] = w[k];
+  for (Eigen::Index k = 0; k < n; ++k) x[perm[k]] = w[k];
+}
+
+}  // namespace
+
+void SparseLdlt::solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) const noexcept {
+  if (!row16_.empty() || row32_.empty())
+    solve_lanes(n_, perm_.data(), col_start_.data(), row16_.data(), value_.data(), inv_diagonal_.data(), xyz, work);
+  else
+    solve_lanes(n_, perm_.data(), col_start_.data(), row32_.data(), value_.data(), inv_diagonal_.data(), xyz, work);
+}
+
+void SparseLdlt::solve_in_place(Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept {
+  if (!row16_.empty() || row32_.empty())
+    solve_one(n_, perm_.data(), col_start_.data(), row16_.data(), value_.data(), inv_diagonal_.data(), x, work);
+  else
+    solve_one(n_, perm_.data(), col_start_.data(), row32_.data(), value_.data(), inv_diagonal_.data(), x, work);
 }
 
 }  // namespace facecap
