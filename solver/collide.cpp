@@ -306,7 +306,7 @@ uint32_t lane_bits(const LaneMask& m) noexcept {
 }
 
 // Which slots of `leaf` overlap `box`, as bits.
-uint32_t slots_overlapping(const LeafBoxes& leaf, const Box& box) noexcept {
+[[gnu::always_inline]] inline uint32_t slots_overlapping(const LeafBoxes& leaf, const Box& box) noexcept {
   const LaneMask m = (leaf.lo[0] <= box.hi[0]) & (leaf.hi[0] >= box.lo[0]) & (leaf.lo[1] <= box.hi[1]) &
                      (leaf.hi[1] >= box.lo[1]) & (leaf.lo[2] <= box.hi[2]) & (leaf.hi[2] >= box.lo[2]);
   return lane_bits(m);
@@ -513,6 +513,7 @@ class Bvh {
   using PairMask = uint64_t;
   static_assert(kMaxLeafSize * kMaxLeafSize <= 64);
   static constexpr PairMask kSlotRow = (PairMask(1) << kMaxLeafSize) - 1;
+  static constexpr int32_t kSkipGroup = 16;  // skip_leaf_ entries compared at once (one AVX-512 register)
 
   struct BuildInput {
     std::vector<Vec3> centroid, lo, hi;  // per triangle (index into the input order)
@@ -661,32 +662,48 @@ class Bvh {
     std::sort(extra_slots.begin(), extra_slots.end());
     std::sort(leaf_pairs.begin(), leaf_pairs.end());
     leaf_pairs.erase(std::unique(leaf_pairs.begin(), leaf_pairs.end()), leaf_pairs.end());
+    // Each leaf's list padded with -1 to whole groups of kSkipGroup, compared at once.
     skip_offset_.assign(std::size_t(leaf_count) + 1, 0);
     skip_leaf_.clear();
     skip_mask_.clear();
-    for (const auto& [a, b] : leaf_pairs) {
-      const Leaf& la = leaves_[std::size_t(a)];
-      const Leaf& lb = leaves_[std::size_t(b)];
-      PairMask mask = 0;
-      for (int32_t s = 0; s < la.count; ++s)
-        for (int32_t t = 0; t < lb.count; ++t) {
-          const int32_t sa = la.first + s, sb = lb.first + t;
-          if (share_vertex(slot_vertices_[std::size_t(sa)], slot_vertices_[std::size_t(sb)]) ||
-              std::binary_search(extra_slots.begin(), extra_slots.end(), std::pair<int32_t, int32_t>{sa, sb}))
-            mask |= PairMask(1) << (kMaxLeafSize * s + t);
-        }
-      skip_leaf_.push_back(b);
-      skip_mask_.push_back(mask);
-      ++skip_offset_[std::size_t(a) + 1];
+    std::size_t next = 0;
+    for (int32_t a = 0; a < leaf_count; ++a) {
+      skip_offset_[std::size_t(a)] = int32_t(skip_leaf_.size());
+      for (; next < leaf_pairs.size() && leaf_pairs[next].first == a; ++next) {
+        const int32_t b = leaf_pairs[next].second;
+        const Leaf& la = leaves_[std::size_t(a)];
+        const Leaf& lb = leaves_[std::size_t(b)];
+        PairMask mask = 0;
+        for (int32_t s = 0; s < la.count; ++s)
+          for (int32_t t = 0; t < lb.count; ++t) {
+            const int32_t sa = la.first + s, sb = lb.first + t;
+            if (share_vertex(slot_vertices_[std::size_t(sa)], slot_vertices_[std::size_t(sb)]) ||
+                std::binary_search(extra_slots.begin(), extra_slots.end(), std::pair<int32_t, int32_t>{sa, sb}))
+              mask |= PairMask(1) << (kMaxLeafSize * s + t);
+          }
+        skip_leaf_.push_back(b);
+        skip_mask_.push_back(mask);
+      }
+      while (skip_leaf_.size() % kSkipGroup != 0) {
+        skip_leaf_.push_back(-1);
+        skip_mask_.push_back(0);
+      }
     }
-    for (std::size_t a = 0; a < std::size_t(leaf_count); ++a) skip_offset_[a + 1] += skip_offset_[a];
+    skip_offset_[std::size_t(leaf_count)] = int32_t(skip_leaf_.size());
   }
 
-  PairMask skip_mask(int32_t leaf_a, int32_t leaf_b) const noexcept {
-    const auto begin = skip_leaf_.begin() + skip_offset_[std::size_t(leaf_a)];
-    const auto end = skip_leaf_.begin() + skip_offset_[std::size_t(leaf_a) + 1];
-    const auto it = std::lower_bound(begin, end, leaf_b);
-    return it != end && *it == leaf_b ? skip_mask_[std::size_t(it - skip_leaf_.begin())] : 0;
+  [[gnu::always_inline]] PairMask skip_mask(int32_t leaf_a, int32_t leaf_b) const noexcept {
+    const int32_t end = skip_offset_[std::size_t(leaf_a) + 1];
+    for (int32_t k = skip_offset_[std::size_t(leaf_a)]; k < end; k += kSkipGroup) {
+#if defined(__AVX512F__)
+      const __mmask16 hit = _mm512_cmpeq_epi32_mask(_mm512_loadu_si512(skip_leaf_.data() + k), _mm512_set1_epi32(leaf_b));
+      if (hit != 0) return skip_mask_[std::size_t(k + std::countr_zero(unsigned(hit)))];
+#else
+      for (int32_t i = k; i < k + kSkipGroup; ++i)
+        if (skip_leaf_[std::size_t(i)] == leaf_b) return skip_mask_[std::size_t(i)];
+#endif
+    }
+    return 0;
   }
 
   template <typename Visit>
@@ -731,7 +748,7 @@ class Bvh {
   std::vector<int32_t> slot_triangle_;                // triangle index per slot
   std::vector<std::array<int32_t, 3>> slot_vertices_;
   std::vector<int32_t> skip_offset_;                  // per leaf: range in skip_leaf_/skip_mask_
-  std::vector<int32_t> skip_leaf_;                    // leaves with pairs to skip, ascending per leaf
+  std::vector<int32_t> skip_leaf_;                    // leaves with pairs to skip, ascending per leaf, then -1s
   std::vector<PairMask> skip_mask_;                   // slot pairs to skip
   std::vector<std::pair<Ref, Ref>> stack_;            // traversal scratch, sized at build
   int depth_ = 0;
