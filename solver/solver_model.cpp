@@ -214,15 +214,17 @@ ShapeBlocks make_shape_blocks(const Eigen::Matrix3Xd& positions, Eigen::Index sh
 }
 
 // value(shape, element, component) quantised entry by entry (QuantisedValues): 8-bit
-// where half a step stays within `tolerance`, else 16-bit, with the fine plane where
-// half a 16-bit step would exceed it.
+// where half a step stays within `tolerance`, else two 8-bit planes, plus the fine plane
+// where half a 16-bit step would exceed it.
 template <class Value>
 QuantisedValues quantise(const ShapeBlocks& blocks, int components, double tolerance, Value&& value) {
   constexpr int B = ShapeBlocks::kBlock;
+  constexpr double kWide = QuantisedValues::kWideLevels;
   QuantisedValues out;
   out.components = components;
   const std::size_t size = out.entry_size();
   out.value_index.assign(blocks.entries.size(), 0);
+  out.coarse_limit.assign(blocks.entries.size(), 0.0f);
   out.fine_of_entry.assign(blocks.entries.size(), -1);
   out.offset.resize(blocks.entries.size() * std::size_t(components));
   out.scale.resize(out.offset.size());
@@ -232,7 +234,7 @@ QuantisedValues quantise(const ShapeBlocks& blocks, int components, double toler
   for (std::size_t e = 0; e < blocks.entries.size(); ++e) {
     const auto [shape, block] = blocks.entries[e];
     const int32_t* slots = blocks.element_of_slot.data() + std::size_t(block) * B;
-    bool narrow = true, needs_fine = false;
+    double widest = 0.0;
     for (int c = 0; c < components; ++c) {
       low[std::size_t(c)] = std::numeric_limits<double>::infinity();
       high[std::size_t(c)] = -low[std::size_t(c)];
@@ -241,12 +243,11 @@ QuantisedValues quantise(const ShapeBlocks& blocks, int components, double toler
         low[std::size_t(c)] = std::min(low[std::size_t(c)], value(shape, slots[i], c));
         high[std::size_t(c)] = std::max(high[std::size_t(c)], value(shape, slots[i], c));
       }
-      const double range = std::max(0.0, high[std::size_t(c)] - low[std::size_t(c)]);
-      narrow = narrow && 0.5 * range / 254.0 <= tolerance;
-      needs_fine = needs_fine || 0.5 * range / 65534.0 > tolerance;
+      widest = std::max(widest, high[std::size_t(c)] - low[std::size_t(c)]);
     }
-    const double levels = narrow ? 254.0 : 65534.0;
-    const long limit = narrow ? 127 : 32767;
+    const bool narrow = 0.5 * widest / 254.0 <= tolerance;
+    const double levels = narrow ? 254.0 : kWide;
+    const long limit = narrow ? 127 : long(kWide / 2);
     for (int c = 0; c < components; ++c) {
       const double range = high[std::size_t(c)] - low[std::size_t(c)];
       const float offset = float(0.5 * (low[std::size_t(c)] + high[std::size_t(c)]));
@@ -262,9 +263,17 @@ QuantisedValues quantise(const ShapeBlocks& blocks, int components, double toler
       for (long v : q) out.narrow.push_back(int8_t(v));
       continue;
     }
-    out.value_index[e] = int32_t(out.wide.size() / size);
-    for (long v : q) out.wide.push_back(int16_t(v));
-    if (!needs_fine) continue;
+    // q = 256 hi + lo with lo in [-128, 127]: the high plane alone is off by at most
+    // 128.5 steps, range * 128.5 / kWide, which a weight up to coarse_limit keeps within
+    // the tolerance.
+    out.value_index[e] = int32_t(out.high.size() / size);
+    for (long v : q) {
+      const long hi = (v + 128 >= 0 ? v + 128 : v + 128 - 255) / 256;  // floor((v + 128) / 256)
+      out.high.push_back(int8_t(hi));
+      out.low.push_back(int8_t(v - 256 * hi));
+    }
+    out.coarse_limit[e] = float(tolerance * kWide / (128.5 * widest));
+    if (0.5 * widest / kWide <= tolerance) continue;
     out.fine_of_entry[e] = int32_t(out.fine.size() / size);
     for (std::size_t k = 0; k < size; ++k)
       out.fine.push_back(slots[k % B] < 0 ? int16_t(0) : int16_t(std::clamp(std::lround((exact[k] - double(q[k])) * 65534.0), -32767L, 32767L)));

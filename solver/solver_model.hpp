@@ -42,16 +42,21 @@ struct ShapeBlocks {
 // `components` values per element for every entry of a ShapeBlocks, component-major
 // (component c of slot i at [c * kBlock + i] of the entry's values), as fixed point
 // offset + scale * q with one offset and scale per entry and component spanning that
-// block's values: as a block holds neighbours its range is usually small. An entry is
-// stored in 8 bits (`narrow`) where half a step of range / 254 stays within the
-// tolerance given at build time, otherwise in 16 bits (`wide`); a wide entry whose step
-// would still exceed it carries a second 16-bit plane, offset + scale * (q + fine / 65534),
-// which makes it finer than float. Per block, the narrow entries are listed first.
+// block's values: as a block holds neighbours its range is usually small.
+// - Narrow entries, where half a step of range / 254 stays within the tolerance given
+//   at build time, keep q in 8 bits.
+// - Wide entries keep q = 256 hi + lo (|q| <= 32512) as two 8-bit planes. Weighted by a
+//   small weight the high plane alone is within the tolerance: a frame reads the low
+//   plane only for weights above `coarse_limit`.
+// - A wide entry whose 16-bit step would still exceed the tolerance has a third plane,
+//   offset + scale * (q + fine / 65534), which makes it finer than float.
+// Per block, the narrow entries are listed first.
 struct QuantisedValues {
+  static constexpr double kWideLevels = 65024.0;  // 2 * 127 * 256 steps over the range
   int components = 0;
-  std::vector<int32_t> value_index;  // per entry: index into narrow or wide (units of entry_size())
-  std::vector<int8_t> narrow;
-  std::vector<int16_t> wide;
+  std::vector<int32_t> value_index;  // per entry: ~index into narrow, or index into high/low (units of entry_size())
+  std::vector<int8_t> narrow, high, low;
+  std::vector<float> coarse_limit;     // per entry: largest weight for which `high` alone suffices
   std::vector<float> offset, scale;    // components per entry
   std::vector<int32_t> fine_of_entry;  // index into `fine` (units of entry_size()), or -1
   std::vector<int16_t> fine;
@@ -64,8 +69,11 @@ struct QuantisedValues {
   const int8_t* narrow_values_of(int32_t entry) const noexcept {
     return narrow.data() + std::size_t(~value_index[std::size_t(entry)]) * entry_size();
   }
-  const int16_t* wide_values_of(int32_t entry) const noexcept {
-    return wide.data() + std::size_t(value_index[std::size_t(entry)]) * entry_size();
+  const int8_t* high_values_of(int32_t entry) const noexcept {
+    return high.data() + std::size_t(value_index[std::size_t(entry)]) * entry_size();
+  }
+  const int8_t* low_values_of(int32_t entry) const noexcept {
+    return low.data() + std::size_t(value_index[std::size_t(entry)]) * entry_size();
   }
   const int16_t* fine_values_of(int32_t entry) const noexcept {
     const int32_t f = fine_of_entry[std::size_t(entry)];
@@ -73,13 +81,15 @@ struct QuantisedValues {
   }
   const float* offsets_of(int32_t entry) const noexcept { return offset.data() + std::size_t(entry) * std::size_t(components); }
   const float* scales_of(int32_t entry) const noexcept { return scale.data() + std::size_t(entry) * std::size_t(components); }
+  // The stored value in full precision (every plane).
   double at(int32_t entry, int component, int i) const noexcept {
     const std::size_t k = std::size_t(component) * ShapeBlocks::kBlock + std::size_t(i);
     const double base = double(offsets_of(entry)[component]);
     const double step = double(scales_of(entry)[component]);
     if (is_narrow(entry)) return base + step * double(narrow_values_of(entry)[k]);
     const int16_t* f = fine_values_of(entry);
-    return base + step * (double(wide_values_of(entry)[k]) + (f ? double(f[k]) / 65534.0 : 0.0));
+    const double q = 256.0 * double(high_values_of(entry)[k]) + double(low_values_of(entry)[k]);
+    return base + step * (q + (f ? double(f[k]) / 65534.0 : 0.0));
   }
 };
 

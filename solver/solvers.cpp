@@ -174,7 +174,8 @@ class WeightsStage {
 
 // sum over the active shapes' entries in `block` of w_s * value, component-major, summed
 // in Lanes16 (one AVX-512 register each) so the block's sum stays in registers; the
-// narrow entries first, then the wide ones (QuantisedValues).
+// narrow entries first, then the wide ones, whose low plane is read only for weights
+// that need it (QuantisedValues).
 template <int Components>
 void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int block, const Eigen::VectorXd& w,
                double active_weight, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
@@ -203,21 +204,37 @@ void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int blo
     const int32_t e = entries[k];
     const double ws = w[blocks.entries[std::size_t(e)].shape];
     if (ws <= active_weight) continue;
-    const int16_t* q = values.wide_values_of(e);
-    const int16_t* fine = values.fine_values_of(e);
+    const int8_t* high = values.high_values_of(e);
     const float* scale = values.scales_of(e);
     const float* offset = values.offsets_of(e);
+    for (int c = 0; c < Components; ++c) offset_sum[c] += float(ws) * offset[c];
+    if (ws <= values.coarse_limit[std::size_t(e)]) {  // the high plane is enough at this weight
+      for (int c = 0; c < Components; ++c) {
+        const float f = 256.0f * float(ws) * scale[c];
+        for (int l = 0; l < L; ++l) lanes[c][l] += f * widen(high + (c * L + l) * 16);
+      }
+      continue;
+    }
+    const int8_t* low = values.low_values_of(e);
+#pragma GCC unroll 16
     for (int c = 0; c < Components; ++c) {
-      offset_sum[c] += float(ws) * offset[c];
       const float f = float(ws) * scale[c];
+#pragma GCC unroll 2
+      for (int l = 0; l < L; ++l) {
+        const int at = (c * L + l) * 16;
+        lanes[c][l] += f * (256.0f * widen(high + at) + widen(low + at));
+      }
+    }
+    const int16_t* fine = values.fine_values_of(e);
+    if (!fine) continue;
+#pragma GCC unroll 16
+    for (int c = 0; c < Components; ++c) {
+      const float f = float(ws) * scale[c] * (1.0f / 65534.0f);
+#pragma GCC unroll 2
       for (int l = 0; l < L; ++l) {
         Shorts16 v;
-        std::memcpy(&v, q + (c * L + l) * 16, sizeof v);
+        std::memcpy(&v, fine + (c * L + l) * 16, sizeof v);
         lanes[c][l] += f * __builtin_convertvector(v, Lanes16);
-        if (fine) {
-          std::memcpy(&v, fine + (c * L + l) * 16, sizeof v);
-          lanes[c][l] += (f * (1.0f / 65534.0f)) * __builtin_convertvector(v, Lanes16);
-        }
       }
     }
   }
