@@ -251,7 +251,7 @@ bool closer_than_impl(const Vec3* a, const Vec3* b, double epsilon) noexcept {
 
 // ---- Bounding volume hierarchy ---------------------------------------------------
 
-constexpr int kMaxLeafSize = 8;  // one AVX register of float lanes
+constexpr int kMaxLeafSize = 16;  // one AVX-512 register of float lanes
 
 // Automatic lip detection, as fractions of the neutral's bounding-box diagonal or of
 // jawOpen's largest displacement (see lip_region_triangles).
@@ -259,7 +259,7 @@ constexpr double kLipNeighbourhood = 0.02;
 constexpr double kLipJawContrast = 0.5;
 constexpr double kLipRegionRadius = 0.03;
 
-// Boxes are stored in float, rounded outwards, so that eight leaf slots fit one AVX
+// Boxes are stored in float, rounded outwards, so that sixteen leaf slots fit one AVX-512
 // register; every decision about a pair is still made in double by the exact test.
 struct Box {
   float lo[3];
@@ -295,9 +295,10 @@ struct alignas(4 * kMaxLeafSize) LeafBoxes {
 };
 
 uint32_t lane_bits(const LaneMask& m) noexcept {
-#if defined(__AVX__)
-  static_assert(kMaxLeafSize == 8);
-  return uint32_t(_mm256_movemask_ps(reinterpret_cast<__m256>(m)));
+#if defined(__AVX512F__)
+  static_assert(kMaxLeafSize == 16);
+  const __m512i lanes = reinterpret_cast<__m512i>(m);
+  return uint32_t(_mm512_test_epi32_mask(lanes, lanes));
 #else
   uint32_t bits = 0;
   for (int i = 0; i < kMaxLeafSize; ++i) bits |= uint32_t(m[i] != 0) << i;
@@ -508,11 +509,12 @@ class Bvh {
   int depth() const noexcept { return depth_; }
 
  private:
-  // Bit kMaxLeafSize * s + t of a leaf-pair mask stands for slot s of the first leaf
-  // and slot t of the second.
-  using PairMask = uint64_t;
-  static_assert(kMaxLeafSize * kMaxLeafSize <= 64);
-  static constexpr PairMask kSlotRow = (PairMask(1) << kMaxLeafSize) - 1;
+  // Bit t of row s of a leaf-pair mask stands for slot s of the first leaf and slot t of
+  // the second.
+  struct PairMask {
+    uint16_t row[kMaxLeafSize] = {};
+  };
+  static_assert(kMaxLeafSize <= 16);
   static constexpr int32_t kSkipGroup = 16;  // skip_leaf_ entries compared at once (one AVX-512 register)
 
   struct BuildInput {
@@ -673,26 +675,27 @@ class Bvh {
         const int32_t b = leaf_pairs[next].second;
         const Leaf& la = leaves_[std::size_t(a)];
         const Leaf& lb = leaves_[std::size_t(b)];
-        PairMask mask = 0;
+        PairMask mask;
         for (int32_t s = 0; s < la.count; ++s)
           for (int32_t t = 0; t < lb.count; ++t) {
             const int32_t sa = la.first + s, sb = lb.first + t;
             if (share_vertex(slot_vertices_[std::size_t(sa)], slot_vertices_[std::size_t(sb)]) ||
                 std::binary_search(extra_slots.begin(), extra_slots.end(), std::pair<int32_t, int32_t>{sa, sb}))
-              mask |= PairMask(1) << (kMaxLeafSize * s + t);
+              mask.row[s] = uint16_t(mask.row[s] | (1u << t));
           }
         skip_leaf_.push_back(b);
         skip_mask_.push_back(mask);
       }
       while (skip_leaf_.size() % kSkipGroup != 0) {
         skip_leaf_.push_back(-1);
-        skip_mask_.push_back(0);
+        skip_mask_.push_back({});
       }
     }
     skip_offset_[std::size_t(leaf_count)] = int32_t(skip_leaf_.size());
   }
 
-  [[gnu::always_inline]] PairMask skip_mask(int32_t leaf_a, int32_t leaf_b) const noexcept {
+  [[gnu::always_inline]] const PairMask& skip_mask(int32_t leaf_a, int32_t leaf_b) const noexcept {
+    static constexpr PairMask kNone{};
     const int32_t end = skip_offset_[std::size_t(leaf_a) + 1];
     for (int32_t k = skip_offset_[std::size_t(leaf_a)]; k < end; k += kSkipGroup) {
 #if defined(__AVX512F__)
@@ -703,7 +706,7 @@ class Bvh {
         if (skip_leaf_[std::size_t(i)] == leaf_b) return skip_mask_[std::size_t(i)];
 #endif
     }
-    return 0;
+    return kNone;
   }
 
   template <typename Visit>
@@ -716,11 +719,10 @@ class Bvh {
     uint32_t a_slots = slots_overlapping(boxes_a, leaf_box_[std::size_t(lb)]);
     const uint32_t b_slots = slots_overlapping(boxes_b, leaf_box_[std::size_t(la)]);
     if (a_slots == 0 || b_slots == 0) return;
-    const PairMask skipped = skip_mask(la, lb);
+    const PairMask& skipped = skip_mask(la, lb);
     for (; a_slots != 0; a_slots &= a_slots - 1) {
       const int s = std::countr_zero(a_slots);
-      uint32_t row = slots_overlapping(boxes_b, slot_box_[std::size_t(a.first + s)]) & b_slots &
-                     ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow);
+      uint32_t row = slots_overlapping(boxes_b, slot_box_[std::size_t(a.first + s)]) & b_slots & ~uint32_t(skipped.row[s]);
       for (; row != 0; row &= row - 1) visit(a.first + s, b.first + std::countr_zero(row));
     }
   }
@@ -729,11 +731,11 @@ class Bvh {
   void visit_within_leaf(int32_t l, Visit& visit) noexcept {
     const Leaf& a = leaves_[std::size_t(l)];
     const LeafBoxes& boxes = leaf_boxes_[std::size_t(l)];
-    const PairMask skipped = skip_mask(l, l);
+    const PairMask& skipped = skip_mask(l, l);
     for (int s = 0; s + 1 < a.count; ++s) {
       // Slots after s (unused lanes never overlap), not skipped.
       uint32_t row = slots_overlapping(boxes, slot_box_[std::size_t(a.first + s)]) & ~((2u << s) - 1) &
-                     ~uint32_t((skipped >> (kMaxLeafSize * s)) & kSlotRow);
+                     ~uint32_t(skipped.row[s]);
       for (; row != 0; row &= row - 1) visit(a.first + s, a.first + std::countr_zero(row));
     }
   }
