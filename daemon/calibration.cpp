@@ -4,6 +4,7 @@
 #include <toml++/toml.h>
 
 #include "core/error.hpp"
+#include "solver/align/profile.hpp"
 
 namespace facecap::daemon {
 namespace {
@@ -55,6 +56,34 @@ MarkerBinding read_face_marker(const toml::table& entry, const std::string& file
   return b;
 }
 
+// A `facecap calibrate` profile: the similarity it measured maps markers to rig space,
+// its stable markers become the head markers (at their calibration-frame positions),
+// and each face marker's rest position off its bound point becomes its offset.
+MarkerCalibration from_profile(const std::string& file, const Rig& rig) {
+  const align::Calibration profile = align::load_calibration_profile(file);
+  align::check_profile_matches_rig(profile, rig, file);
+  MarkerCalibration calibration;
+  calibration.origin = file + " (facecap calibrate profile)";
+  calibration.marker_mm_per_unit = profile.take_mm_per_unit;
+  calibration.marker_scale = profile.take_to_rig.scale;
+  calibration.T_rig_marker.linear() = profile.take_to_rig.rotation;
+  calibration.T_rig_marker.translation() = profile.take_to_rig.translation;
+  for (const align::MarkerCalibration& marker : profile.markers) {
+    MarkerBinding binding = marker.binding;
+    binding.label = marker.label;
+    calibration.markers.face.push_back(std::move(binding));
+    calibration.face_offsets.push_back(profile.take_to_rig.apply(marker.neutral) - marker.bound_point);
+  }
+  for (const std::string& label : profile.stable_markers) {
+    const int k = profile.find(label);
+    if (k < 0) throw Error(fmt::format("stable marker '{}' is not among the profile's markers", label), {.file = file, .key = "stabilise.markers"});
+    calibration.markers.head.push_back({label, profile.take_to_rig.apply(profile.markers[std::size_t(k)].neutral)});
+  }
+  const std::size_t heads = calibration.markers.head.size();
+  if (heads == 1 || heads == 2) throw Error("head stabilisation needs at least 3 stable markers (or none)", {.file = file, .key = "stabilise.markers"});
+  return calibration;
+}
+
 MarkerCalibration read_calibration_file(const std::string& file, const Rig& rig) {
   toml::table table;
   try {
@@ -63,6 +92,7 @@ MarkerCalibration read_calibration_file(const std::string& file, const Rig& rig)
     throw Error(std::string(e.description()),
                 {.file = file, .line = int64_t(e.source().begin.line), .column = int64_t(e.source().begin.column)});
   }
+  if (table.contains("transform") && table.contains("marker")) return from_profile(file, rig);
   if (table["version"].value_or<int64_t>(0) != 1) throw Error("calibration needs version = 1", {.file = file, .key = "version"});
   MarkerCalibration calibration;
   calibration.origin = file;
@@ -113,6 +143,7 @@ MarkerCalibration load_calibration(const config::CalibrationSection& section, co
 }
 
 double marker_to_rig_scale(const MarkerCalibration& calibration, const std::string& source_units, const Rig& rig) {
+  if (calibration.marker_scale > 0.0) return calibration.marker_scale;
   const double mm_per_unit = calibration.marker_mm_per_unit > 0.0 ? calibration.marker_mm_per_unit
                                                                   : millimetres_per_unit(source_units).value_or(0.0);
   return mm_per_unit > 0.0 ? mm_per_unit * drivers::rig_units_per_mm(rig) : 1.0;

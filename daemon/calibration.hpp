@@ -3,6 +3,7 @@
 // head markers for stabilisation) and the transform from marker space to rig space.
 // Either the default marker set (what the sim produces) or a calibration file.
 #include <string>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -16,12 +17,21 @@ struct MarkerCalibration {
   drivers::MarkerSet markers;
   // Marker units to millimetres (0: take the source's units, else assume rig units).
   double marker_mm_per_unit = 0.0;
+  // Marker units to rig units when a calibration measured it (an actor's face is not the
+  // rig's size); 0: from the units alone.
+  double marker_scale = 0.0;
   // Marker space (after scaling to rig units) to rig space, for a head at rest.
   Eigen::Isometry3d T_rig_marker = Eigen::Isometry3d::Identity();
+  // Per face marker, rig space: where the actor's marker sits at rest relative to its
+  // bound rig point (identity mismatch), taken off every target so that the actor at
+  // rest gives the rig's neutral. Empty: no offsets.
+  std::vector<Eigen::Vector3d> face_offsets;
   std::string origin;  // "default marker set" or the file
 };
 
-// The configured calibration. A file is TOML (docs/config.md):
+// The configured calibration: the default marker set, or a file, either a profile
+// written by `facecap calibrate` (docs/alignment.md; it must have been made for this
+// rig) or a hand-written TOML (docs/config.md):
 //   version = 1
 //   marker_units = "mm"                      # optional
 //   rotation_wxyz = [1, 0, 0, 0]             # optional, marker -> rig

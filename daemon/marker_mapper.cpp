@@ -29,6 +29,9 @@ MarkerMapper::MarkerMapper(const MarkerCalibration& calibration, const std::vect
     face_slot_.push_back(slot(binding.label));
     matched_face_ += face_slot_.back() >= 0 ? 1 : 0;
   }
+  face_offset_ = Eigen::Matrix3Xd::Zero(3, Eigen::Index(face_slot_.size()));
+  for (std::size_t k = 0; k < calibration.face_offsets.size(); ++k)
+    face_offset_.col(Eigen::Index(k)) = calibration.face_offsets[k];
   if (matched_face_ == 0)
     throw Error(fmt::format("none of the {} face markers of the {} ({}, ...) is among the source's {} markers ({}, ...)",
                             calibration.markers.face.size(), calibration.origin, calibration.markers.face.front().label,
@@ -80,14 +83,15 @@ MappedFrame MarkerMapper::map(const MarkerFrame& frame, Eigen::Matrix3Xd& target
     else out.head_pose_held = true;
     out.T_world_head = last_head_;
   }
-  // Face markers into head space: T_head_world * T_rig_marker * scale * p.
+  // Face markers into head space: T_head_world * T_rig_marker * scale * p - offset.
   const Eigen::Isometry3d T_head_marker = out.T_world_head.inverse() * T_rig_marker_;
   for (std::size_t k = 0; k < face_slot_.size(); ++k) {
     const int s = face_slot_[k];
     const bool here = slot_present(frame, s);
     present[k] = here ? 1 : 0;
     if (!here) continue;
-    targets.col(Eigen::Index(k)) = T_head_marker * (scale_ * frame.markers[std::size_t(s)].position);
+    targets.col(Eigen::Index(k)) =
+        T_head_marker * (scale_ * frame.markers[std::size_t(s)].position) - face_offset_.col(Eigen::Index(k));
     ++out.face_markers_present;
   }
   return out;

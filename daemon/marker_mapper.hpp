@@ -1,7 +1,8 @@
 #pragma once
 // From a source's marker frame to the solver's input: picks each bound marker out of the
-// frame by label, scales and transforms it into rig space, and (with head markers) fits
-// the head's rigid pose and moves the face markers into head space.
+// frame by label, scales and transforms it into rig space, (with head markers) fits the
+// head's rigid pose and moves the face markers into head space, and takes off each
+// marker's calibrated offset.
 #include <cstdint>
 #include <span>
 #include <string>
@@ -44,6 +45,7 @@ class MarkerMapper {
   std::vector<int> face_slot_;  // K: source slot of each face binding, -1 when the source lacks it
   std::vector<int> head_slot_;  // H: source slot of each head marker, -1 when absent
   Eigen::Matrix3Xd head_reference_;  // 3 x H, rig space
+  Eigen::Matrix3Xd face_offset_;     // 3 x K, rig space, taken off each target
   std::size_t matched_face_ = 0;
   double scale_ = 1.0;
   Eigen::Isometry3d T_rig_marker_ = Eigen::Isometry3d::Identity();

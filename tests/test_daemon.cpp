@@ -1,6 +1,7 @@
 // The daemon in-process: solve accuracy against the sim's ground truth, head
 // stabilisation, the latency histogram, lockstep replay, the recorder, solver swaps and
 // SIGHUP-style reloads.
+#include <random>
 #include <thread>
 
 #include <catch2/catch.hpp>
@@ -18,7 +19,11 @@
 #include "drivers/replay/replay_source.hpp"
 #include "drivers/sim/sim_source.hpp"
 #include "formats/recording.hpp"
+#include "solver/align/mapper.hpp"
+#include "solver/align/pipeline.hpp"
+#include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
+#include "tests/align_test_support.hpp"
 #include "tests/daemon_test_support.hpp"
 #include "tests/test_support.hpp"
 
@@ -144,6 +149,65 @@ TEST_CASE("a calibration file binds markers and scales and moves them into rig s
 
   test::write_text(file, "version = 1\n[[face]]\nlabel = \"a\"\nvertex = 999999\n");
   CHECK_THROWS_WITH(load_calibration(section, rig), Contains(file.string() + ":4:10") && Contains("vertex 999999 is not in the rig"));
+}
+
+// `facecap calibrate` then facecapd: the daemon reads the profile the tool writes and
+// maps a take's markers to the same solver targets as the alignment tools do.
+TEST_CASE("a facecap calibrate profile maps markers as the alignment tools map them") {
+  test::SyntheticTakeOptions options;
+  options.head_sway_deg = 4.0;
+  options.noise_mm = 0.0;  // so the robust and the plain head fit agree exactly
+  test::SyntheticTake take = test::make_synthetic_take(options);
+  // The actor's face is not the rig's: each marker sits up to a few mm off its rig point.
+  std::mt19937 rng(5);
+  std::normal_distribution<double> mismatch_mm(0.0, 1.5);
+  for (std::size_t k = 0; k < take.labels.size(); ++k) {
+    const Eigen::Vector3d mismatch(mismatch_mm(rng), mismatch_mm(rng), mismatch_mm(rng));
+    for (auto& frame : take.frames) frame.markers[k].position += mismatch;
+  }
+  const Rig& rig = BuiltinFace::instance().rig();
+  align::TakeCalibrationOptions calibrate_options;
+  calibrate_options.neutral.rate_hz = 60.0;
+  calibrate_options.neutral.take_mm_per_unit = 1.0;
+  const align::Calibration profile = align::calibrate_take(rig, take.labels, take.frames, calibrate_options).calibration;
+  REQUIRE(profile.stable_markers.size() >= 3);
+  const fs::path file = test::scratch_dir("calibration") / "actor.toml";
+  align::save_calibration_profile(file, profile);
+
+  config::CalibrationSection section;
+  section.file = file.string();
+  const MarkerCalibration calibration = load_calibration(section, rig);
+  REQUIRE(calibration.markers.face.size() == profile.markers.size());
+  CHECK(calibration.markers.head.size() == profile.stable_markers.size());
+  CHECK(calibration.origin == file.string() + " (facecap calibrate profile)");
+  CHECK(marker_to_rig_scale(calibration, "mm", rig) == Approx(profile.take_to_rig.scale));
+
+  MarkerMapper daemon_mapper(calibration, take.labels, marker_to_rig_scale(calibration, "mm", rig), true);
+  REQUIRE(daemon_mapper.stabilising());
+  align::MarkerMapper tool_mapper(profile, take.labels);
+  align::MappedFrame tool = tool_mapper.make_output();
+  const auto K = Eigen::Index(profile.markers.size());
+  Eigen::Matrix3Xd targets = Eigen::Matrix3Xd::Zero(3, K);
+  std::vector<uint8_t> present(std::size_t(K), 0);
+  double worst = 0.0, largest_offset = 0.0;
+  int presence_differs = 0;
+  for (const auto& offset : calibration.face_offsets) largest_offset = std::max(largest_offset, offset.norm());
+  for (std::size_t f = 0; f < take.frames.size(); f += 7) {
+    daemon_mapper.map(take.frames[f], targets, present);
+    tool_mapper.process(take.frames[f], tool);
+    presence_differs += present != tool.present;
+    for (Eigen::Index k = 0; k < K; ++k) worst = std::max(worst, (targets.col(k) - tool.targets.col(k)).norm());
+  }
+  INFO("largest difference " << worst * 10.0 << " mm; largest offset " << largest_offset * 10.0 << " mm");
+  CHECK(presence_differs == 0);
+  CHECK(largest_offset * 10.0 > 2.0);  // the offsets matter ...
+  CHECK(worst < 1e-6);                 // ... and both paths apply them alike
+
+  // A profile made for another rig is refused, naming the file.
+  auto other = profile;
+  other.rig_hash ^= 1;
+  align::save_calibration_profile(file, other);
+  CHECK_THROWS_WITH(load_calibration(section, rig), Contains(file.string()));
 }
 
 TEST_CASE("latency quantiles come from the histogram to within a bucket") {
