@@ -2,7 +2,6 @@
 
 #include <unordered_map>
 
-#include <Eigen/SVD>
 #include <fmt/format.h>
 
 #include "core/error.hpp"
@@ -17,7 +16,7 @@ bool slot_present(const MarkerFrame& frame, int slot) noexcept {
 }  // namespace
 
 MarkerMapper::MarkerMapper(const MarkerCalibration& calibration, const std::vector<std::string>& source_labels,
-                           double scale, bool stabilise_head)
+                           double scale, bool stabilise_head, double outlier_floor)
     : scale_(scale), T_rig_marker_(calibration.T_rig_marker) {
   std::unordered_map<std::string, int> slot_of;
   for (std::size_t i = 0; i < source_labels.size(); ++i) slot_of.emplace(source_labels[i], int(i));
@@ -36,52 +35,33 @@ MarkerMapper::MarkerMapper(const MarkerCalibration& calibration, const std::vect
     throw Error(fmt::format("none of the {} face markers of the {} ({}, ...) is among the source's {} markers ({}, ...)",
                             calibration.markers.face.size(), calibration.origin, calibration.markers.face.front().label,
                             source_labels.size(), source_labels.empty() ? "none" : source_labels.front()));
-  head_reference_.resize(3, Eigen::Index(calibration.markers.head.size()));
+  Eigen::Matrix3Xd head_reference(3, Eigen::Index(calibration.markers.head.size()));
+  std::vector<int> head_index;
   for (std::size_t h = 0; h < calibration.markers.head.size(); ++h) {
     head_slot_.push_back(slot(calibration.markers.head[h].label));
-    head_reference_.col(Eigen::Index(h)) = calibration.markers.head[h].position;
+    head_reference.col(Eigen::Index(h)) = calibration.markers.head[h].position;
+    head_index.push_back(int(h));
   }
   stabilise_ = stabilise_head && head_slot_.size() >= 3;
-}
-
-bool MarkerMapper::fit_head(const MarkerFrame& frame, Eigen::Isometry3d& T_world_head) noexcept {
-  // Centroids, then the cross-covariance of the matched pairs (fixed-size: no allocation).
-  Eigen::Vector3d reference_centroid = Eigen::Vector3d::Zero(), observed_centroid = Eigen::Vector3d::Zero();
-  int count = 0;
-  for (std::size_t h = 0; h < head_slot_.size(); ++h) {
-    const int s = head_slot_[h];
-    if (!slot_present(frame, s)) continue;
-    reference_centroid += head_reference_.col(Eigen::Index(h));
-    observed_centroid += T_rig_marker_ * (scale_ * frame.markers[std::size_t(s)].position);
-    ++count;
+  if (stabilise_) {
+    stabiliser_.emplace(std::move(head_index), std::move(head_reference), align::StabiliserParams{.outlier_floor = outlier_floor});
+    head_markers_.resize(head_slot_.size());
   }
-  if (count < 3) return false;
-  reference_centroid /= count;
-  observed_centroid /= count;
-  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-  for (std::size_t h = 0; h < head_slot_.size(); ++h) {
-    const int s = head_slot_[h];
-    if (!slot_present(frame, s)) continue;
-    const Eigen::Vector3d observed = T_rig_marker_ * (scale_ * frame.markers[std::size_t(s)].position);
-    covariance += (head_reference_.col(Eigen::Index(h)) - reference_centroid) * (observed - observed_centroid).transpose();
-  }
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d correction = Eigen::Matrix3d::Identity();
-  correction(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;  // no reflections
-  const Eigen::Matrix3d rotation = svd.matrixV() * correction * svd.matrixU().transpose();
-  T_world_head.linear() = rotation;
-  T_world_head.translation() = observed_centroid - rotation * reference_centroid;
-  return true;
 }
 
 MappedFrame MarkerMapper::map(const MarkerFrame& frame, Eigen::Matrix3Xd& targets, std::span<uint8_t> present) noexcept {
   MappedFrame out;
   for (const int s : head_slot_) out.head_markers_present += slot_present(frame, s) ? 1 : 0;
   if (stabilise_) {
-    Eigen::Isometry3d fitted;
-    if (fit_head(frame, fitted)) last_head_ = fitted;
-    else out.head_pose_held = true;
-    out.T_world_head = last_head_;
+    for (std::size_t h = 0; h < head_slot_.size(); ++h) {
+      const int s = head_slot_[h];
+      const bool here = slot_present(frame, s);
+      head_markers_[h].flags = here ? 0u : uint32_t(kMarkerMissing);
+      if (here) head_markers_[h].position = T_rig_marker_ * (scale_ * frame.markers[std::size_t(s)].position);
+    }
+    out.head_pose_held = stabiliser_->process(head_markers_, head_pose_);
+    out.T_world_head.linear() = head_pose_.pose.rotation;
+    out.T_world_head.translation() = head_pose_.pose.translation;
   }
   // Face markers into head space: T_head_world * T_rig_marker * scale * p - offset.
   const Eigen::Isometry3d T_head_marker = out.T_world_head.inverse() * T_rig_marker_;

@@ -4,6 +4,7 @@
 // head's rigid pose and moves the face markers into head space, and takes off each
 // marker's calibrated offset.
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -12,6 +13,7 @@
 
 #include "core/frame.hpp"
 #include "daemon/calibration.hpp"
+#include "solver/align/stabilise.hpp"
 
 namespace facecap::daemon {
 
@@ -24,10 +26,12 @@ struct MappedFrame {
 
 class MarkerMapper {
  public:
-  // source_labels: the source's marker slots (SourceInfo::labels). Throws Error when no
-  // face marker of the calibration is among them. Not RT-safe.
+  // source_labels: the source's marker slots (SourceInfo::labels). outlier_floor: rig
+  // units; a head marker off the fit by more than this (and than 4x the others' median)
+  // is left out of the head pose (align::HeadStabiliser, as `facecap solve` fits it).
+  // Throws Error when no face marker of the calibration is among them. Not RT-safe.
   MarkerMapper(const MarkerCalibration& calibration, const std::vector<std::string>& source_labels, double scale,
-               bool stabilise_head);
+               bool stabilise_head, double outlier_floor);
 
   // targets: 3 x K (K face markers) in rig (head) space; present: K flags. Missing
   // markers keep their previous target (the solver ignores them). RT-safe.
@@ -39,18 +43,18 @@ class MarkerMapper {
   bool stabilising() const noexcept { return stabilise_; }
 
  private:
-  // Rigid Kabsch fit of head_reference_ to the observed head markers. RT-safe.
-  bool fit_head(const MarkerFrame& frame, Eigen::Isometry3d& T_world_head) noexcept;
-
   std::vector<int> face_slot_;  // K: source slot of each face binding, -1 when the source lacks it
   std::vector<int> head_slot_;  // H: source slot of each head marker, -1 when absent
-  Eigen::Matrix3Xd head_reference_;  // 3 x H, rig space
   Eigen::Matrix3Xd face_offset_;     // 3 x K, rig space, taken off each target
   std::size_t matched_face_ = 0;
   double scale_ = 1.0;
   Eigen::Isometry3d T_rig_marker_ = Eigen::Isometry3d::Identity();
   bool stabilise_ = false;
-  Eigen::Isometry3d last_head_ = Eigen::Isometry3d::Identity();
+  // With stabilisation: the head markers in rig space each frame (H), fitted robustly to
+  // their rest positions.
+  std::optional<align::HeadStabiliser> stabiliser_;
+  std::vector<Marker> head_markers_;
+  align::HeadPoseResult head_pose_;
 };
 
 }  // namespace facecap::daemon

@@ -4,8 +4,16 @@
 
 #include "core/error.hpp"
 #include "core/time.hpp"
+#include "drivers/marker_set.hpp"
 
 namespace facecap::daemon {
+namespace {
+
+// A head marker this far off the rigid fit (and 4x the others' median) is left out of
+// the head pose, as `facecap solve` does.
+constexpr double kHeadOutlierFloorMm = 1.0;
+
+}  // namespace
 
 SolverParams solver_params(const config::SolverSection& section) {
   SolverParams p;
@@ -24,7 +32,7 @@ SolverParams solver_params(const config::SolverSection& section) {
 SolvePipeline::SolvePipeline(const Rig& rig, const MarkerCalibration& calibration, const drivers::SourceInfo& source,
                              const config::SolverSection& solver, bool stabilise_head)
     : scale_(marker_to_rig_scale(calibration, source.units, rig)),
-      mapper_(calibration, source.labels, scale_, stabilise_head),
+      mapper_(calibration, source.labels, scale_, stabilise_head, kHeadOutlierFloorMm * drivers::rig_units_per_mm(rig)),
       solver_(make_solver(solver.method, build_solver_model(rig, calibration.markers.face, solver_params(solver)))),
       result_(solver_->make_result()),
       targets_(Eigen::Matrix3Xd::Zero(3, Eigen::Index(calibration.markers.face.size()))),

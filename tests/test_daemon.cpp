@@ -88,7 +88,7 @@ TEST_CASE("head stabilisation undoes a known rigid motion exactly") {
   calibration.markers = drivers::default_marker_set(rig, 6, 4);
   calibration.origin = "test";
   const std::vector<std::string> labels = calibration.markers.labels();
-  MarkerMapper mapper(calibration, labels, 1.0, true);
+  MarkerMapper mapper(calibration, labels, 1.0, true, 0.1);
   Eigen::Isometry3d motion = Eigen::Isometry3d::Identity();
   motion.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
   motion.translation() = Eigen::Vector3d(1.5, -2, 0.7);
@@ -122,7 +122,7 @@ TEST_CASE("a source with none of the calibration's markers is refused") {
   MarkerCalibration calibration;
   calibration.markers = drivers::default_marker_set(BuiltinFace::instance().rig(), 4, 0);
   calibration.origin = "default marker set";
-  CHECK_THROWS_WITH(MarkerMapper(calibration, {"LeftCheek", "Chin"}, 1.0, true),
+  CHECK_THROWS_WITH(MarkerMapper(calibration, {"LeftCheek", "Chin"}, 1.0, true, 0.1),
                     Contains("none of the 4 face markers of the default marker set (M000, ...) is among the source's 2 markers"));
 }
 
@@ -138,7 +138,7 @@ TEST_CASE("a calibration file binds markers and scales and moves them into rig s
   REQUIRE(calibration.markers.face.size() == 3);
   CHECK(calibration.markers.face[2].vertices == std::array<int, 3>{30, 31, 32});
   CHECK(marker_to_rig_scale(calibration, "m", rig) == Approx(0.1));  // the file's mm win over the source's m
-  MarkerMapper mapper(calibration, {"c", "a", "b"}, 0.1, false);
+  MarkerMapper mapper(calibration, {"c", "a", "b"}, 0.1, false, 0.1);
   MarkerFrame frame = drivers::make_marker_frame({"c", "a", "b"});
   for (auto& m : frame.markers) m.flags = 0;
   frame.markers[1].position = Eigen::Vector3d(10, 20, 30);  // "a", in mm
@@ -152,7 +152,8 @@ TEST_CASE("a calibration file binds markers and scales and moves them into rig s
 }
 
 // `facecap calibrate` then facecapd: the daemon reads the profile the tool writes and
-// maps a take's markers to the same solver targets as the alignment tools do.
+// maps a take's markers to the same solver targets as the alignment tools do, a bumped
+// head marker included.
 TEST_CASE("a facecap calibrate profile maps markers as the alignment tools map them") {
   test::SyntheticTakeOptions options;
   options.head_sway_deg = 4.0;
@@ -182,9 +183,13 @@ TEST_CASE("a facecap calibrate profile maps markers as the alignment tools map t
   CHECK(calibration.origin == file.string() + " (facecap calibrate profile)");
   CHECK(marker_to_rig_scale(calibration, "mm", rig) == Approx(profile.take_to_rig.scale));
 
-  MarkerMapper daemon_mapper(calibration, take.labels, marker_to_rig_scale(calibration, "mm", rig), true);
+  // Both fit the head robustly, leaving out a stable marker 1 mm or more off the fit.
+  MarkerMapper daemon_mapper(calibration, take.labels, marker_to_rig_scale(calibration, "mm", rig), true, 0.1);
   REQUIRE(daemon_mapper.stabilising());
-  align::MarkerMapper tool_mapper(profile, take.labels);
+  align::MarkerMapper tool_mapper(profile, take.labels, align::StabiliserParams{.outlier_floor = 1.0});
+  // Every other frame tested, a stable marker knocked 6 mm off (a bumped marker).
+  const int bumped = int(std::find(take.labels.begin(), take.labels.end(), profile.stable_markers[0]) - take.labels.begin());
+  for (std::size_t f = 0; f < take.frames.size(); f += 14) take.frames[f].markers[std::size_t(bumped)].position.x() += 6.0;
   align::MappedFrame tool = tool_mapper.make_output();
   const auto K = Eigen::Index(profile.markers.size());
   Eigen::Matrix3Xd targets = Eigen::Matrix3Xd::Zero(3, K);
