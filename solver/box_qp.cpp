@@ -5,7 +5,8 @@
 namespace facecap {
 
 BoxQpSolver::BoxQpSolver(Eigen::Index size)
-    : n_(size), state_(size), free_(size), chol_(size, size), rhs_(size), candidate_(size), gradient_(size) {}
+    : n_(size), state_(size), free_(size), chol_(size, size), rhs_(size), candidate_(size), gradient_(size),
+      bound_product_(size) {}
 
 // Solves H_FF w_F = g_F - H_FA w_A for the free set into candidate_. False if H_FF is
 // not positive definite (cannot happen for the ridge-regularised weights problem).
@@ -17,28 +18,42 @@ bool BoxQpSolver::solve_free_subproblem(const Eigen::MatrixXd& H, const Eigen::V
   candidate_ = w;
   const Eigen::Index f = free_count_;
   if (f == 0) return true;
+  // H_FA w_A as one product: w with its free entries zeroed.
+  for (Eigen::Index a = 0; a < f; ++a) candidate_[free_[a]] = 0.0;
+  bound_product_.noalias() = H * candidate_;
   for (Eigen::Index a = 0; a < f; ++a) {
     const Eigen::Index i = free_[a];
-    double r = g[i];
-    for (Eigen::Index j = 0; j < n_; ++j)
-      if (state_[j] != 0) r -= H(i, j) * w[j];
-    rhs_[a] = r;
-    for (Eigen::Index b = 0; b <= a; ++b) chol_(a, b) = H(i, free_[b]);
+    rhs_[a] = g[i] - bound_product_[i];
+    for (Eigen::Index b = a; b < f; ++b) chol_(b, a) = H(free_[b], i);
   }
-  // In-place Cholesky (lower, row by row so each dot product is two contiguous rows,
-  // which Eigen vectorises), then forward and back substitution.
+  // In-place Cholesky, right-looking: each column, once final, updates the columns after
+  // it by contiguous (vectorised) column updates; then forward and back substitution.
+  const Eigen::Index stride = chol_.outerStride();
+  double* L = chol_.data();
   for (Eigen::Index j = 0; j < f; ++j) {
-    const double d2 = chol_(j, j) - chol_.row(j).head(j).squaredNorm();
-    if (!(d2 > 0.0)) return false;
-    const double d = std::sqrt(d2);
-    chol_(j, j) = d;
-    for (Eigen::Index i = j + 1; i < f; ++i) chol_(i, j) = (chol_(i, j) - chol_.row(i).head(j).dot(chol_.row(j).head(j))) / d;
+    double* __restrict column = L + j * stride;
+    if (!(column[j] > 0.0)) return false;
+    const double d = std::sqrt(column[j]);
+    column[j] = d;
+    for (Eigen::Index i = j + 1; i < f; ++i) column[i] /= d;
+    for (Eigen::Index k = j + 1; k < f; ++k) {
+      double* __restrict target = L + k * stride;
+      const double l = column[k];
+      for (Eigen::Index i = k; i < f; ++i) target[i] -= l * column[i];
+    }
   }
-  for (Eigen::Index i = 0; i < f; ++i) rhs_[i] = (rhs_[i] - chol_.row(i).head(i).dot(rhs_.head(i))) / chol_(i, i);
-  for (Eigen::Index i = f - 1; i >= 0; --i) {
-    double s = rhs_[i];
-    for (Eigen::Index k = i + 1; k < f; ++k) s -= chol_(k, i) * rhs_[k];
-    rhs_[i] = s / chol_(i, i);
+  double* __restrict x = rhs_.data();
+  for (Eigen::Index j = 0; j < f; ++j) {
+    const double* __restrict column = L + j * stride;
+    const double xj = x[j] / column[j];
+    x[j] = xj;
+    for (Eigen::Index i = j + 1; i < f; ++i) x[i] -= column[i] * xj;
+  }
+  for (Eigen::Index j = f - 1; j >= 0; --j) {
+    const double* __restrict column = L + j * stride;
+    double s = x[j];
+    for (Eigen::Index i = j + 1; i < f; ++i) s -= column[i] * x[i];
+    x[j] = s / column[j];
   }
   for (Eigen::Index a = 0; a < f; ++a) candidate_[free_[a]] = rhs_[a];
   return true;

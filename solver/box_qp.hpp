@@ -31,10 +31,11 @@ class BoxQpSolver {
   Eigen::VectorXi state_;      // 0 free, -1 at lower, +1 at upper
   Eigen::VectorXi free_;       // indices of free variables
   Eigen::Index free_count_ = 0;
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> chol_;  // lower Cholesky factor of H on the free set
+  Eigen::MatrixXd chol_;       // lower Cholesky factor of H on the free set (column-major, leading f x f)
   Eigen::VectorXd rhs_;        // free-set right-hand side, then solution
   Eigen::VectorXd candidate_;  // full-size candidate point
   Eigen::VectorXd gradient_;
+  Eigen::VectorXd bound_product_;  // H w with the free entries of w zeroed
 };
 
 }  // namespace facecap
