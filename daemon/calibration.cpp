@@ -76,11 +76,14 @@ MarkerCalibration from_profile(const std::string& file, const Rig& rig) {
   }
   for (const std::string& label : profile.stable_markers) {
     const int k = profile.find(label);
-    if (k < 0) throw Error(fmt::format("stable marker '{}' is not among the profile's markers", label), {.file = file, .key = "stabilise.markers"});
+    if (k < 0)
+      throw Error(fmt::format("stable marker '{}' is not among the profile's markers", label),
+                  {.file = file, .key = "stabilise.markers"});
     calibration.markers.head.push_back({label, profile.take_to_rig.apply(profile.markers[std::size_t(k)].neutral)});
   }
   const std::size_t heads = calibration.markers.head.size();
-  if (heads == 1 || heads == 2) throw Error("head stabilisation needs at least 3 stable markers (or none)", {.file = file, .key = "stabilise.markers"});
+  if (heads == 1 || heads == 2)
+    throw Error("head stabilisation needs at least 3 stable markers (or none)", {.file = file, .key = "stabilise.markers"});
   return calibration;
 }
 
