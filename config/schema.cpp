@@ -81,9 +81,10 @@ const std::vector<KeySpec>& schema_rows() {
 
       {FACECAP_KEY(calibration.file), .default_value = std::string(),
        .reload = Reload::kRebuild, .names_input_file = true,
-       .description = "Marker calibration (TOML, see docs/config.md): which rig point each marker sits on, the head "
-                      "markers, and the transform from marker space to rig space. Empty: the default marker set, in "
-                      "rig space, which the sim produces."},
+       .description = "Marker calibration (TOML, see docs/config.md): a profile written by `facecap calibrate`, or a "
+                      "hand-written file naming which rig point each marker sits on, the head markers, and the "
+                      "transform from marker space to rig space. Empty: the default marker set, in rig space, which "
+                      "the sim produces."},
       {FACECAP_KEY(calibration.face_markers), .default_value = int64_t{48}, .min = 3, .max = 1000,
        .description = "Face markers of the default marker set, spread evenly over the rig (labels M000, M001, ...)."},
       {FACECAP_KEY(calibration.head_markers), .default_value = int64_t{4}, .min = 0, .max = 16,
