@@ -109,9 +109,6 @@ struct PinColumns {
   }
   const int16_t* column(Eigen::Index c) const noexcept { return values.data() + std::size_t(c * rows); }
   void set_column(Eigen::Index c, const Eigen::Ref<const Eigen::VectorXd>& column);
-  double at(Eigen::Index row, Eigen::Index c) const noexcept {
-    return double(scale[std::size_t(c)]) * double(values[std::size_t(c * rows + row)]);
-  }
 };
 
 // How a marker moves with one shape's weight t under Eq. 4 where the shape turns the

@@ -46,13 +46,13 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A) : n_(A.rows()) {
   perm_.assign(perm, perm + n_);
   col_start_.resize(std::size_t(n_) + 1);
   inv_diagonal_.resize(std::size_t(n_));
-  const bool short_rows = n_ <= 65536;
+  short_rows_ = n_ <= 65536;
   value_.reserve(std::size_t(p[n_]));
   for (Eigen::Index j = 0; j < n_; ++j) {
     col_start_[std::size_t(j)] = int(value_.size());
     inv_diagonal_[std::size_t(j)] = 1.0 / x[p[j]];  // first entry of each column is D_jj
     for (int k = p[j] + 1; k < p[j + 1]; ++k) {
-      if (short_rows) row16_.push_back(uint16_t(i[k]));
+      if (short_rows_) row16_.push_back(uint16_t(i[k]));
       else row32_.push_back(i[k]);
       value_.push_back(x[k]);
     }
@@ -123,14 +123,14 @@ void solve_one(Eigen::Index n, const int* perm, const int* col_start, const Row*
 }  // namespace
 
 void SparseLdlt::solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) const noexcept {
-  if (!row16_.empty() || row32_.empty())
+  if (short_rows_)
     solve_lanes(n_, perm_.data(), col_start_.data(), row16_.data(), value_.data(), inv_diagonal_.data(), xyz, work);
   else
     solve_lanes(n_, perm_.data(), col_start_.data(), row32_.data(), value_.data(), inv_diagonal_.data(), xyz, work);
 }
 
 void SparseLdlt::solve_in_place(Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept {
-  if (!row16_.empty() || row32_.empty())
+  if (short_rows_)
     solve_one(n_, perm_.data(), col_start_.data(), row16_.data(), value_.data(), inv_diagonal_.data(), x, work);
   else
     solve_one(n_, perm_.data(), col_start_.data(), row32_.data(), value_.data(), inv_diagonal_.data(), x, work);

@@ -31,7 +31,8 @@ class SparseLdlt {
   Eigen::Index n_ = 0;
   std::vector<int> perm_;            // factor row i is A's row perm_[i]
   // Strictly-lower entries of the unit L, by column. Their rows are 16-bit when N allows
-  // (a sixth fewer bytes streamed per solve), otherwise 32-bit; one of the two is empty.
+  // (short_rows_: a sixth fewer bytes streamed per solve), otherwise 32-bit.
+  bool short_rows_ = true;
   std::vector<int> col_start_;
   std::vector<uint16_t> row16_;
   std::vector<int> row32_;
