@@ -165,6 +165,15 @@ class SolverModel {
   std::vector<int> collision_vertices;   // their vertices: the ones it may pin
   std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
   Eigen::MatrixXd collision_basis;       // M x 3C: B's rows of collision vertex i in columns 3i..3i+2
+  // With collision handling: vertices held to the linear blend x0 + B w, through
+  // kTangleWeight beta e_v e_v^T in A0 and kTangleWeight beta (x0 + B w)_v in the
+  // right-hand side. They are the corners of triangles that already cross in the neutral
+  // (ICT's lip corners), and one ring around them. Such crumpled triangles have no
+  // meaningful rotation: blended, they fold through their neighbours where the linear
+  // blend does not.
+  static constexpr double kTangleWeight = 10.0;  // times beta: at beta alone they still cross by a hair
+  std::vector<int> tangle_vertices;
+  Eigen::MatrixXd tangle_basis;  // M x 3L, like collision_basis
   Eigen::MatrixXd marker_solution;       // N x K
   PinColumns pin_solution;               // N x C, or empty
   bool collision_columns_precomputed() const {

@@ -13,6 +13,7 @@
 #include "solver/box_qp.hpp"
 #include "solver/collide.hpp"
 #include "solver/face_solver.hpp"
+#include "solver/mesh_topology.hpp"
 #include "solver/meshik.hpp"
 #include "solver/solver_model.hpp"
 
@@ -328,6 +329,14 @@ class PoissonSolver : public FaceSolver {
       linear_stamp_.assign(std::size_t(C), 0);
       pin_stamp_.assign(std::size_t(N), 0);
       collisions_ = collider_.make_result();
+      const TriangleAdjacency adjacency(m.rig.triangles);
+      const auto candidates = collider_.candidate_triangles();
+      std::vector<int> candidate_index(std::size_t(T), -1);
+      for (std::size_t i = 0; i < candidates.size(); ++i) candidate_index[std::size_t(candidates[i])] = int(i);
+      for (std::size_t i = 0; i < candidates.size(); ++i)
+        for (const int u : adjacency.neighbours(candidates[i]))
+          if (candidate_index[std::size_t(u)] > int(i)) fold_edges_.push_back({int(i), candidate_index[std::size_t(u)]});
+      fold_normals_.resize(3, Eigen::Index(candidates.size()));
     }
     // Pins beyond capacity are left out (and counted); markers always fit.
     pin_capacity_ = std::min<Eigen::Index>(Eigen::Index(m.collision_vertices.size()), kMaxPins);
@@ -379,6 +388,11 @@ class PoissonSolver : public FaceSolver {
       } else {
         add_modification({b.vertices, b.barycentric, m.marker_solution.col(k).data(), nullptr, 0.0f, -beta});
       }
+    }
+    for (std::size_t i = 0; i < m.tangle_vertices.size(); ++i) {
+      const int v = m.tangle_vertices[i];
+      for (int c = 0; c < 3; ++c)
+        rhs_(c, v) += SolverModel::kTangleWeight * beta * (m.rig.neutral(c, v) + m.tangle_basis.col(3 * Eigen::Index(i) + c).dot(out.weights));
     }
     clock.lap(SolveStage::kRhs);
 
@@ -490,13 +504,12 @@ class PoissonSolver : public FaceSolver {
     const SolverModel& m = *model_;
     if (!collider_.configured() || !collider_.detect(out.vertices, collisions_)) return;
     out.collision_pairs = uint32_t(collisions_.pairs_found);
-    if (collisions_.pair_count == 0) return;
     if (++stamp_ == 0) {  // wrapped: forget every old stamp
       std::fill(pin_stamp_.begin(), pin_stamp_.end(), 0u);
       std::fill(linear_stamp_.begin(), linear_stamp_.end(), 0u);
       stamp_ = 1;
     }
-    const double beta = m.params.beta, epsilon = m.params.collision_epsilon;
+    const double epsilon = m.params.collision_epsilon;
     Eigen::Index pins = 0;
     for (const TrianglePair& pair : collisions_.valid_pairs()) {
       const auto ta = m.rig.triangles.col(pair.first), tb = m.rig.triangles.col(pair.second);
@@ -511,29 +524,53 @@ class PoissonSolver : public FaceSolver {
                                  out.vertices.col(tb[0]), out.vertices.col(tb[1]), out.vertices.col(tb[2])))
           continue;
       }
-      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) {
-        if (pin_stamp_[std::size_t(v)] == stamp_ || pins == pin_capacity_) continue;
-        pin_stamp_[std::size_t(v)] = stamp_;
-        const double* column = nullptr;
-        const int16_t* pin_column = nullptr;
-        float pin_scale = 0.0f;
-        if (m.collision_columns_precomputed()) {
-          const auto c = Eigen::Index(m.vertex_to_collision[std::size_t(v)]);
-          pin_column = m.pin_solution.column(c);
-          pin_scale = m.pin_solution.scale[std::size_t(c)];
-        } else {
-          auto z = pin_columns_.col(pins);
-          z.setZero();
-          z[v] = 1.0;
-          m.factor->solve_in_place(z, pin_work_);
-          column = z.data();
-        }
-        add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, pin_column, pin_scale, beta, linear_position(v, out.weights)});
-        ++pins;
-      }
+      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins, out.weights);
+    }
+    // Folds: neighbours across an edge turned more than 90 degrees against each other
+    // where the linear blend keeps them less than 90 degrees apart. Such a crease folds
+    // the skin through itself within a few triangles, where pairs are too near to test.
+    const auto candidates = collider_.candidate_triangles();
+    for (std::size_t i = 0; i < candidates.size(); ++i)
+      fold_normals_.col(Eigen::Index(i)) = triangle_normal(out.vertices, m.rig.triangles.col(candidates[i]));
+    for (const auto& [first, second] : fold_edges_) {
+      if (fold_normals_.col(first).dot(fold_normals_.col(second)) >= 0.0) continue;
+      const auto ta = m.rig.triangles.col(candidates[std::size_t(first)]), tb = m.rig.triangles.col(candidates[std::size_t(second)]);
+      const Eigen::Vector3d la = (linear_position(ta[1], out.weights) - linear_position(ta[0], out.weights))
+                                     .cross(linear_position(ta[2], out.weights) - linear_position(ta[0], out.weights));
+      const Eigen::Vector3d lb = (linear_position(tb[1], out.weights) - linear_position(tb[0], out.weights))
+                                     .cross(linear_position(tb[2], out.weights) - linear_position(tb[0], out.weights));
+      if (la.dot(lb) < 0.0) continue;
+      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins, out.weights);
     }
     out.collision_constraints = uint32_t(pins);
     if (pins > 0) apply_modifications(rhs_, out.vertices);
+  }
+
+  static Eigen::Vector3d triangle_normal(const Eigen::Matrix3Xd& x, const Eigen::Ref<const Eigen::Vector3i>& t) noexcept {
+    return (x.col(t[1]) - x.col(t[0])).cross(x.col(t[2]) - x.col(t[0]));
+  }
+
+  // Pins vertex v to the linear blend, once per frame and while capacity lasts.
+  void pin(int v, Eigen::Index& pins, const Eigen::VectorXd& w) noexcept {
+    const SolverModel& m = *model_;
+    if (pin_stamp_[std::size_t(v)] == stamp_ || pins == pin_capacity_) return;
+    pin_stamp_[std::size_t(v)] = stamp_;
+    const double* column = nullptr;
+    const int16_t* pin_column = nullptr;
+    float pin_scale = 0.0f;
+    if (m.collision_columns_precomputed()) {
+      const auto c = Eigen::Index(m.vertex_to_collision[std::size_t(v)]);
+      pin_column = m.pin_solution.column(c);
+      pin_scale = m.pin_solution.scale[std::size_t(c)];
+    } else {
+      auto z = pin_columns_.col(pins);
+      z.setZero();
+      z[v] = 1.0;
+      m.factor->solve_in_place(z, pin_work_);
+      column = z.data();
+    }
+    add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, pin_column, pin_scale, m.params.beta, linear_position(v, w)});
+    ++pins;
   }
 
   // (x0 + B w)_v for a vertex of the collision region, computed once per frame.
@@ -673,6 +710,8 @@ class PoissonSolver : public FaceSolver {
   Eigen::Matrix<double, Eigen::Dynamic, 3> small_rhs_;
   TriangleCollider collider_;
   CollisionResult collisions_;
+  std::vector<std::pair<int, int>> fold_edges_;  // candidate triangles sharing an edge (indices into the candidates)
+  Eigen::Matrix3Xd fold_normals_;                // per candidate triangle: this frame's normal (not unit)
   Eigen::Index pin_capacity_ = 0;
   Eigen::MatrixXd pin_columns_;  // A0^-1 e_v solved per frame when not precomputed
   Eigen::Matrix3Xd linear_cache_;     // 3 x C: this frame's linear blend there
