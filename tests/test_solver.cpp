@@ -311,6 +311,45 @@ TEST_CASE("whole-face collision handling solves its pins per frame and removes t
   CHECK(count_intersecting_pairs(rig.triangles, out.vertices) == 0);
 }
 
+// An ICT FaceKit pose solved by the non-linear solver with and without collision
+// handling, for the lip-pose tests below.
+struct LipPoseSolves {
+  using Pose = std::vector<std::pair<const char*, double>>;
+  explicit LipPoseSolves(const Rig& rig_) : rig(rig_), layout(spread_marker_layout(rig, 60)) {
+    SolverParams without;
+    without.collision_region = CollisionRegion::kNone;
+    model = build_solver_model(rig, layout);
+    handled = make_solver("nonlinear", model);
+    unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+    with_handling = handled->make_result();
+    without_handling = unhandled->make_result();
+  }
+  // Solves `pose` (shape, weight) both ways, with marker targets on its linear blend.
+  // Returns the pose's name, "shape=weight ...".
+  std::string solve(const Pose& pose) {
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+    std::string name;
+    for (const auto& [shape, value] : pose) {
+      w[*rig.shape_index(shape)] = value;
+      name += fmt::format("{}={} ", shape, value);
+    }
+    linear = rig.linear_blend(w);
+    const Eigen::Matrix3Xd targets = markers_of(linear, layout);
+    handled->solve_with_weights(w, targets, all_present(60), with_handling);
+    unhandled->solve_with_weights(w, targets, all_present(60), without_handling);
+    return name;
+  }
+  int64_t new_crossings(const Eigen::Matrix3Xd& positions) const {
+    return count_new_intersecting_pairs(rig.triangles, rig.neutral, positions);
+  }
+  const Rig& rig;
+  std::vector<MarkerBinding> layout;
+  std::shared_ptr<const SolverModel> model;
+  std::unique_ptr<FaceSolver> handled, unhandled;
+  SolveResult with_handling, without_handling;
+  Eigen::Matrix3Xd linear;  // the last pose's linear blend
+};
+
 // ICT FaceKit poses where the non-linear blend crosses at the lips and the linear blend,
 // the collision stage's reference, does not. Found by a search over 350 random mixes of
 // two or three jaw* and mouth* shapes at weights 0.25..1: 41 such poses, 40 of which end
@@ -319,12 +358,8 @@ TEST_CASE("whole-face collision handling solves its pins per frame and removes t
 TEST_CASE("ICT FaceKit poses whose linear blend is clean: collision handling leaves no lip crossings") {
   FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
   const Rig rig = load_rig(dir.string());
-  const auto layout = spread_marker_layout(rig, 60);
-  SolverParams without;
-  without.collision_region = CollisionRegion::kNone;
-  auto handled = make_solver("nonlinear", build_solver_model(rig, layout));
-  auto unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
-  const std::vector<std::vector<std::pair<const char*, double>>> poses{
+  LipPoseSolves solves(rig);
+  const std::vector<LipPoseSolves::Pose> poses{
       {{"jawOpen", 1.0}, {"mouthPress_R", 0.5}, {"mouthShrugLower", 0.5}},
       {{"jawForward", 0.75}, {"jawOpen", 0.75}},
       {{"jawOpen", 0.5}, {"mouthPucker", 1.0}, {"mouthRollLower", 0.75}},
@@ -336,24 +371,14 @@ TEST_CASE("ICT FaceKit poses whose linear blend is clean: collision handling lea
       {{"jawOpen", 0.25}, {"mouthRollLower", 0.75}},
       {{"jawOpen", 0.75}, {"mouthPress_R", 0.5}, {"mouthRollUpper", 0.5}},
   };
-  SolveResult a = handled->make_result(), b = unhandled->make_result();
   std::string table = "ICT new intersecting pairs, nonlinear without -> with handling (the linear blend has none):\n";
   for (const auto& pose : poses) {
-    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
-    std::string name;
-    for (const auto& [shape, value] : pose) {
-      w[*rig.shape_index(shape)] = value;
-      name += fmt::format("{}={} ", shape, value);
-    }
-    const Eigen::Matrix3Xd linear = rig.linear_blend(w);
-    const Eigen::Matrix3Xd targets = markers_of(linear, layout);
-    handled->solve_with_weights(w, targets, all_present(60), a);
-    unhandled->solve_with_weights(w, targets, all_present(60), b);
-    const int64_t before = count_new_intersecting_pairs(rig.triangles, rig.neutral, b.vertices);
-    const int64_t after = count_new_intersecting_pairs(rig.triangles, rig.neutral, a.vertices);
-    table += fmt::format("  {}: {} -> {} ({} pins)\n", name, before, after, a.collision_constraints);
+    const std::string name = solves.solve(pose);
+    const int64_t before = solves.new_crossings(solves.without_handling.vertices);
+    const int64_t after = solves.new_crossings(solves.with_handling.vertices);
+    table += fmt::format("  {}: {} -> {} ({} pins)\n", name, before, after, solves.with_handling.collision_constraints);
     INFO(name);
-    CHECK(count_new_intersecting_pairs(rig.triangles, rig.neutral, linear) == 0);
+    CHECK(solves.new_crossings(solves.linear) == 0);
     CHECK(before > 0);
     CHECK(after == 0);
   }
@@ -368,38 +393,25 @@ TEST_CASE("ICT FaceKit poses whose linear blend is clean: collision handling lea
 TEST_CASE("ICT FaceKit lip poses with and without collision handling") {
   FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
   const Rig rig = load_rig(dir.string());
-  const auto layout = spread_marker_layout(rig, 60);
-  SolverParams without;
-  without.collision_region = CollisionRegion::kNone;
-  const auto model = build_solver_model(rig, layout);
-  auto handled = make_solver("nonlinear", model);
-  auto unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+  LipPoseSolves solves(rig);
   std::vector<uint8_t> lip_region(std::size_t(rig.vertex_count()), 0);
-  for (const int v : model->collision_vertices) lip_region[std::size_t(v)] = 1;
-  const std::vector<std::vector<std::pair<const char*, double>>> poses{
+  for (const int v : solves.model->collision_vertices) lip_region[std::size_t(v)] = 1;
+  const std::vector<LipPoseSolves::Pose> poses{
       {{"mouthClose", 1.0}},
       {{"jawOpen", 0.3}, {"mouthClose", 1.0}},
       {{"mouthPress_L", 1.0}},
       {{"mouthRollLower", 1.0}, {"mouthRollUpper", 1.0}},
       {{"jawOpen", 0.15}, {"mouthPucker", 1.0}},
   };
-  SolveResult a = handled->make_result(), b = unhandled->make_result();
   int64_t total_before = 0, total_after = 0;
   std::string table = "ICT new intersecting pairs (linear blend; nonlinear without -> with handling):\n";
   for (const auto& pose : poses) {
-    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
-    std::string name;
-    for (const auto& [shape, value] : pose) {
-      w[*rig.shape_index(shape)] = value;
-      name += fmt::format("{}={} ", shape, value);
-    }
-    const Eigen::Matrix3Xd linear = rig.linear_blend(w);
-    const Eigen::Matrix3Xd targets = markers_of(linear, layout);
-    handled->solve_with_weights(w, targets, all_present(60), a);
-    unhandled->solve_with_weights(w, targets, all_present(60), b);
-    const int64_t reference = count_new_intersecting_pairs(rig.triangles, rig.neutral, linear);
-    const int64_t before = count_new_intersecting_pairs(rig.triangles, rig.neutral, b.vertices);
-    const int64_t after = count_new_intersecting_pairs(rig.triangles, rig.neutral, a.vertices);
+    const std::string name = solves.solve(pose);
+    const SolveResult& a = solves.with_handling;
+    const SolveResult& b = solves.without_handling;
+    const int64_t reference = solves.new_crossings(solves.linear);
+    const int64_t before = solves.new_crossings(b.vertices);
+    const int64_t after = solves.new_crossings(a.vertices);
     double far_move = 0;  // largest move outside the lip region
     for (Eigen::Index v = 0; v < rig.vertex_count(); ++v)
       if (!lip_region[std::size_t(v)]) far_move = std::max(far_move, (a.vertices.col(v) - b.vertices.col(v)).norm());
@@ -409,7 +421,7 @@ TEST_CASE("ICT FaceKit lip poses with and without collision handling") {
     total_after += after;
     INFO(name);
     CHECK(before > 0);      // every pose here crosses at the lips without handling
-    CHECK(far_move < 0.2);  // under 2 mm away from the lips (measured: up to 1.1 mm)
+    CHECK(far_move < 0.2);  // under 2 mm away from the lips (measured: up to 1.6 mm)
   }
   table += fmt::format("  total {} -> {}\n", total_before, total_after);
   WARN(table);
