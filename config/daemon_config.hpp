@@ -30,6 +30,7 @@ struct SolverSection {
   int64_t weight_refinements = 0;
   std::string collisions;
   double collision_epsilon = 0.0;
+  int64_t collision_max_pins = 0;
   double active_weight = 0.0;
 };
 

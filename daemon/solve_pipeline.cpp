@@ -25,6 +25,7 @@ SolverParams solver_params(const config::SolverSection& section) {
                        : section.collisions == "face" ? CollisionRegion::kFace
                                                       : CollisionRegion::kLips;
   p.collision_epsilon = section.collision_epsilon;
+  p.collision_max_pins = int(section.collision_max_pins);
   p.active_weight = section.active_weight;
   return p;
 }

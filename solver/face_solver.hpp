@@ -37,6 +37,9 @@ struct SolverParams {
   double beta = 100.0;    // marker pinning strength (Eq. 5)
   CollisionRegion collision_region = CollisionRegion::kLips;
   double collision_epsilon = 0.01;  // rig units: triangle pairs closer than this collide
+  // Vertices pinned per frame at most: bounds the collision stage's cost. Lip poses that
+  // need more keep some crossings (ICT: one pose in 41 needs 100).
+  int collision_max_pins = 64;
   double active_weight = 1e-4;      // weights below this are left out of T(w)
   // Gauss-Newton refinements of Eq. 2 for the nonlinear solver, fitting markers along
   // the paths the rotations of Eq. 4 move them (a hinge swings, it does not slide);

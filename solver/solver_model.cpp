@@ -27,6 +27,8 @@ double seconds_since(Clock::time_point t) { return std::chrono::duration<double>
 void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const SolverParams& params) {
   if (rig.vertex_count() == 0 || rig.triangle_count() == 0) throw Error("solver: the rig has no mesh");
   if (markers.empty()) throw Error("solver: no markers to solve from");
+  if (params.collision_max_pins < 0 || params.collision_max_pins > 1024)
+    throw Error(fmt::format("solver: collision_max_pins {} is not in [0, 1024]", params.collision_max_pins));
   if (!(params.beta > 0) || !(params.alpha >= 0) || !(params.mu >= 0))
     throw Error(fmt::format("solver: beta must be > 0 and alpha, mu >= 0 (beta {}, alpha {}, mu {})", params.beta,
                             params.alpha, params.mu));

@@ -22,7 +22,6 @@ namespace {
 
 constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear", "dt", "meshik"};
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
-constexpr Eigen::Index kMaxPins = 64;     // collision pins per frame: bounds the stage's cost
 
 // One component of a ShapeBlocks block.
 using Lanes16 = float __attribute__((vector_size(64)));
@@ -339,7 +338,7 @@ class PoissonSolver : public FaceSolver {
       fold_normals_.resize(3, Eigen::Index(candidates.size()));
     }
     // Pins beyond capacity are left out (and counted); markers always fit.
-    pin_capacity_ = std::min<Eigen::Index>(Eigen::Index(m.collision_vertices.size()), kMaxPins);
+    pin_capacity_ = std::min<Eigen::Index>(Eigen::Index(m.collision_vertices.size()), m.params.collision_max_pins);
     const Eigen::Index capacity = K + pin_capacity_;
     modifications_.resize(std::size_t(capacity));
     small_.resize(capacity, capacity);

@@ -231,6 +231,9 @@ TEST_CASE("too few markers hold the previous result and unknown solvers are reje
   CHECK(out.held);
   CHECK_THROWS_WITH(make_solver("magic", model), Catch::Contains("unknown solver 'magic'"));
   CHECK_THROWS_WITH(build_solver_model(rig, {MarkerBinding::at_vertex("bad", 1 << 30)}), Catch::Contains("marker 'bad'"));
+  SolverParams too_many;
+  too_many.collision_max_pins = 2000;
+  CHECK_THROWS_WITH(build_solver_model(rig, layout, too_many), Catch::Contains("collision_max_pins 2000 is not in [0, 1024]"));
 }
 
 #include "tests/alloc_counter.hpp"
@@ -315,10 +318,11 @@ TEST_CASE("whole-face collision handling solves its pins per frame and removes t
 // handling, for the lip-pose tests below.
 struct LipPoseSolves {
   using Pose = std::vector<std::pair<const char*, double>>;
-  explicit LipPoseSolves(const Rig& rig_) : rig(rig_), layout(spread_marker_layout(rig, 60)) {
-    SolverParams without;
+  explicit LipPoseSolves(const Rig& rig_, const SolverParams& params = {})
+      : rig(rig_), layout(spread_marker_layout(rig, 60)) {
+    SolverParams without = params;
     without.collision_region = CollisionRegion::kNone;
-    model = build_solver_model(rig, layout);
+    model = build_solver_model(rig, layout, params);
     handled = make_solver("nonlinear", model);
     unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
     with_handling = handled->make_result();
@@ -383,6 +387,28 @@ TEST_CASE("ICT FaceKit poses whose linear blend is clean: collision handling lea
     CHECK(after == 0);
   }
   WARN(table);
+}
+
+TEST_CASE("a lip pose that needs more than 64 pins ends with no crossings at collision_max_pins 128") {
+  FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
+  const Rig rig = load_rig(dir.string());
+  const LipPoseSolves::Pose pose{{"jawOpen", 1.0}, {"mouthPress_L", 0.5}, {"mouthShrugLower", 1.0}};
+  LipPoseSolves by_default(rig);
+  by_default.solve(pose);
+  SolverParams more;
+  more.collision_max_pins = 128;
+  LipPoseSolves with_more(rig, more);
+  with_more.solve(pose);
+  const int64_t before = by_default.new_crossings(by_default.without_handling.vertices);
+  const int64_t at_64 = by_default.new_crossings(by_default.with_handling.vertices);
+  const int64_t at_128 = with_more.new_crossings(with_more.with_handling.vertices);
+  WARN(fmt::format("{} new crossing pairs without handling, {} with 64 pins, {} with {} of 128", before, at_64, at_128,
+                   with_more.with_handling.collision_constraints));
+  CHECK(with_more.new_crossings(with_more.linear) == 0);
+  CHECK(by_default.with_handling.collision_constraints == 64);
+  CHECK(at_64 > 0);
+  CHECK(with_more.with_handling.collision_constraints > 64);
+  CHECK(at_128 == 0);
 }
 
 // ICT FaceKit's own shapes cross at the lips in these poses (its linear blend does, and

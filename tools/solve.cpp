@@ -28,6 +28,7 @@ namespace {
 struct Options {
   std::string rig, calib, take, output, solver = "nonlinear", rig_units;
   bool force = false, quiet = false, vertices = false, check_labels = false;
+  int max_pins = SolverParams{}.collision_max_pins;
 };
 
 Timecode timecode_at(int64_t time_ns) {
@@ -60,7 +61,9 @@ void run_solve(const Options& o) {
   for (const auto& w : take.warnings) fmt::print(stderr, "facecap: warning: {}: {}\n", o.take, w);
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
 
-  auto setup = make_calibrated_setup(rig, cal, take.labels);
+  SolverParams params;
+  params.collision_max_pins = o.max_pins;
+  auto setup = make_calibrated_setup(rig, cal, take.labels, params);
   const auto solver_ptr = make_solver(o.solver, setup.model);
   FaceSolver& solver = *solver_ptr;
   SolveResult result = solver.make_result();
@@ -168,6 +171,8 @@ void add_solve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("-o,--output", opts->output, "out.csv (Live Link Face) or out.fcrec (recording)")->required();
   cmd->add_option("--solver", opts->solver, "nonlinear, linear, dt or meshik (offline only: slow)")->capture_default_str();
   cmd->add_option("--rig-units", opts->rig_units, "Rig units mm|cm|m (default: guessed from the face's size)");
+  cmd->add_option("--max-pins", opts->max_pins, "Collision pins per frame at most (offline, more removes more lip crossings)")
+      ->capture_default_str()->check(CLI::Range(0, 1024));
   cmd->add_flag("--check-labels", opts->check_labels, "Check the take's labels each frame and correct swaps");
   cmd->add_flag("--vertices", opts->vertices, "Store solved meshes in a .fcrec (large)");
   cmd->add_flag("--force", opts->force, "Replace the output file if it exists");
