@@ -38,6 +38,7 @@ struct LoopSection {
   double rate_hz = 0.0;
   std::string mode;
   int64_t phase_margin_us = 0;
+  int64_t prefetch_lead_us = 0;
   bool realtime = true;
   int64_t priority = 0;
   bool lock_memory = false;

@@ -10,6 +10,8 @@
 #include <sys/mman.h>
 #include <sys/resource.h>
 
+#include "core/time.hpp"
+
 namespace facecap {
 
 RealtimeReport apply_realtime(const RealtimeRequest& request) noexcept {
@@ -71,6 +73,21 @@ MemoryLockReport lock_memory() noexcept {
   report.locked = mlockall(MCL_CURRENT | MCL_FUTURE) == 0;
   report.error = report.locked ? 0 : errno;
   return report;
+}
+
+std::size_t prefetch_until(std::span<const std::span<const std::byte>> ranges, int64_t deadline_ns) noexcept {
+  constexpr std::size_t kLine = 64, kChunk = 64 * 1024;
+  std::size_t done = 0;
+  for (const auto range : ranges) {
+    for (std::size_t begin = 0; begin < range.size(); begin += kChunk) {
+      if (monotonic_now_ns() >= deadline_ns) return done;
+      const std::size_t end = std::min(range.size(), begin + kChunk);
+      // Locality 1: into the outer caches; the solve's own loads take it from there.
+      for (std::size_t at = begin; at < end; at += kLine) __builtin_prefetch(range.data() + at, 0, 1);
+      done += end - begin;
+    }
+  }
+  return done;
 }
 
 std::string MemoryLockReport::describe() const {

@@ -2,7 +2,9 @@
 // Real-time setup as a reported try: each step that fails leaves its errno and an
 // actionable hint in the report, and the caller keeps running without it. Used by the
 // solve thread and by drivers whose threads stand in for hardware timing.
+#include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -40,5 +42,12 @@ struct MemoryLockReport {
 
 // mlockall(MCL_CURRENT | MCL_FUTURE) for the whole process. Not RT-safe (call at start).
 MemoryLockReport lock_memory() noexcept;
+
+// Prefetches `ranges` into the cache, in order, until CLOCK_MONOTONIC reaches
+// deadline_ns (checked every 64 KiB). Returns the bytes prefetched. A thread that sleeps
+// between frames calls it before waking for the next one, so that a solve streaming
+// megabytes of model data does not start from main memory. RT-safe: prefetch
+// instructions and clock reads only.
+std::size_t prefetch_until(std::span<const std::span<const std::byte>> ranges, int64_t deadline_ns) noexcept;
 
 }  // namespace facecap

@@ -142,6 +142,7 @@ void Daemon::start() {
   loop_options.rate_hz = c.loop.rate_hz;
   loop_options.lockstep = c.loop.mode == "lockstep";
   loop_options.phase_margin_ns = c.loop.phase_margin_us * kNsPerUs;
+  loop_options.prefetch_lead_ns = c.loop.prefetch_lead_us * kNsPerUs;
   loop_options.realtime = {.fifo = c.loop.realtime, .priority = int(c.loop.priority), .cpus = c.loop.cpu_affinity};
   loop_ = std::make_unique<SolveLoop>(loop_options, *source_, std::move(pipeline), shm_.get(), recorder_.get(),
                                       c.outputs.shm.vertices);

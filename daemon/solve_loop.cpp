@@ -167,10 +167,18 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
   return true;
 }
 
+void SolveLoop::wait_for_tick(int64_t deadline_ns) noexcept {
+  if (options_.prefetch_lead_ns > 0) {
+    sleep_until(deadline_ns - options_.prefetch_lead_ns);
+    prefetch_until(pipeline_->streamed_memory(), deadline_ns);
+  }
+  sleep_until(deadline_ns);
+}
+
 void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
   int64_t deadline_ns = epoch_ns;
   while (!stop_requested_.load(std::memory_order_acquire)) {
-    sleep_until(deadline_ns);
+    wait_for_tick(deadline_ns);
     const int64_t wake_ns = monotonic_now_ns();
     store_max(counters_.max_wake_late_ns, wake_ns - deadline_ns);
     tick(wake_ns);

@@ -25,6 +25,9 @@ struct LoopOptions {
   bool lockstep = false;
   // > 0: shift ticks to fall this long after frames of a source on its own clock arrive.
   int64_t phase_margin_ns = 0;
+  // > 0: wake this long before each deadline to prefetch the solver's streamed memory
+  // (fixed rate only), so that a solve after a sleep does not start from main memory.
+  int64_t prefetch_lead_ns = 0;
   RealtimeRequest realtime;
 };
 
@@ -85,6 +88,10 @@ class SolveLoop {
   // One tick's work at time now_ns; public so tests can drive the loop by hand. RT-safe.
   // Returns true when a frame was solved.
   bool tick(int64_t now_ns) noexcept;
+
+  // Sleeps until deadline_ns, prefetching the solver's streamed memory in the last
+  // prefetch_lead_ns before it. RT-safe.
+  void wait_for_tick(int64_t deadline_ns) noexcept;
 
  private:
   void run() noexcept;

@@ -31,6 +31,8 @@ class SolvePipeline {
   // A frame sized for this rig (vertices only when wanted). Not RT-safe.
   SolvedFrame make_solved_frame(bool with_vertices) const;
 
+  // What the loop prefetches ahead of a frame (FaceSolver::streamed_memory). RT-safe.
+  std::span<const std::span<const std::byte>> streamed_memory() const noexcept { return solver_->streamed_memory(); }
   const MarkerMapper& mapper() const noexcept { return mapper_; }
   std::string_view method() const noexcept { return solver_->name(); }
   double marker_scale() const noexcept { return scale_; }

@@ -4,6 +4,7 @@
 // make_solver() gives a solver whose solve() runs once per frame into pre-sized
 // outputs and never allocates, locks, throws or logs.
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -77,6 +78,12 @@ class FaceSolver {
 
   // Forgets the warm start (previous weights). Real-time safe.
   virtual void reset() noexcept = 0;
+
+  // The model memory each solve streams through that is too large to stay cached
+  // between paced frames (the blend's terms), in the order it is read: a loop that
+  // sleeps between frames prefetches it before the next one (prefetch_until). Empty
+  // when nothing is worth it. Valid while the solver lives.
+  virtual std::span<const std::span<const std::byte>> streamed_memory() const noexcept { return {}; }
 
   SolveResult make_result() const;
   const SolverModel& model() const { return *model_; }

@@ -346,10 +346,14 @@ class PoissonSolver : public FaceSolver {
     if (!m.collision_columns_precomputed()) pin_columns_.resize(N, pin_capacity_);
     pin_work_.resize(N);
     correction_.resize(N, 3);
+    const QuantisedValues& values = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
+    streamed_ = {std::as_bytes(std::span(values.narrow)), std::as_bytes(std::span(values.high)),
+                 std::as_bytes(std::span(values.low)), std::as_bytes(std::span(operator_))};
   }
 
   std::string_view name() const noexcept override { return blend_ == Blend::kNonlinear ? "nonlinear" : "dt"; }
   void reset() noexcept override { weights_.reset(); }
+  std::span<const std::span<const std::byte>> streamed_memory() const noexcept override { return streamed_; }
 
   void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
     StageClock clock(out);
@@ -699,6 +703,7 @@ class PoissonSolver : public FaceSolver {
 
   Blend blend_;
   WeightsStage weights_;
+  std::vector<std::span<const std::byte>> streamed_;  // the blend's terms and Q_j (streamed_memory)
   std::vector<float> operator_;        // Q_j, in triangle_blocks' slots, component-major per block
   std::vector<std::array<int32_t, 3>> slot_corners_;  // per slot of triangle_blocks: its vertices, -1 for padding
   Eigen::Matrix3Xd identity_rhs_, rhs_;

@@ -3,6 +3,8 @@
 #include "core/error.hpp"
 #include "core/frame.hpp"
 #include "core/io.hpp"
+#include "core/realtime.hpp"
+#include "core/time.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -45,4 +47,12 @@ TEST_CASE("FNV-1a matches the published test vector") {
   Fnv1a64 h;
   h.add("a", 1);
   CHECK(h.digest() == 0xaf63dc4c8601ec8cull);
+}
+
+TEST_CASE("prefetch_until covers every range before its deadline and nothing after it") {
+  const std::vector<std::byte> large(200'000), small(3);
+  const std::span<const std::byte> ranges[] = {large, small};
+  CHECK(prefetch_until(ranges, std::numeric_limits<int64_t>::max()) == 200'003);
+  CHECK(prefetch_until(ranges, monotonic_now_ns()) == 0);  // the deadline has passed
+  CHECK(prefetch_until({}, std::numeric_limits<int64_t>::max()) == 0);
 }

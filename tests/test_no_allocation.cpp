@@ -30,17 +30,17 @@ struct Counted {
   uint64_t frames = 0;
 };
 
-// Runs ticks until `frames` frames are solved, counting allocations inside tick() only.
+// Runs ticks until `frames` frames are solved, counting allocations in the wait before
+// each tick (prefetching included) and in tick().
 Counted run_ticks(SolveLoop& loop, uint64_t frames, int64_t period_ns) {
   Counted c;
   int64_t deadline = monotonic_now_ns();
   for (int i = 0; i < 20000 && c.frames < frames; ++i) {
     deadline += period_ns;
-    timespec ts{time_t(deadline / kNsPerSecond), long(deadline % kNsPerSecond)};
-    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
     bool solved = false;
     {
       const test::CountAllocations counter;
+      loop.wait_for_tick(deadline);
       solved = loop.tick(monotonic_now_ns());
       c.allocations += std::size_t(counter.count());
     }
@@ -69,7 +69,7 @@ TEST_CASE("the counter sees allocations by new and by malloc") {
   std::free(q);
 }
 
-TEST_CASE("a tick allocates nothing: sim source and solve and shm publish and recorder and solver swap") {
+TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, shm publish, recorder and solver swap") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
   const MarkerCalibration calibration = load_calibration(c.calibration, *rig);
@@ -86,6 +86,7 @@ TEST_CASE("a tick allocates nothing: sim source and solve and shm publish and re
   Recorder recorder(r, drivers::make_marker_frame(sim.info().labels), rig->shape_count());
   LoopOptions options;
   options.realtime.fifo = false;
+  options.prefetch_lead_ns = 800'000;
   SolveLoop loop(options, sim, std::make_unique<SolvePipeline>(*rig, calibration, sim.info(), c.solver, true), &shm,
                  &recorder, true);
   sim.start({.epoch_ns = monotonic_now_ns()});

@@ -236,6 +236,23 @@ TEST_CASE("too few markers hold the previous result and unknown solvers are reje
   CHECK_THROWS_WITH(build_solver_model(rig, layout, too_many), Catch::Contains("collision_max_pins 2000 is not in [0, 1024]"));
 }
 
+TEST_CASE("the Poisson solvers stream their blend's terms and operators, the linear solver nothing") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto model = build_solver_model(rig, spread_marker_layout(rig, 60));
+  const std::size_t operators = std::size_t(model->triangle_blocks.block_count()) * 9 * ShapeBlocks::kBlock * sizeof(float);
+  auto bytes_of = [](const QuantisedValues& v) { return v.narrow.size() + v.high.size() + v.low.size(); };
+  auto streamed = [&](const char* name) {
+    const auto solver = make_solver(name, model);
+    std::size_t total = 0;
+    for (const auto range : solver->streamed_memory()) total += range.size();
+    return total;
+  };
+  CHECK(streamed("nonlinear") == bytes_of(model->triangle_nonlinear) + operators);
+  CHECK(streamed("dt") == bytes_of(model->triangle_gradient) + operators);
+  CHECK(streamed("linear") == 0);
+  CHECK(bytes_of(model->triangle_nonlinear) > 1'000'000);  // megabytes: more than a core's L2 keeps
+}
+
 #include "tests/alloc_counter.hpp"
 
 TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers") {
