@@ -10,6 +10,8 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
+#include "core/huge_pages.hpp"
+
 namespace facecap {
 
 class SparseLdlt {
@@ -33,10 +35,10 @@ class SparseLdlt {
   // Strictly-lower entries of the unit L, by column. Their rows are 16-bit when N allows
   // (short_rows_: a sixth fewer bytes streamed per solve), otherwise 32-bit.
   bool short_rows_ = true;
-  std::vector<int> col_start_;
-  std::vector<uint16_t> row16_;
-  std::vector<int> row32_;
-  std::vector<double> value_;
+  HugePageVector<int> col_start_;
+  HugePageVector<uint16_t> row16_;
+  HugePageVector<int> row32_;
+  HugePageVector<double> value_;
   std::vector<double> inv_diagonal_; // 1 / D
 };
 

@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 #include "core/frame.hpp"
+#include "core/huge_pages.hpp"
 #include "core/io.hpp"
 #include "core/realtime.hpp"
 #include "core/time.hpp"
@@ -55,4 +56,17 @@ TEST_CASE("prefetch_until covers every range before its deadline and nothing aft
   CHECK(prefetch_until(ranges, std::numeric_limits<int64_t>::max()) == 200'003);
   CHECK(prefetch_until(ranges, monotonic_now_ns()) == 0);  // the deadline has passed
   CHECK(prefetch_until({}, std::numeric_limits<int64_t>::max()) == 0);
+}
+
+TEST_CASE("huge-page vectors are aligned, hold their values and map large arrays on 2 MiB boundaries") {
+  HugePageVector<float> small(1000, 1.5f);
+  CHECK(reinterpret_cast<std::uintptr_t>(small.data()) % 64 == 0);
+  const std::size_t count = (3 << 20) / sizeof(double);  // 3 MiB: mapped on its own
+  HugePageVector<double> large(count);
+  for (std::size_t i = 0; i < count; ++i) large[i] = double(i);
+  CHECK(reinterpret_cast<std::uintptr_t>(large.data()) % kHugePageBytes == 0);
+  CHECK(large[count - 1] == double(count - 1));
+  HugePageVector<double> copy = large;
+  CHECK(copy == large);
+  CHECK(small[999] == 1.5f);
 }
