@@ -1,6 +1,8 @@
 #include "solver/solver_model.hpp"
 
 #include <algorithm>
+#include <cstring>
+#include <iterator>
 #include <chrono>
 #include <limits>
 #include <cmath>
@@ -215,80 +217,90 @@ ShapeBlocks make_shape_blocks(const Eigen::Matrix3Xd& positions, Eigen::Index sh
   return out;
 }
 
-// value(shape, element, component) quantised entry by entry (QuantisedValues): 8-bit
-// where half a step stays within `tolerance`, else two 8-bit planes, plus the fine plane
-// where half a 16-bit step would exceed it.
+// value(shape, element, component) stored entry by entry within `tolerance` (BlendTerms).
 template <class Value>
-QuantisedValues quantise(const ShapeBlocks& blocks, int components, double tolerance, Value&& value) {
+BlendTerms quantise(const ShapeBlocks& blocks, int components, double tolerance, Value&& value) {
   constexpr int B = ShapeBlocks::kBlock;
-  constexpr double kWide = QuantisedValues::kWideLevels;
-  QuantisedValues out;
+  constexpr double kLevels[2] = {254.0, 65534.0};  // steps over the range: 8-bit, 16-bit
+  constexpr std::size_t kAlign = 64;
+  BlendTerms out;
   out.components = components;
-  const std::size_t size = out.entry_size();
-  out.value_index.assign(blocks.entries.size(), 0);
-  out.coarse_limit.assign(blocks.entries.size(), 0.0f);
-  out.fine_of_entry.assign(blocks.entries.size(), -1);
-  out.offset.resize(blocks.entries.size() * std::size_t(components));
-  out.scale.resize(out.offset.size());
-  const auto component_count = static_cast<std::size_t>(components);
-  std::vector<double> exact(size), low(component_count), high(component_count);
-  std::vector<long> q(size);
-  for (std::size_t e = 0; e < blocks.entries.size(); ++e) {
-    const auto [shape, block] = blocks.entries[e];
-    const int32_t* slots = blocks.element_of_slot.data() + std::size_t(block) * B;
+  const auto C = std::size_t(components);
+  const std::size_t entries = blocks.entries.size();
+  std::vector<int> width(entries);
+  std::vector<double> low(entries * C, std::numeric_limits<double>::infinity());
+  std::vector<double> high(entries * C, -std::numeric_limits<double>::infinity());
+  for (std::size_t e = 0; e < entries; ++e) {
+    const int32_t* slots = blocks.element_of_slot.data() + std::size_t(blocks.entries[e].block) * B;
     double widest = 0.0;
-    for (int c = 0; c < components; ++c) {
-      low[std::size_t(c)] = std::numeric_limits<double>::infinity();
-      high[std::size_t(c)] = -low[std::size_t(c)];
+    for (std::size_t c = 0; c < C; ++c) {
       for (int i = 0; i < B; ++i) {
         if (slots[i] < 0) continue;
-        low[std::size_t(c)] = std::min(low[std::size_t(c)], value(shape, slots[i], c));
-        high[std::size_t(c)] = std::max(high[std::size_t(c)], value(shape, slots[i], c));
+        const double v = value(blocks.entries[e].shape, slots[i], int(c));
+        low[e * C + c] = std::min(low[e * C + c], v);
+        high[e * C + c] = std::max(high[e * C + c], v);
       }
-      widest = std::max(widest, high[std::size_t(c)] - low[std::size_t(c)]);
+      widest = std::max(widest, high[e * C + c] - low[e * C + c]);
     }
-    const bool narrow = 0.5 * widest / 254.0 <= tolerance;
-    const double levels = narrow ? 254.0 : kWide;
-    const long limit = narrow ? 127 : long(kWide / 2);
-    for (int c = 0; c < components; ++c) {
-      const double range = high[std::size_t(c)] - low[std::size_t(c)];
-      const float offset = float(0.5 * (low[std::size_t(c)] + high[std::size_t(c)]));
-      const float scale = range > 0.0 ? float(range / levels) : 1.0f;
-      out.offset[e * std::size_t(components) + std::size_t(c)] = offset;
-      out.scale[e * std::size_t(components) + std::size_t(c)] = scale;
-      for (int i = 0; i < B; ++i)
-        exact[std::size_t(c) * B + std::size_t(i)] = slots[i] < 0 ? 0.0 : (value(shape, slots[i], c) - offset) / scale;
-    }
-    for (std::size_t k = 0; k < size; ++k) q[k] = std::clamp(std::lround(exact[k]), -limit, limit);
-    if (narrow) {
-      out.value_index[e] = ~int32_t(out.narrow.size() / size);
-      for (long v : q) out.narrow.push_back(int8_t(v));
-      continue;
-    }
-    // q = 256 hi + lo with lo in [-128, 127]: the high plane alone is off by at most
-    // 128.5 steps, range * 128.5 / kWide, which a weight up to coarse_limit keeps within
-    // the tolerance.
-    out.value_index[e] = int32_t(out.high.size() / size);
-    for (long v : q) {
-      const long hi = (v + 128 >= 0 ? v + 128 : v + 128 - 255) / 256;  // floor((v + 128) / 256)
-      out.high.push_back(int8_t(hi));
-      out.low.push_back(int8_t(v - 256 * hi));
-    }
-    out.coarse_limit[e] = float(tolerance * kWide / (128.5 * widest));
-    if (0.5 * widest / kWide <= tolerance) continue;
-    out.fine_of_entry[e] = int32_t(out.fine.size() / size);
-    for (std::size_t k = 0; k < size; ++k)
-      out.fine.push_back(slots[k % B] < 0 ? int16_t(0) : int16_t(std::clamp(std::lround((exact[k] - double(q[k])) * 65534.0), -32767L, 32767L)));
+    width[e] = 0.5 * widest / kLevels[0] <= tolerance ? 0 : 0.5 * widest / kLevels[1] <= tolerance ? 1 : 2;
   }
-  // Narrow entries first within each block, shapes ascending otherwise.
-  out.block_entries.resize(blocks.entries.size());
-  std::iota(out.block_entries.begin(), out.block_entries.end(), 0);
-  out.narrow_end.resize(std::size_t(blocks.block_count()));
+  // Positions: per block its entries by width; each block's values start on a cache line.
+  out.position_of_entry.resize(entries);
+  out.shape.resize(entries);
+  out.scale_offset.resize(entries * 2 * C);
+  std::vector<std::size_t> value_at(entries);
+  std::size_t bytes = 0;
+  int32_t position = 0;
   for (int b = 0; b < blocks.block_count(); ++b) {
-    const auto first = out.block_entries.begin() + blocks.block_begin[std::size_t(b)];
-    const auto last = out.block_entries.begin() + blocks.block_begin[std::size_t(b) + 1];
-    const auto middle = std::stable_partition(first, last, [&](int32_t e) { return out.is_narrow(e); });
-    out.narrow_end[std::size_t(b)] = int32_t(middle - out.block_entries.begin());
+    BlendTerms::BlockRun run;
+    run.values = bytes;
+    run.first = position;
+    for (int w = 0; w < BlendTerms::kWidths; ++w)
+      for (int32_t e = blocks.block_begin[std::size_t(b)]; e < blocks.block_begin[std::size_t(b) + 1]; ++e) {
+        if (width[std::size_t(e)] != w) continue;
+        out.position_of_entry[std::size_t(e)] = position;
+        out.shape[std::size_t(position)] = blocks.entries[std::size_t(e)].shape;
+        value_at[std::size_t(e)] = bytes;
+        bytes += C * B * std::size_t(BlendTerms::kBytesPerValue[w]);
+        ++run.count[w];
+        ++position;
+      }
+    bytes = (bytes + kAlign - 1) / kAlign * kAlign;
+    out.blocks.push_back(run);
+  }
+  out.values.assign(bytes, std::byte{0});
+  for (std::size_t e = 0; e < entries; ++e) {
+    const int32_t* slots = blocks.element_of_slot.data() + std::size_t(blocks.entries[e].block) * B;
+    float* scale = out.scale_offset.data() + std::size_t(out.position_of_entry[e]) * 2 * C;
+    float* offset = scale + C;
+    std::byte* values = out.values.data() + value_at[e];
+    for (std::size_t c = 0; c < C; ++c) {
+      const double range = high[e * C + c] - low[e * C + c];
+      if (width[e] == 2) {
+        scale[c] = 1.0f;
+        offset[c] = 0.0f;
+      } else {
+        offset[c] = float(0.5 * (low[e * C + c] + high[e * C + c]));
+        scale[c] = range > 0.0 ? float(range / kLevels[width[e]]) : 1.0f;
+      }
+      const long limit = width[e] == 0 ? 127 : 32767;
+      for (int i = 0; i < B; ++i) {
+        const double v = slots[i] < 0 ? double(offset[c]) : value(blocks.entries[e].shape, slots[i], int(c));
+        const std::size_t k = c * B + std::size_t(i);
+        if (width[e] == 2) {
+          const float f = float(v);
+          std::memcpy(values + 4 * k, &f, sizeof f);
+          continue;
+        }
+        const long q = std::clamp(std::lround((v - double(offset[c])) / double(scale[c])), -limit, limit);
+        if (width[e] == 0) {
+          values[k] = std::byte(uint8_t(int8_t(q)));
+        } else {
+          const auto q16 = int16_t(q);
+          std::memcpy(values + 2 * k, &q16, sizeof q16);
+        }
+      }
+    }
   }
   return out;
 }
@@ -417,6 +429,36 @@ void PinColumns::set_column(Eigen::Index c, const Eigen::Ref<const Eigen::Vector
   int16_t* q = values.data() + std::size_t(c * rows);
   for (Eigen::Index r = 0; r < rows; ++r)
     q[r] = int16_t(std::clamp(std::lround(column[r] / double(float(step))), -32767L, 32767L));
+}
+
+double BlendTerms::at(int32_t entry, int component, int slot) const noexcept {
+  const int32_t position = position_of_entry[std::size_t(entry)];
+  const auto run = std::prev(std::upper_bound(blocks.begin(), blocks.end(), position,
+                                              [](int32_t p, const BlockRun& r) { return p < r.first; }));
+  const auto C = std::size_t(components);
+  std::size_t at = run->values;
+  int32_t k = position - run->first;
+  int w = 0;
+  for (; w + 1 < kWidths && k >= run->count[w]; ++w) {
+    at += std::size_t(run->count[w]) * entry_values() * std::size_t(kBytesPerValue[w]);
+    k -= run->count[w];
+  }
+  at += (std::size_t(k) * entry_values() + std::size_t(component) * ShapeBlocks::kBlock + std::size_t(slot)) *
+        std::size_t(kBytesPerValue[w]);
+  const float* scale = scale_offset.data() + std::size_t(position) * 2 * C;
+  double q = 0.0;
+  if (w == 0) {
+    q = double(int8_t(values[at]));
+  } else if (w == 1) {
+    int16_t v;
+    std::memcpy(&v, values.data() + at, sizeof v);
+    q = double(v);
+  } else {
+    float v;
+    std::memcpy(&v, values.data() + at, sizeof v);
+    q = double(v);
+  }
+  return double(scale[C + std::size_t(component)]) + double(scale[component]) * q;
 }
 
 int32_t ShapeBlocks::find_entry(Eigen::Index shape, int block) const noexcept {

@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 
+#include "core/huge_pages.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/rig.hpp"
 #include "solver/sparse_ldlt.hpp"
@@ -39,58 +40,37 @@ struct ShapeBlocks {
   int32_t find_entry(Eigen::Index shape, int block) const noexcept;
 };
 
-// `components` values per element for every entry of a ShapeBlocks, component-major
-// (component c of slot i at [c * kBlock + i] of the entry's values), as fixed point
-// offset + scale * q with one offset and scale per entry and component spanning that
-// block's values: as a block holds neighbours its range is usually small.
-// - Narrow entries, where half a step of range / 254 stays within the tolerance given
-//   at build time, keep q in 8 bits.
-// - Wide entries keep q = 256 hi + lo (|q| <= 32512) as two 8-bit planes. Weighted by a
-//   small weight the high plane alone is within the tolerance: a frame reads the low
-//   plane only for weights above `coarse_limit`.
-// - A wide entry whose 16-bit step would still exceed the tolerance has a third plane,
-//   offset + scale * (q + fine / 65534), which makes it finer than float.
-// Per block, the narrow entries are listed first.
-struct QuantisedValues {
-  static constexpr double kWideLevels = 65024.0;  // 2 * 127 * 256 steps over the range
-  int components = 0;
-  std::vector<int32_t> value_index;  // per entry: ~index into narrow, or index into high/low (units of entry_size())
-  std::vector<int8_t> narrow, high, low;
-  std::vector<float> coarse_limit;     // per entry: largest weight for which `high` alone suffices
-  std::vector<float> offset, scale;    // components per entry
-  std::vector<int32_t> fine_of_entry;  // index into `fine` (units of entry_size()), or -1
-  std::vector<int16_t> fine;
-  // The entries of block b are block_entries[block_begin[b] .. block_begin[b + 1]) (the
-  // ShapeBlocks' ranges), the narrow ones up to narrow_end[b].
-  std::vector<int32_t> block_entries, narrow_end;
+// `components` values per element for every entry of a ShapeBlocks, laid out for the
+// per-frame weighted sum: a frame reads each block's active entries once, front to back.
+// Each entry stores component c of slot i at [c * kBlock + i] (component-major) as
+// offset + scale * q, one offset and scale per entry and component spanning that
+// block's values (a block holds neighbours, so its range is usually small):
+// - 8-bit q where half a step of range / 254 stays within the tolerance given at build,
+// - 16-bit q (range / 65534 steps) where that is too coarse,
+// - plain float (offset 0, scale 1) where even 16 bits would be.
+// Per block the 8-bit entries come first, then the 16-bit and the float ones, their
+// values in one contiguous run. Every value costs the same: one widening load, one
+// conversion and one multiply-add.
+struct BlendTerms {
+  struct BlockRun {
+    std::size_t values = 0;  // byte offset of the block's first value (64-byte aligned)
+    int32_t first = 0;       // its first position
+    int32_t count[3] = {};   // its 8-bit, 16-bit and float entries, in that order
+  };
+  static constexpr int kWidths = 3;
+  static constexpr int kBytesPerValue[kWidths] = {1, 2, 4};
 
-  std::size_t entry_size() const noexcept { return std::size_t(components) * ShapeBlocks::kBlock; }
-  bool is_narrow(int32_t entry) const noexcept { return value_index[std::size_t(entry)] < 0; }
-  const int8_t* narrow_values_of(int32_t entry) const noexcept {
-    return narrow.data() + std::size_t(~value_index[std::size_t(entry)]) * entry_size();
-  }
-  const int8_t* high_values_of(int32_t entry) const noexcept {
-    return high.data() + std::size_t(value_index[std::size_t(entry)]) * entry_size();
-  }
-  const int8_t* low_values_of(int32_t entry) const noexcept {
-    return low.data() + std::size_t(value_index[std::size_t(entry)]) * entry_size();
-  }
-  const int16_t* fine_values_of(int32_t entry) const noexcept {
-    const int32_t f = fine_of_entry[std::size_t(entry)];
-    return f < 0 ? nullptr : fine.data() + std::size_t(f) * entry_size();
-  }
-  const float* offsets_of(int32_t entry) const noexcept { return offset.data() + std::size_t(entry) * std::size_t(components); }
-  const float* scales_of(int32_t entry) const noexcept { return scale.data() + std::size_t(entry) * std::size_t(components); }
-  // The stored value in full precision (every plane).
-  double at(int32_t entry, int component, int i) const noexcept {
-    const std::size_t k = std::size_t(component) * ShapeBlocks::kBlock + std::size_t(i);
-    const double base = double(offsets_of(entry)[component]);
-    const double step = double(scales_of(entry)[component]);
-    if (is_narrow(entry)) return base + step * double(narrow_values_of(entry)[k]);
-    const int16_t* f = fine_values_of(entry);
-    const double q = 256.0 * double(high_values_of(entry)[k]) + double(low_values_of(entry)[k]);
-    return base + step * (q + (f ? double(f[k]) / 65534.0 : 0.0));
-  }
+  int components = 0;
+  std::vector<BlockRun> blocks;
+  // Per position (entries in stored order):
+  std::vector<int32_t> shape;
+  HugePageVector<float> scale_offset;  // 2 * components: the scales, then the offsets
+  HugePageVector<std::byte> values;
+  std::vector<int32_t> position_of_entry;  // per ShapeBlocks entry
+
+  // The stored value of a ShapeBlocks entry.
+  double at(int32_t entry, int component, int slot) const noexcept;
+  std::size_t entry_values() const noexcept { return std::size_t(components) * ShapeBlocks::kBlock; }
 };
 
 // Columns of an N-row matrix as 16-bit fixed point, scale * q with one scale per column
@@ -98,8 +78,8 @@ struct QuantisedValues {
 // double's bytes stream through the per-frame sum.
 struct PinColumns {
   Eigen::Index rows = 0;
-  std::vector<int16_t> values;  // column-major
-  std::vector<float> scale;     // per column
+  HugePageVector<int16_t> values;  // column-major
+  std::vector<float> scale;        // per column
 
   Eigen::Index cols() const noexcept { return Eigen::Index(scale.size()); }
   void resize(Eigen::Index row_count, Eigen::Index col_count) {
@@ -145,14 +125,14 @@ class SolverModel {
   std::vector<MarkerPath> marker_paths;         // (marker, shape) pairs that turn
 
   ShapeBlocks vertex_blocks;
-  QuantisedValues vertex_deltas;  // B's columns (x, y, z), for x0 + B w
+  BlendTerms vertex_deltas;  // B's columns (x, y, z), for x0 + B w
 
   // Eq. 3-5: per triangle j, Q_j = area_j [grad phi_1, grad phi_2, grad phi_3] so the
   // right-hand side gains T_j Q_j on the triangle's three vertices.
   Eigen::Matrix<double, 9, Eigen::Dynamic> triangle_operator;  // 9 x T, column-major 3x3
   ShapeBlocks triangle_blocks;
-  QuantisedValues triangle_nonlinear;  // Eq. 3: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
-  QuantisedValues triangle_gradient;   // F - I, column-major (deformation transfer)
+  BlendTerms triangle_nonlinear;  // Eq. 3: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
+  BlendTerms triangle_gradient;   // F - I, column-major (deformation transfer)
   std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
 
   // Low-rank modifications of A0 without refactoring: a marker dropping out removes

@@ -23,20 +23,53 @@ namespace {
 constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear", "dt", "meshik"};
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
 
-// One component of a ShapeBlocks block.
+// 16 slots of one component of a ShapeBlocks block.
 using Lanes16 = float __attribute__((vector_size(64)));
-using Shorts16 = int16_t __attribute__((vector_size(32)));
-using Bytes16 = int8_t __attribute__((vector_size(16)));
 
-// 16 bytes widened to floats (GCC 12 turns __builtin_convertvector from bytes into
-// scalar code, so AVX-512 gets the two instructions spelled out).
-Lanes16 widen(const int8_t* q) noexcept {
+// 16 stored values as floats: 8-bit and 16-bit ones widened and converted (GCC 12 turns
+// __builtin_convertvector from small integers into scalar code, so AVX-512 gets the two
+// instructions spelled out).
+template <int Width>
+Lanes16 load_values(const std::byte* p) noexcept {
 #if defined(__AVX512F__)
-  return Lanes16(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(q)))));
+  if constexpr (Width == 0)
+    return Lanes16(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_load_si128(reinterpret_cast<const __m128i*>(p)))));
+  else if constexpr (Width == 1)
+    return Lanes16(_mm512_cvtepi32_ps(_mm512_cvtepi16_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(p)))));
+  else
+    return Lanes16(_mm512_load_ps(p));
 #else
-  Bytes16 v;
-  std::memcpy(&v, q, sizeof v);
-  return __builtin_convertvector(v, Lanes16);
+  using Stored = std::conditional_t<Width == 0, int8_t, std::conditional_t<Width == 1, int16_t, float>>;
+  Stored v[16];
+  std::memcpy(v, p, sizeof v);
+  Lanes16 out;
+  for (int i = 0; i < 16; ++i) out[i] = float(v[i]);
+  return out;
+#endif
+}
+
+// Unaligned loads and stores of 16 lanes (V = Lanes16) or one (V = float).
+template <class V>
+V load_lanes(const float* p) noexcept {
+  V v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+template <class V>
+void store_lanes(float* p, V v) noexcept {
+  std::memcpy(p, &v, sizeof v);
+}
+
+// `Components` floats from p into the first lanes, zeros after.
+template <int Components>
+Lanes16 load_head(const float* p) noexcept {
+  static_assert(Components <= 16);
+#if defined(__AVX512F__)
+  return Lanes16(_mm512_maskz_loadu_ps(__mmask16((1u << Components) - 1), p));
+#else
+  Lanes16 out = {};
+  for (int i = 0; i < Components; ++i) out[i] = p[i];
+  return out;
 #endif
 }
 
@@ -172,88 +205,60 @@ class WeightsStage {
   Eigen::Array<bool, Eigen::Dynamic, 1> present_;
 };
 
-// sum over the active shapes' entries in `block` of w_s * value, component-major, summed
-// in Lanes16 (one AVX-512 register each) so the block's sum stays in registers; the
-// narrow entries first, then the wide ones, whose low plane is read only for weights
-// that need it (QuantisedValues).
+// Per frame, each shape's weight as the blend reads it: 0 for weights at or below
+// active_weight, so that their entries are skipped. Real-time safe.
+void active_weights(const Eigen::VectorXd& w, double active_weight, std::vector<float>& out) noexcept {
+  for (Eigen::Index i = 0; i < w.size(); ++i) out[std::size_t(i)] = w[i] > active_weight ? float(w[i]) : 0.0f;
+}
+
+// sum over the active entries of `block` of w_shape * value, component-major (BlendTerms),
+// in Lanes16 so that the block's sums stay in registers. An entry's weighted scales and
+// offsets take one vector operation each; every value one load, conversion and
+// multiply-add.
 template <int Components>
-void sum_block(const ShapeBlocks& blocks, const QuantisedValues& values, int block, const Eigen::VectorXd& w,
-               double active_weight, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
-  constexpr int L = ShapeBlocks::kBlock / 16;  // Lanes16 per component
-  static_assert(L * 16 == ShapeBlocks::kBlock);
+void sum_block(const BlendTerms& terms, int block, const float* weights, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
+  constexpr int B = ShapeBlocks::kBlock, L = B / 16;  // Lanes16 per component
+  static_assert(L * 16 == B);
   Lanes16 lanes[Components][L] = {};
-  float offset_sum[Components] = {};
-  const int32_t* entries = values.block_entries.data();
-  const int32_t narrow_end = values.narrow_end[std::size_t(block)], end = blocks.block_begin[std::size_t(block) + 1];
-  for (int32_t k = blocks.block_begin[std::size_t(block)]; k < narrow_end; ++k) {
-    const int32_t e = entries[k];
-    const double ws = w[blocks.entries[std::size_t(e)].shape];
-    if (ws <= active_weight) continue;
-    const int8_t* q = values.narrow_values_of(e);
-    const float* scale = values.scales_of(e);
-    const float* offset = values.offsets_of(e);
-    for (int c = 0; c < Components; ++c) {
-      offset_sum[c] += float(ws) * offset[c];
-      const float f = float(ws) * scale[c];
-      for (int l = 0; l < L; ++l) {
-        lanes[c][l] += f * widen(q + (c * L + l) * 16);
-      }
-    }
-  }
-  for (int32_t k = narrow_end; k < end; ++k) {
-    const int32_t e = entries[k];
-    const double ws = w[blocks.entries[std::size_t(e)].shape];
-    if (ws <= active_weight) continue;
-    const int8_t* high = values.high_values_of(e);
-    const float* scale = values.scales_of(e);
-    const float* offset = values.offsets_of(e);
-    for (int c = 0; c < Components; ++c) offset_sum[c] += float(ws) * offset[c];
-    if (ws <= values.coarse_limit[std::size_t(e)]) {  // the high plane is enough at this weight
-      for (int c = 0; c < Components; ++c) {
-        const float f = 256.0f * float(ws) * scale[c];
-        for (int l = 0; l < L; ++l) lanes[c][l] += f * widen(high + (c * L + l) * 16);
-      }
-      continue;
-    }
-    // Both planes joined before scaling: one multiply-add per vector (adding the low plane
-    // on its own after the high one measured slower).
-    const int8_t* low = values.low_values_of(e);
+  Lanes16 offsets = {};  // lane c: the weighted offsets of component c
+  alignas(64) float factor[16];
+  const BlendTerms::BlockRun& run = terms.blocks[std::size_t(block)];
+  const std::byte* values = terms.values.data() + run.values;
+  int32_t position = run.first;
+  auto add_entries = [&]<int Width>(std::integral_constant<int, Width>) {
+    constexpr std::size_t kEntryBytes = std::size_t(Components) * B * BlendTerms::kBytesPerValue[Width];
+    constexpr std::size_t kLaneBytes = 16 * BlendTerms::kBytesPerValue[Width];
+    for (const int32_t end = position + run.count[Width]; position < end; ++position, values += kEntryBytes) {
+      const float w = weights[terms.shape[std::size_t(position)]];
+      if (w == 0.0f) continue;
+      const float* scale = terms.scale_offset.data() + std::size_t(position) * 2 * Components;
+      const Lanes16 wv = Lanes16{} + w;
+      offsets += wv * load_head<Components>(scale + Components);
+      const Lanes16 f = wv * load_head<Components>(scale);
+      std::memcpy(factor, &f, sizeof f);
 #pragma GCC unroll 16
-    for (int c = 0; c < Components; ++c) {
-      const float f = float(ws) * scale[c];
+      for (int c = 0; c < Components; ++c)
 #pragma GCC unroll 2
-      for (int l = 0; l < L; ++l) {
-        const int at = (c * L + l) * 16;
-        lanes[c][l] += f * (256.0f * widen(high + at) + widen(low + at));
-      }
+        for (int l = 0; l < L; ++l) lanes[c][l] += factor[c] * load_values<Width>(values + (c * L + l) * kLaneBytes);
     }
-    const int16_t* fine = values.fine_values_of(e);
-    if (!fine) continue;
-#pragma GCC unroll 16
-    for (int c = 0; c < Components; ++c) {
-      const float f = float(ws) * scale[c] * (1.0f / 65534.0f);
-#pragma GCC unroll 2
-      for (int l = 0; l < L; ++l) {
-        Shorts16 v;
-        std::memcpy(&v, fine + (c * L + l) * 16, sizeof v);
-        lanes[c][l] += f * __builtin_convertvector(v, Lanes16);
-      }
-    }
-  }
+  };
+  add_entries(std::integral_constant<int, 0>{});
+  add_entries(std::integral_constant<int, 1>{});
+  add_entries(std::integral_constant<int, 2>{});
   for (int c = 0; c < Components; ++c)
     for (int l = 0; l < L; ++l) {
-      const Lanes16 v = lanes[c][l] + offset_sum[c];
+      const Lanes16 v = lanes[c][l] + offsets[c];
       std::memcpy(sum + (c * L + l) * 16, &v, sizeof v);
     }
 }
 
-// x0 + B w over the active weights, block by block (ShapeBlocks).
-void linear_blend(const SolverModel& m, const Eigen::VectorXd& w, Eigen::Matrix3Xd& out) noexcept {
+// x0 + B w over the active weights (from active_weights), block by block.
+void linear_blend(const SolverModel& m, const float* weights, Eigen::Matrix3Xd& out) noexcept {
   constexpr int B = ShapeBlocks::kBlock;
   const ShapeBlocks& blocks = m.vertex_blocks;
   alignas(64) float sum[3 * B];
   for (int block = 0; block < blocks.block_count(); ++block) {
-    sum_block<3>(blocks, m.vertex_deltas, block, w, m.params.active_weight, sum);
+    sum_block<3>(m.vertex_deltas, block, weights, sum);
     for (int i = 0; i < B; ++i) {
       const int32_t v = blocks.element_of_slot[std::size_t(block) * B + std::size_t(i)];
       if (v < 0) continue;
@@ -264,7 +269,8 @@ void linear_blend(const SolverModel& m, const Eigen::VectorXd& w, Eigen::Matrix3
 
 class LinearSolver final : public FaceSolver {
  public:
-  explicit LinearSolver(std::shared_ptr<const SolverModel> model) : FaceSolver(std::move(model)), weights_(*model_, false) {}
+  explicit LinearSolver(std::shared_ptr<const SolverModel> model)
+      : FaceSolver(std::move(model)), weights_(*model_, false), active_(std::size_t(model_->shape_count())) {}
   std::string_view name() const noexcept override { return "linear"; }
   void reset() noexcept override { weights_.reset(); }
   void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
@@ -274,7 +280,7 @@ class LinearSolver final : public FaceSolver {
     if (out.held) { clock.finish(); return; }
     out.markers_used = weights_.solve(targets, present, out.weights);
     clock.lap(SolveStage::kWeights);
-    linear_blend(*model_, out.weights, out.vertices);
+    blend(out);
     clock.lap(SolveStage::kBlend);
     clock.finish();
   }
@@ -283,13 +289,19 @@ class LinearSolver final : public FaceSolver {
     StageClock clock(out);
     out.held = false;
     out.weights = weights;
-    linear_blend(*model_, out.weights, out.vertices);
+    blend(out);
     clock.lap(SolveStage::kBlend);
     clock.finish();
   }
 
  private:
+  void blend(SolveResult& out) noexcept {
+    active_weights(out.weights, model_->params.active_weight, active_);
+    linear_blend(*model_, active_.data(), out.vertices);
+  }
+
   WeightsStage weights_;
+  std::vector<float> active_;  // per shape: its weight, 0 if inactive
 };
 
 // Eq. 4-5 with the matrix factored once: the right-hand side G^T W T(w) + beta C^T b is
@@ -346,9 +358,10 @@ class PoissonSolver : public FaceSolver {
     if (!m.collision_columns_precomputed()) pin_columns_.resize(N, pin_capacity_);
     pin_work_.resize(N);
     correction_.resize(N, 3);
-    const QuantisedValues& values = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
-    streamed_ = {std::as_bytes(std::span(values.narrow)), std::as_bytes(std::span(values.high)),
-                 std::as_bytes(std::span(values.low)), std::as_bytes(std::span(operator_))};
+    active_.resize(std::size_t(m.shape_count()));
+    const BlendTerms& terms = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
+    streamed_ = {std::as_bytes(std::span(terms.values)), std::as_bytes(std::span(terms.scale_offset)),
+                 std::as_bytes(std::span(operator_))};
   }
 
   std::string_view name() const noexcept override { return blend_ == Blend::kNonlinear ? "nonlinear" : "dt"; }
@@ -415,12 +428,13 @@ class PoissonSolver : public FaceSolver {
     const SolverModel& m = *model_;
     rhs_ = identity_rhs_;
     const ShapeBlocks& blocks = m.triangle_blocks;
-    const QuantisedValues& values = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
+    const BlendTerms& terms = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
+    active_weights(w, m.params.active_weight, active_);
     constexpr int B = ShapeBlocks::kBlock;
     constexpr std::size_t E = 9 * B;
     alignas(64) float sum[E];
     for (int block = 0; block < blocks.block_count(); ++block) {
-      sum_block<9>(blocks, values, block, w, m.params.active_weight, sum);
+      sum_block<9>(terms, block, active_.data(), sum);
       const float* Q = operator_.data() + std::size_t(block) * E;
       alignas(64) float out[E];  // (T_j - I) Q_j, component-major like sum
       if (blend_ == Blend::kDeformationTransfer)
@@ -441,59 +455,63 @@ class PoissonSolver : public FaceSolver {
   // out = sum Q per slot of a block: deformation transfer's T - I = sum w_i (F_i - I).
   static void transfer_block(const float* sum, const float* Q, float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-    for (int t = 0; t < B; ++t)
+    for (int t = 0; t < B; t += 16)
       for (int r = 0; r < 3; ++r)
         for (int k = 0; k < 3; ++k)
-          out[(3 * k + r) * B + t] = sum[r * B + t] * Q[(3 * k) * B + t] + sum[(3 + r) * B + t] * Q[(3 * k + 1) * B + t] +
-                                     sum[(6 + r) * B + t] * Q[(3 * k + 2) * B + t];
+          store_lanes(out + (3 * k + r) * B + t,
+                      load_lanes<Lanes16>(sum + r * B + t) * load_lanes<Lanes16>(Q + (3 * k) * B + t) +
+                          load_lanes<Lanes16>(sum + (3 + r) * B + t) * load_lanes<Lanes16>(Q + (3 * k + 1) * B + t) +
+                          load_lanes<Lanes16>(sum + (6 + r) * B + t) * load_lanes<Lanes16>(Q + (3 * k + 2) * B + t));
   }
 
-  // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4), in float:
-  // 16 lanes per vector, and the rounding (1e-7 of T) is far below the stored terms'.
+  // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4), in float,
+  // 16 triangles at a time: the rounding (1e-7 of T) is far below the stored terms'.
   static void nonlinear_block(const float* sum, const float* Q, float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-    for (int t = 0; t < B; ++t) {
-      const float rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
-      const float x = rx * rx + ry * ry + rz * rz;
+    constexpr float kLargestSeriesAngleSq = 6.25f;
+    for (int t = 0; t < B; t += 16) {
+      const Lanes16 rx = load_lanes<Lanes16>(sum + t), ry = load_lanes<Lanes16>(sum + B + t), rz = load_lanes<Lanes16>(sum + 2 * B + t);
+      const Lanes16 x = rx * rx + ry * ry + rz * rz;
       // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to float
       // precision for theta <= 2.5; larger turns are redone with sin and cos below.
-      float a = 1.0f / 6227020800.0f, b = 1.0f / 87178291200.0f;  // 1/13!, 1/14!
+      Lanes16 a = Lanes16{} + 1.0f / 6227020800.0f, b = Lanes16{} + 1.0f / 87178291200.0f;  // 1/13!, 1/14!
       constexpr float kInvFactorial[] = {1.0f / 39916800.0f, 1.0f / 362880.0f, 1.0f / 5040.0f, 1.0f / 120.0f, 1.0f / 6.0f, 1.0f};
       constexpr float kInvFactorialEven[] = {1.0f / 479001600.0f, 1.0f / 3628800.0f, 1.0f / 40320.0f, 1.0f / 720.0f, 1.0f / 24.0f, 0.5f};
       for (int i = 0; i < 6; ++i) {
         a = kInvFactorial[i] - x * a;
         b = kInvFactorialEven[i] - x * b;
       }
-      finish_triangle(t, rx, ry, rz, x, a, b, sum, Q, out);
-    }
-    for (int t = 0; t < B; ++t) {
-      const float rx = sum[t], ry = sum[B + t], rz = sum[2 * B + t];
-      const float x = rx * rx + ry * ry + rz * rz;
-      if (x <= 6.25f) continue;
-      const double theta = std::sqrt(double(x));
-      finish_triangle(t, rx, ry, rz, x, float(std::sin(theta) / theta), float((1.0 - std::cos(theta)) / x), sum, Q, out);
+      finish_triangles(t, rx, ry, rz, x, a, b, sum, Q, out);
+      for (int i = 0; i < 16; ++i) {
+        if (x[i] <= kLargestSeriesAngleSq) continue;
+        const double theta = std::sqrt(double(x[i]));
+        finish_triangles(t + i, rx[i], ry[i], rz[i], x[i], float(std::sin(theta) / theta),
+                         float((1.0 - std::cos(theta)) / double(x[i])), sum, Q, out);
+      }
     }
   }
 
-  // out = (R (I + S) - I) Q for triangle t of a block, R = I + a [r]x + b [r]x^2.
-  static void finish_triangle(int t, float rx, float ry, float rz, float x, float a, float b, const float* S,
-                              const float* Q, float* out) noexcept {
+  // out = (R (I + S) - I) Q for the triangles of a block from slot t (16 of them with
+  // V = Lanes16, one with V = float), R = I + a [r]x + b [r]x^2.
+  template <class V>
+  static void finish_triangles(int t, V rx, V ry, V rz, V x, V a, V b, const float* S, const float* Q, float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-    float D[9];  // R - I, column-major: small, so no precision is lost against I
+    V D[9];  // R - I, column-major: small, so no precision is lost against I
     D[0] = b * (rx * rx - x);     D[3] = -a * rz + b * rx * ry;  D[6] = a * ry + b * rx * rz;
     D[1] = a * rz + b * rx * ry;  D[4] = b * (ry * ry - x);      D[7] = -a * rx + b * ry * rz;
     D[2] = -a * ry + b * rx * rz; D[5] = a * rx + b * ry * rz;   D[8] = b * (rz * rz - x);
-    const float sxx = S[3 * B + t], syy = S[4 * B + t], szz = S[5 * B + t];
-    const float sxy = S[6 * B + t], sxz = S[7 * B + t], syz = S[8 * B + t];
-    const float E[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};  // S - I
-    float M[9];  // R S - I = D + E + D E
+    const V sxx = load_lanes<V>(S + 3 * B + t), syy = load_lanes<V>(S + 4 * B + t), szz = load_lanes<V>(S + 5 * B + t);
+    const V sxy = load_lanes<V>(S + 6 * B + t), sxz = load_lanes<V>(S + 7 * B + t), syz = load_lanes<V>(S + 8 * B + t);
+    const V E[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};  // S - I
+    V M[9];  // R S - I = D + E + D E
     for (int c = 0; c < 3; ++c)
       for (int r = 0; r < 3; ++r)
         M[3 * c + r] = D[3 * c + r] + E[3 * c + r] + D[r] * E[3 * c] + D[3 + r] * E[3 * c + 1] + D[6 + r] * E[3 * c + 2];
     for (int k = 0; k < 3; ++k)
       for (int r = 0; r < 3; ++r)
-        out[(3 * k + r) * B + t] =
-            M[r] * Q[(3 * k) * B + t] + M[3 + r] * Q[(3 * k + 1) * B + t] + M[6 + r] * Q[(3 * k + 2) * B + t];
+        store_lanes(out + (3 * k + r) * B + t, M[r] * load_lanes<V>(Q + (3 * k) * B + t) +
+                                                   M[3 + r] * load_lanes<V>(Q + (3 * k + 1) * B + t) +
+                                                   M[6 + r] * load_lanes<V>(Q + (3 * k + 2) * B + t));
   }
 
   // Triangle pairs closer than epsilon pin their vertices to the linear blend
@@ -704,6 +722,7 @@ class PoissonSolver : public FaceSolver {
   Blend blend_;
   WeightsStage weights_;
   std::vector<std::span<const std::byte>> streamed_;  // the blend's terms and Q_j (streamed_memory)
+  std::vector<float> active_;                         // per shape: its weight, 0 if inactive
   std::vector<float> operator_;        // Q_j, in triangle_blocks' slots, component-major per block
   std::vector<std::array<int32_t, 3>> slot_corners_;  // per slot of triangle_blocks: its vertices, -1 for padding
   Eigen::Matrix3Xd identity_rhs_, rhs_;

@@ -119,8 +119,8 @@ TEST_CASE("nonlinear and dt reproduce every ICT FaceKit shape within 1e-5 cm") {
 }
 
 // Deformation transfer is linear in the weights, so a mix of small weights must equal
-// the same mix of the single-shape solves. Small weights read only the high plane of
-// most wide entries (QuantisedValues::coarse_limit); this checks that path's error.
+// the same mix of the single-shape solves: the blend's stored terms and its float sums
+// stay within the tolerance however the weights are spread.
 TEST_CASE("dt with small ICT FaceKit weights equals the mix of single-shape solves within 1e-5 cm") {
   FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
   const Rig rig = load_rig(dir.string());
@@ -240,7 +240,7 @@ TEST_CASE("the Poisson solvers stream their blend's terms and operators, the lin
   const Rig& rig = BuiltinFace::instance().rig();
   const auto model = build_solver_model(rig, spread_marker_layout(rig, 60));
   const std::size_t operators = std::size_t(model->triangle_blocks.block_count()) * 9 * ShapeBlocks::kBlock * sizeof(float);
-  auto bytes_of = [](const QuantisedValues& v) { return v.narrow.size() + v.high.size() + v.low.size(); };
+  auto bytes_of = [](const BlendTerms& t) { return t.values.size() + t.scale_offset.size() * sizeof(float); };
   auto streamed = [&](const char* name) {
     const auto solver = make_solver(name, model);
     std::size_t total = 0;
