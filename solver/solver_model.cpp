@@ -325,9 +325,9 @@ void build_triangle_terms(SolverModel& model, const std::vector<ShapeDeformation
   model.triangle_blocks = make_shape_blocks(centroids, rig.shape_count(), [&](Eigen::Index s, int32_t t) {
     return shapes[std::size_t(s)].changed[std::size_t(t)] != 0;
   });
-  // Rotation logs and stretches are relative: 5e-6 rad moves a triangle's far corner by
-  // 5 millionths of its size (ICT: at most 1.5e-6 cm on any vertex, docs/solver.md).
-  constexpr double kTolerance = 5e-6;
+  // Rotation logs and stretches are relative: 1e-5 rad moves a triangle's far corner by
+  // 1e-5 of its size (ICT: at most 4.5e-6 cm on any vertex, docs/solver.md).
+  constexpr double kTolerance = 1e-5;
   model.triangle_nonlinear = quantise(model.triangle_blocks, 9, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
     return double(shapes[std::size_t(s)].nonlinear[9 * std::size_t(t) + std::size_t(c)]);
   });
