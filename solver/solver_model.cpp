@@ -305,16 +305,17 @@ BlendTerms quantise(const ShapeBlocks& blocks, int components, double tolerance,
   return out;
 }
 
-void build_vertex_deltas(SolverModel& model) {
-  const Rig& rig = model.rig;
-  model.vertex_blocks = make_shape_blocks(rig.neutral, rig.shape_count(), [&](Eigen::Index s, int32_t v) {
-    return !rig.deltas.col(s).segment<3>(3 * v).isZero(0.0);
+// B's rows at `vertices` (all of them when empty) as blend terms over those vertices,
+// rounded by at most 1e-7 of the face's size (about 3e-6 cm on a face).
+void build_vertex_terms(const Rig& rig, std::span<const int> vertices, ShapeBlocks& blocks, BlendTerms& terms) {
+  auto vertex = [&](int32_t element) { return vertices.empty() ? element : vertices[std::size_t(element)]; };
+  Eigen::Matrix3Xd positions(3, vertices.empty() ? rig.vertex_count() : Eigen::Index(vertices.size()));
+  for (Eigen::Index i = 0; i < positions.cols(); ++i) positions.col(i) = rig.neutral.col(vertex(int32_t(i)));
+  blocks = make_shape_blocks(positions, rig.shape_count(), [&](Eigen::Index s, int32_t e) {
+    return !rig.deltas.col(s).segment<3>(3 * vertex(e)).isZero(0.0);
   });
-  // Rounding at most 1e-7 of the face's size (about 3e-6 cm on a face).
   const double tolerance = 1e-7 * bounding_box(rig.neutral).size().norm();
-  model.vertex_deltas = quantise(model.vertex_blocks, 3, tolerance, [&](Eigen::Index s, int32_t v, int c) {
-    return rig.deltas(3 * v + c, s);
-  });
+  terms = quantise(blocks, 3, tolerance, [&](Eigen::Index s, int32_t e, int c) { return rig.deltas(3 * vertex(e) + c, s); });
 }
 
 void build_triangle_terms(SolverModel& model, const std::vector<ShapeDeformation>& shapes) {
@@ -368,14 +369,6 @@ void build_marker_paths(SolverModel& model) {
   }
 }
 
-// B's rows of `vertices`, contiguous per vertex: vertex i in columns 3i..3i+2.
-Eigen::MatrixXd vertex_rows(const Rig& rig, const std::vector<int>& vertices) {
-  Eigen::MatrixXd rows(rig.shape_count(), 3 * Eigen::Index(vertices.size()));
-  for (std::size_t i = 0; i < vertices.size(); ++i)
-    for (int c = 0; c < 3; ++c) rows.col(3 * Eigen::Index(i) + c) = rig.deltas.row(3 * Eigen::Index(vertices[i]) + c).transpose();
-  return rows;
-}
-
 // Candidate triangles for the collision stage and the vertices it may pin.
 void choose_collision_region(SolverModel& model) {
   const Rig& rig = model.rig;
@@ -392,7 +385,20 @@ void choose_collision_region(SolverModel& model) {
       model.vertex_to_collision[std::size_t(v)] = int(model.collision_vertices.size());
       model.collision_vertices.push_back(v);
     }
-  model.collision_basis = vertex_rows(rig, model.collision_vertices);
+}
+
+// SolverModel::reference_*: the collision and tangle vertices, whose linear-blend
+// positions every frame needs.
+void build_reference_terms(SolverModel& model) {
+  model.vertex_to_reference.assign(std::size_t(model.vertex_count()), -1);
+  for (const auto* vertices : {&model.collision_vertices, &model.tangle_vertices})
+    for (const int v : *vertices) {
+      if (model.vertex_to_reference[std::size_t(v)] >= 0) continue;
+      model.vertex_to_reference[std::size_t(v)] = int(model.reference_vertices.size());
+      model.reference_vertices.push_back(v);
+    }
+  if (!model.reference_vertices.empty())
+    build_vertex_terms(model.rig, model.reference_vertices, model.reference_blocks, model.reference_deltas);
 }
 
 // SolverModel::tangle_vertices: the corners of triangles crossing in the neutral, grown
@@ -417,7 +423,6 @@ void find_tangle_vertices(SolverModel& model) {
   }
   for (Eigen::Index v = 0; v < rig.vertex_count(); ++v)
     if (tangled[std::size_t(v)]) model.tangle_vertices.push_back(int(v));
-  model.tangle_basis = vertex_rows(rig, model.tangle_vertices);
 }
 
 }  // namespace
@@ -531,7 +536,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   model->params = params;
   model->markers = std::move(markers);
   build_marker_rows(*model);
-  build_vertex_deltas(*model);
+  build_vertex_terms(rig, {}, model->vertex_blocks, model->vertex_deltas);
 
   const TriangleAdjacency adjacency(rig.triangles);
   {
@@ -570,6 +575,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   {
     const auto t0 = Clock::now();
     choose_collision_region(*model);
+    build_reference_terms(*model);
     // Beyond this many candidate vertices (a whole-face region) the columns would take
     // too much memory; pins are then solved for per frame.
     constexpr std::size_t kMaxPrecomputedPins = 3000;

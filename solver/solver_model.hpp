@@ -31,7 +31,7 @@ struct ShapeBlocks {
   std::vector<int32_t> shape_begin;  // shapes + 1: shape s's entries are shape_entries[shape_begin[s] ..]
   std::vector<int32_t> shape_entries;
 
-  int block_count() const noexcept { return int(block_begin.size()) - 1; }
+  int block_count() const noexcept { return block_begin.empty() ? 0 : int(block_begin.size()) - 1; }
   std::span<const int32_t> entries_of_shape(Eigen::Index shape) const noexcept {
     return {shape_entries.data() + shape_begin[std::size_t(shape)],
             std::size_t(shape_begin[std::size_t(shape) + 1] - shape_begin[std::size_t(shape)])};
@@ -144,7 +144,6 @@ class SolverModel {
   std::vector<int> collision_triangles;  // triangles the collision stage checks
   std::vector<int> collision_vertices;   // their vertices: the ones it may pin
   std::vector<int> vertex_to_collision;  // N: index into collision_vertices or -1
-  Eigen::MatrixXd collision_basis;       // M x 3C: B's rows of collision vertex i in columns 3i..3i+2
   // With collision handling: vertices held to the linear blend x0 + B w, through
   // kTangleWeight beta e_v e_v^T in A0 and kTangleWeight beta (x0 + B w)_v in the
   // right-hand side. They are the corners of triangles that already cross in the neutral
@@ -153,7 +152,13 @@ class SolverModel {
   // blend does not.
   static constexpr double kTangleWeight = 10.0;  // times beta: at beta alone they still cross by a hair
   std::vector<int> tangle_vertices;
-  Eigen::MatrixXd tangle_basis;  // M x 3L, like collision_basis
+  // The vertices whose linear blend (x0 + B w)_v each frame needs: the collision and the
+  // tangle vertices, with B's rows there laid out like vertex_deltas. Element i of
+  // reference_blocks is vertex reference_vertices[i].
+  std::vector<int> reference_vertices;
+  std::vector<int> vertex_to_reference;  // N: index into reference_vertices or -1
+  ShapeBlocks reference_blocks;
+  BlendTerms reference_deltas;
   Eigen::MatrixXd marker_solution;       // N x K
   PinColumns pin_solution;               // N x C, or empty
   bool collision_columns_precomputed() const {

@@ -252,18 +252,19 @@ void sum_block(const BlendTerms& terms, int block, const float* weights, float (
     }
 }
 
-// x0 + B w over the active weights (from active_weights), block by block.
-void linear_blend(const SolverModel& m, const float* weights, Eigen::Matrix3Xd& out) noexcept {
+// x0 + B w over the active weights (from active_weights) for the elements in one block
+// of `blocks`: element e is rig vertex vertices[e], or vertex e when vertices is empty;
+// out column e.
+void linear_blend_block(const ShapeBlocks& blocks, const BlendTerms& terms, const Eigen::Matrix3Xd& neutral,
+                        std::span<const int> vertices, const float* weights, int block, Eigen::Matrix3Xd& out) noexcept {
   constexpr int B = ShapeBlocks::kBlock;
-  const ShapeBlocks& blocks = m.vertex_blocks;
   alignas(64) float sum[3 * B];
-  for (int block = 0; block < blocks.block_count(); ++block) {
-    sum_block<3>(m.vertex_deltas, block, weights, sum);
-    for (int i = 0; i < B; ++i) {
-      const int32_t v = blocks.element_of_slot[std::size_t(block) * B + std::size_t(i)];
-      if (v < 0) continue;
-      for (int c = 0; c < 3; ++c) out(c, v) = m.rig.neutral(c, v) + double(sum[c * B + i]);
-    }
+  sum_block<3>(terms, block, weights, sum);
+  for (int i = 0; i < B; ++i) {
+    const int32_t e = blocks.element_of_slot[std::size_t(block) * B + std::size_t(i)];
+    if (e < 0) continue;
+    const int v = vertices.empty() ? e : vertices[std::size_t(e)];
+    for (int c = 0; c < 3; ++c) out(c, e) = neutral(c, v) + double(sum[c * B + i]);
   }
 }
 
@@ -296,8 +297,10 @@ class LinearSolver final : public FaceSolver {
 
  private:
   void blend(SolveResult& out) noexcept {
-    active_weights(out.weights, model_->params.active_weight, active_);
-    linear_blend(*model_, active_.data(), out.vertices);
+    const SolverModel& m = *model_;
+    active_weights(out.weights, m.params.active_weight, active_);
+    for (int block = 0; block < m.vertex_blocks.block_count(); ++block)
+      linear_blend_block(m.vertex_blocks, m.vertex_deltas, m.rig.neutral, {}, active_.data(), block, out.vertices);
   }
 
   WeightsStage weights_;
@@ -329,15 +332,14 @@ class PoissonSolver : public FaceSolver {
     }
     rhs_.resize(3, N);
     work_.resize(4, N);
+    reference_.resize(3, Eigen::Index(m.reference_vertices.size()));
+    reference_stamp_.assign(std::size_t(m.reference_blocks.block_count()), 0);
     if (!m.collision_triangles.empty()) {
       ColliderConfig config;
       config.epsilon = m.params.collision_epsilon;
       config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
       config.neighbour_edges = 2;
       collider_.configure(m.rig.triangles, m.rig.neutral, m.collision_triangles, config);
-      const auto C = Eigen::Index(m.collision_vertices.size());
-      linear_cache_.resize(3, C);
-      linear_stamp_.assign(std::size_t(C), 0);
       pin_stamp_.assign(std::size_t(N), 0);
       collisions_ = collider_.make_result();
       const TriangleAdjacency adjacency(m.rig.triangles);
@@ -405,11 +407,12 @@ class PoissonSolver : public FaceSolver {
         add_modification({b.vertices, b.barycentric, m.marker_solution.col(k).data(), nullptr, 0.0f, -beta});
       }
     }
-    for (std::size_t i = 0; i < m.tangle_vertices.size(); ++i) {
-      const int v = m.tangle_vertices[i];
-      for (int c = 0; c < 3; ++c)
-        rhs_(c, v) += SolverModel::kTangleWeight * beta * (m.rig.neutral(c, v) + m.tangle_basis.col(3 * Eigen::Index(i) + c).dot(out.weights));
+    if (++frame_stamp_ == 0) {  // wrapped: forget every old stamp
+      std::fill(pin_stamp_.begin(), pin_stamp_.end(), 0u);
+      std::fill(reference_stamp_.begin(), reference_stamp_.end(), 0u);
+      frame_stamp_ = 1;
     }
+    for (const int v : m.tangle_vertices) rhs_.col(v) += SolverModel::kTangleWeight * beta * reference(v);
     clock.lap(SolveStage::kRhs);
 
     m.factor->solve_in_place(rhs_, work_);  // rhs_ now holds y = A0^-1 r
@@ -525,19 +528,21 @@ class PoissonSolver : public FaceSolver {
     const SolverModel& m = *model_;
     if (!collider_.configured() || !collider_.detect(out.vertices, collisions_)) return;
     out.collision_pairs = uint32_t(collisions_.pairs_found);
-    if (++stamp_ == 0) {  // wrapped: forget every old stamp
-      std::fill(pin_stamp_.begin(), pin_stamp_.end(), 0u);
-      std::fill(linear_stamp_.begin(), linear_stamp_.end(), 0u);
-      stamp_ = 1;
-    }
     const double epsilon = m.params.collision_epsilon;
     Eigen::Index pins = 0;
+    // A pair whose six vertices are pinned already, or any pair once capacity is
+    // reached, cannot add a pin: its reference is not worth testing.
+    auto adds_pins = [&](const auto& ta, const auto& tb) {
+      if (pins == pin_capacity_) return false;
+      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]})
+        if (pin_stamp_[std::size_t(v)] != frame_stamp_) return true;
+      return false;
+    };
     for (const TrianglePair& pair : collisions_.valid_pairs()) {
       const auto ta = m.rig.triangles.col(pair.first), tb = m.rig.triangles.col(pair.second);
-      const Eigen::Vector3d a[3] = {linear_position(ta[0], out.weights), linear_position(ta[1], out.weights),
-                                    linear_position(ta[2], out.weights)};
-      const Eigen::Vector3d b[3] = {linear_position(tb[0], out.weights), linear_position(tb[1], out.weights),
-                                    linear_position(tb[2], out.weights)};
+      if (!adds_pins(ta, tb)) continue;
+      const Eigen::Vector3d a[3] = {reference(ta[0]), reference(ta[1]), reference(ta[2])};
+      const Eigen::Vector3d b[3] = {reference(tb[0]), reference(tb[1]), reference(tb[2])};
       if (triangles_closer_than(a[0], a[1], a[2], b[0], b[1], b[2], epsilon)) {
         // The reference is in contact too: pin only if the solve crosses where it does not.
         if (triangles_intersect(a[0], a[1], a[2], b[0], b[1], b[2]) ||
@@ -545,7 +550,7 @@ class PoissonSolver : public FaceSolver {
                                  out.vertices.col(tb[0]), out.vertices.col(tb[1]), out.vertices.col(tb[2])))
           continue;
       }
-      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins, out.weights);
+      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins);
     }
     // Folds: neighbours across an edge turned more than 90 degrees against each other
     // where the linear blend keeps them less than 90 degrees apart. Such a crease folds
@@ -556,12 +561,11 @@ class PoissonSolver : public FaceSolver {
     for (const auto& [first, second] : fold_edges_) {
       if (fold_normals_.col(first).dot(fold_normals_.col(second)) >= 0.0) continue;
       const auto ta = m.rig.triangles.col(candidates[std::size_t(first)]), tb = m.rig.triangles.col(candidates[std::size_t(second)]);
-      const Eigen::Vector3d la = (linear_position(ta[1], out.weights) - linear_position(ta[0], out.weights))
-                                     .cross(linear_position(ta[2], out.weights) - linear_position(ta[0], out.weights));
-      const Eigen::Vector3d lb = (linear_position(tb[1], out.weights) - linear_position(tb[0], out.weights))
-                                     .cross(linear_position(tb[2], out.weights) - linear_position(tb[0], out.weights));
+      if (!adds_pins(ta, tb)) continue;
+      const Eigen::Vector3d la = (reference(ta[1]) - reference(ta[0])).cross(reference(ta[2]) - reference(ta[0]));
+      const Eigen::Vector3d lb = (reference(tb[1]) - reference(tb[0])).cross(reference(tb[2]) - reference(tb[0]));
       if (la.dot(lb) < 0.0) continue;
-      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins, out.weights);
+      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins);
     }
     out.collision_constraints = uint32_t(pins);
     if (pins > 0) apply_modifications(rhs_, out.vertices);
@@ -572,10 +576,10 @@ class PoissonSolver : public FaceSolver {
   }
 
   // Pins vertex v to the linear blend, once per frame and while capacity lasts.
-  void pin(int v, Eigen::Index& pins, const Eigen::VectorXd& w) noexcept {
+  void pin(int v, Eigen::Index& pins) noexcept {
     const SolverModel& m = *model_;
-    if (pin_stamp_[std::size_t(v)] == stamp_ || pins == pin_capacity_) return;
-    pin_stamp_[std::size_t(v)] = stamp_;
+    if (pin_stamp_[std::size_t(v)] == frame_stamp_ || pins == pin_capacity_) return;
+    pin_stamp_[std::size_t(v)] = frame_stamp_;
     const double* column = nullptr;
     const int16_t* pin_column = nullptr;
     float pin_scale = 0.0f;
@@ -590,19 +594,21 @@ class PoissonSolver : public FaceSolver {
       m.factor->solve_in_place(z, pin_work_);
       column = z.data();
     }
-    add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, pin_column, pin_scale, m.params.beta, linear_position(v, w)});
+    add_modification({{v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), column, pin_column, pin_scale, m.params.beta, reference(v)});
     ++pins;
   }
 
-  // (x0 + B w)_v for a vertex of the collision region, computed once per frame.
-  Eigen::Vector3d linear_position(int v, const Eigen::VectorXd& w) noexcept {
-    const auto i = std::size_t(model_->vertex_to_collision[std::size_t(v)]);
-    if (linear_stamp_[i] != stamp_) {
-      linear_stamp_[i] = stamp_;
-      for (int c = 0; c < 3; ++c)
-        linear_cache_(c, Eigen::Index(i)) = model_->rig.neutral(c, v) + model_->collision_basis.col(3 * Eigen::Index(i) + c).dot(w);
+  // This frame's (x0 + B w)_v at a collision or tangle vertex, its block of
+  // reference_blocks blended on first use.
+  Eigen::Vector3d reference(int v) noexcept {
+    const SolverModel& m = *model_;
+    const int i = m.vertex_to_reference[std::size_t(v)];
+    const int block = m.reference_blocks.slot_of_element[std::size_t(i)] / ShapeBlocks::kBlock;
+    if (reference_stamp_[std::size_t(block)] != frame_stamp_) {
+      reference_stamp_[std::size_t(block)] = frame_stamp_;
+      linear_blend_block(m.reference_blocks, m.reference_deltas, m.rig.neutral, m.reference_vertices, active_.data(), block, reference_);
     }
-    return linear_cache_.col(Eigen::Index(i));
+    return reference_.col(i);
   }
 
   // A change d u u^T of A0 with u = sum_a weight_a e_{vertex_a}; A0^-1 u is `column`, or
@@ -737,9 +743,10 @@ class PoissonSolver : public FaceSolver {
   Eigen::Matrix3Xd fold_normals_;                // per candidate triangle: this frame's normal (not unit)
   Eigen::Index pin_capacity_ = 0;
   Eigen::MatrixXd pin_columns_;  // A0^-1 e_v solved per frame when not precomputed
-  Eigen::Matrix3Xd linear_cache_;     // 3 x C: this frame's linear blend there
-  std::vector<uint32_t> linear_stamp_, pin_stamp_;  // frame stamps: linear_cache_ valid, vertex pinned
-  uint32_t stamp_ = 0;
+  Eigen::Matrix3Xd reference_;        // the linear blend at the model's reference_vertices (reference())
+  uint32_t frame_stamp_ = 0;
+  std::vector<uint32_t> pin_stamp_;        // per vertex: the frame it was last pinned
+  std::vector<uint32_t> reference_stamp_;  // per block of reference_blocks: the frame it was last blended
   Eigen::VectorXd pin_work_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> correction_;  // N x 3: Z C, coordinate by coordinate
 };
