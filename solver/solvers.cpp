@@ -88,6 +88,27 @@ class StageClock {
   int64_t start_, last_;
 };
 
+// sin and cos of angles in [0, 3] (marker path turns), to double precision: Taylor series
+// about pi/2, branch-free so that the loop over every path vectorises.
+void sin_cos_turns(const std::vector<double>& angles, std::vector<double>& sin_out, std::vector<double>& cos_out) noexcept {
+  constexpr double kHalfPi = 1.57079632679489661923;
+  for (std::size_t i = 0; i < angles.size(); ++i) {
+    const double r = angles[i] - kHalfPi, r2 = r * r;  // |r| <= pi/2: the terms below reach 1e-18
+    double s = 1.0 / 51090942171709440000.0, c = 1.0 / 2432902008176640000.0;  // 1/21!, 1/20!
+    constexpr double kOdd[] = {1.0 / 121645100408832000.0, 1.0 / 355687428096000.0, 1.0 / 1307674368000.0,
+                               1.0 / 6227020800.0, 1.0 / 39916800.0, 1.0 / 362880.0, 1.0 / 5040.0, 1.0 / 120.0,
+                               1.0 / 6.0, 1.0};
+    constexpr double kEven[] = {1.0 / 6402373705728000.0, 1.0 / 20922789888000.0, 1.0 / 87178291200.0,
+                                1.0 / 479001600.0, 1.0 / 3628800.0, 1.0 / 40320.0, 1.0 / 720.0, 1.0 / 24.0, 0.5, 1.0};
+    for (int k = 0; k < 10; ++k) {
+      s = kOdd[k] - r2 * s;
+      c = kEven[k] - r2 * c;
+    }
+    sin_out[i] = c;       // sin(a) = cos(r)
+    cos_out[i] = -r * s;  // cos(a) = -sin(r)
+  }
+}
+
 // Eq. 2: w = argmin |B~ w - (m - x0~)|^2 + alpha |w - w_prev|^2 + mu |w|^2, 0 <= w <= 1,
 // on the rows of the present markers. H starts from the all-markers Gram matrix and
 // loses the missing markers' blocks, so its cost follows the dropouts, not K.
@@ -100,9 +121,19 @@ class WeightsStage {
         previous_(Eigen::VectorXd::Zero(model.shape_count())), residual_(3 * model.marker_count()),
         present_(model.marker_count()) {
     if (refinements_ > 0) {
+      const std::size_t P = model.marker_paths.size();
       gram_present_.resize(model.shape_count(), model.shape_count());
-      cross_.resize(model.shape_count(), model.shape_count());
-      path_difference_.resize(3, Eigen::Index(model.marker_paths.size()));
+      turning_of_shape_.assign(std::size_t(model.shape_count()), -1);
+      for (const auto& path : model.marker_paths) {
+        if (turning_of_shape_[std::size_t(path.shape)] >= 0) continue;
+        turning_of_shape_[std::size_t(path.shape)] = int(turning_shapes_.size());
+        turning_shapes_.push_back(path.shape);
+      }
+      cross_.resize(model.shape_count(), Eigen::Index(turning_shapes_.size()));
+      path_turn_.resize(P);
+      path_cos_.resize(P);
+      path_sin_.resize(P);
+      path_difference_.resize(3, Eigen::Index(P));
       path_start_.assign(std::size_t(model.marker_count()) + 1, 0);
       for (const auto& path : model.marker_paths) ++path_start_[std::size_t(path.marker) + 1];
       for (std::size_t k = 0; k < std::size_t(model.marker_count()); ++k) path_start_[k + 1] += path_start_[k];
@@ -154,7 +185,7 @@ class WeightsStage {
   // corrections rather than a dense product.
   void refine(const Eigen::Matrix3Xd& targets, Eigen::VectorXd& w) noexcept {
     const SolverModel& m = model_;
-    const Eigen::Index K = m.marker_count();
+    const Eigen::Index K = m.marker_count(), M = m.shape_count();
     const SolverParams& p = m.params;
     // c = m - x0 - f(w) + J w; start with the linear part, c = m - x0.
     for (Eigen::Index k = 0; k < K; ++k)
@@ -163,11 +194,13 @@ class WeightsStage {
     H_ = gram_present_;
     cross_.setZero();
     const auto& paths = m.marker_paths;
+    for (std::size_t i = 0; i < paths.size(); ++i) path_turn_[i] = w[paths[i].shape] * paths[i].angle;
+    sin_cos_turns(path_turn_, path_sin_, path_cos_);
     for (std::size_t i = 0; i < paths.size(); ++i) {
       const MarkerPath& path = paths[i];
       if (!present_[path.marker]) { path_difference_.col(Eigen::Index(i)).setZero(); continue; }
       const double t = w[path.shape];
-      const double c = std::cos(t * path.angle), sn = std::sin(t * path.angle);
+      const double c = path_cos_[i], sn = path_sin_[i];
       const Eigen::Vector3d turned = c * path.arm + sn * path.axis_cross_arm;  // exp(t r) arm
       const Eigen::Vector3d linear_delta = m.marker_basis.block<3, 1>(3 * path.marker, path.shape);
       const Eigen::Vector3d slope = path.angle * (c * path.axis_cross_arm - sn * path.arm) + path.axial;  // r x turned + axial
@@ -175,17 +208,27 @@ class WeightsStage {
       path_difference_.col(Eigen::Index(i)) = difference;
       // f(t) - t B~ replaced by its tangent: - (f(t) - t B~) + t D_p.
       residual_.segment<3>(3 * path.marker) -= turned - path.arm + t * path.axial - t * linear_delta - t * difference;
-      // B~^T D_p into column `shape` of cross_ (mirrored into the row below).
-      cross_.col(path.shape).noalias() += m.marker_basis_rows.middleRows<3>(3 * path.marker).transpose() * difference;
+      // B~^T D_p into the shape's column of cross_, from the marker's three rows of B~.
+      double* __restrict column = cross_.col(turning_of_shape_[std::size_t(path.shape)]).data();
+      const double* rows = m.marker_basis_rows.row(3 * path.marker).data();
+      for (Eigen::Index j = 0; j < M; ++j)
+        column[j] += rows[j] * difference[0] + rows[M + j] * difference[1] + rows[2 * M + j] * difference[2];
     }
-    H_ += cross_;
-    H_ += cross_.transpose();
-    // D_p^T D_q for the paths on each marker.
+    // J^T J = B~^T B~ + C + C^T + D^T D, C's nonzero columns being the turning shapes'.
+    for (std::size_t i = 0; i < turning_shapes_.size(); ++i) {
+      const int shape = turning_shapes_[i];
+      H_.col(shape) += cross_.col(Eigen::Index(i));
+      H_.row(shape) += cross_.col(Eigen::Index(i)).transpose();
+    }
+    // D_p^T D_q for the paths on each marker (each pair once, mirrored).
     for (Eigen::Index k = 0; k < K; ++k)
       for (int a = path_start_[std::size_t(k)]; a < path_start_[std::size_t(k) + 1]; ++a)
-        for (int b = path_start_[std::size_t(k)]; b < path_start_[std::size_t(k) + 1]; ++b) {
+        for (int b = a; b < path_start_[std::size_t(k) + 1]; ++b) {
           const int i = path_of_marker_[std::size_t(a)], j = path_of_marker_[std::size_t(b)];
-          H_(paths[std::size_t(i)].shape, paths[std::size_t(j)].shape) += path_difference_.col(i).dot(path_difference_.col(j));
+          const double d = path_difference_.col(i).dot(path_difference_.col(j));
+          const int si = paths[std::size_t(i)].shape, sj = paths[std::size_t(j)].shape;
+          H_(si, sj) += d;
+          if (a != b) H_(sj, si) += d;
         }
     H_.diagonal().array() += p.alpha + p.mu;
     g_.noalias() = m.marker_basis.transpose() * residual_;
@@ -198,7 +241,11 @@ class WeightsStage {
   const SolverModel& model_;
   int refinements_;
   BoxQpSolver qp_;
-  Eigen::MatrixXd H_, gram_present_, cross_;
+  Eigen::MatrixXd H_, gram_present_;
+  Eigen::MatrixXd cross_;                 // M x turning shapes: B~^T D's nonzero columns
+  std::vector<int> turning_shapes_;       // shapes with marker paths
+  std::vector<int> turning_of_shape_;     // per shape: index into turning_shapes_ or -1
+  std::vector<double> path_turn_, path_cos_, path_sin_;  // per marker path: w_shape * angle, its cos and sin
   Eigen::VectorXd g_, previous_, residual_;
   Eigen::Matrix3Xd path_difference_;
   std::vector<int> path_start_, path_of_marker_;  // marker paths grouped by marker (CSR)
