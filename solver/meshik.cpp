@@ -25,23 +25,28 @@ Eigen::Matrix3d symmetric_from6(const double* s, double diagonal) {
   return S;
 }
 
-// Calls f(triangle, v) for every triangle `shape` changes, v[c] being component c of
-// its Eq. 3 terms.
+// Calls f(triangle, v) for every triangle `shape` changes, v being its Eq. 3 terms: the
+// rotation log, then S - I in world coordinates (xx, yy, zz, xy, xz, yz; nothing along
+// the rest normal, which no residual sees).
 template <class F>
 void for_each_changed_triangle(const SolverModel& m, Eigen::Index shape, F&& f) {
   constexpr int B = ShapeBlocks::kBlock;
+  constexpr int C = SolverModel::kNonlinearComponents;
   for (const int32_t e : m.triangle_blocks.entries_of_shape(shape)) {
     const std::size_t first = std::size_t(m.triangle_blocks.entries[std::size_t(e)].block) * B;
     for (int i = 0; i < B; ++i) {
       const int32_t t = m.triangle_blocks.element_of_slot[first + std::size_t(i)];
       if (t < 0) continue;
-      std::array<double, 9> v;
+      double stored[C];
       bool changes = false;
-      for (int c = 0; c < 9; ++c) {
-        v[std::size_t(c)] = m.triangle_nonlinear.at(e, c, i);
-        changes = changes || v[std::size_t(c)] != 0.0;
+      for (int c = 0; c < C; ++c) {
+        stored[c] = m.triangle_nonlinear.at(e, c, i);
+        changes = changes || stored[c] != 0.0;
       }
-      if (changes) f(Eigen::Index(t), v);
+      if (!changes) continue;
+      const Eigen::Matrix3d s = m.world_stretch(t, stored + 3);
+      const std::array<double, 9> v = {stored[0], stored[1], stored[2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
+      f(Eigen::Index(t), v);
     }
   }
 }

@@ -64,6 +64,20 @@ void build_marker_rows(SolverModel& model) {
         model.marker_basis.middleRows(3 * k, 3).transpose() * model.marker_basis.middleRows(3 * k, 3);
 }
 
+// Twice the area below which a triangle is degenerate: it constrains nothing.
+double degenerate_area(const Rig& rig) { return 1e-14 * bounding_box(rig.neutral).size().squaredNorm(); }
+
+void build_triangle_frames(SolverModel& model) {
+  const Rig& rig = model.rig;
+  const double degenerate = degenerate_area(rig);
+  model.triangle_frames.setZero(9, rig.triangle_count());
+  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t) {
+    const Eigen::Vector3i tri = rig.triangles.col(t);
+    Eigen::Map<Eigen::Matrix3d>(model.triangle_frames.col(t).data()) =
+        rest_frame(rig.neutral.col(tri[0]), rig.neutral.col(tri[1]), rig.neutral.col(tri[2]), degenerate);
+  }
+}
+
 // Q_j and the Laplacian-like G^T W G.
 Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
   const Rig& rig = model.rig;
@@ -71,13 +85,13 @@ Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
   model.triangle_operator.setZero(9, T);
   std::vector<Eigen::Triplet<double>> entries;
   entries.reserve(std::size_t(T) * 9);
-  const double scale = bounding_box(rig.neutral).size().squaredNorm();
+  const double degenerate = degenerate_area(rig);
   for (Eigen::Index t = 0; t < T; ++t) {
     const Eigen::Vector3i tri = rig.triangles.col(t);
     const Eigen::Vector3d x0 = rig.neutral.col(tri[0]), x1 = rig.neutral.col(tri[1]), x2 = rig.neutral.col(tri[2]);
     const Eigen::Vector3d n = (x1 - x0).cross(x2 - x0);
     const double twice_area = n.norm();
-    if (twice_area <= 1e-14 * scale) continue;  // degenerate: constrains nothing
+    if (twice_area <= degenerate) continue;  // constrains nothing
     const Eigen::Vector3d unit = n / twice_area;
     Eigen::Matrix3d grad;  // columns: gradients of the hat functions of x0, x1, x2
     grad.col(0) = unit.cross(x2 - x1) / twice_area;
@@ -94,16 +108,18 @@ Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
   return L;
 }
 
-// One shape's Eq. 3 terms on every triangle, 9 per triangle (built, then regrouped).
+// One shape's Eq. 3 terms on every triangle (built, then regrouped).
 struct ShapeDeformation {
-  std::vector<uint8_t> changed;          // T
-  std::vector<float> nonlinear, gradient;  // 9 x T, triangle-major
+  std::vector<uint8_t> changed;  // T
+  std::vector<float> nonlinear;  // kNonlinearComponents x T, triangle-major (SolverModel::triangle_nonlinear)
+  std::vector<float> gradient;   // kGradientComponents x T (SolverModel::triangle_gradient)
 };
 
 // Deformation of every (shape, triangle) that changes, with rotation logs kept on one
 // branch across the mesh: triangles turning less than pi/2 fix the branch, and the rest
 // take the branch nearest their already-decided neighbours, breadth first.
-ShapeDeformation build_shape_deformation(const Rig& rig, Eigen::Index shape, const TriangleAdjacency& adjacency) {
+ShapeDeformation build_shape_deformation(const SolverModel& model, Eigen::Index shape, const TriangleAdjacency& adjacency) {
+  const Rig& rig = model.rig;
   const Eigen::Index T = rig.triangle_count();
   const Eigen::Matrix3Xd posed = rig.shape_positions(shape);
   std::vector<Eigen::Vector3d> logs(std::size_t(T), Eigen::Vector3d::Zero());
@@ -146,18 +162,20 @@ ShapeDeformation build_shape_deformation(const Rig& rig, Eigen::Index shape, con
   for (Eigen::Index t = 0; t < T; ++t)  // islands rotating more than pi/2 everywhere
     if (!decided[std::size_t(t)]) { decided[std::size_t(t)] = 1; frontier.push(int(t)); propagate(); }
 
+  constexpr auto kNonlinear = std::size_t(SolverModel::kNonlinearComponents);
+  constexpr auto kGradient = std::size_t(SolverModel::kGradientComponents);
   ShapeDeformation out;
   out.changed = std::move(changed);
-  out.nonlinear.assign(9 * triangle_count, 0.0f);
-  out.gradient.assign(9 * triangle_count, 0.0f);
+  out.nonlinear.assign(kNonlinear * triangle_count, 0.0f);
+  out.gradient.assign(kGradient * triangle_count, 0.0f);
   for (std::size_t i = 0; i < triangle_count; ++i) {
     if (!out.changed[i]) continue;
-    const Eigen::Matrix3d& s = stretch[i];
-    const double values[9] = {logs[i][0], logs[i][1], logs[i][2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
-    for (std::size_t c = 0; c < 9; ++c) {
-      out.nonlinear[9 * i + c] = float(values[c]);
-      out.gradient[9 * i + c] = float(gradient[i].data()[c]);
-    }
+    const Eigen::Map<const Eigen::Matrix3d> frame(model.triangle_frames.col(Eigen::Index(i)).data());
+    const Eigen::Matrix3d s = frame.transpose() * stretch[i] * frame;
+    const double nonlinear[kNonlinear] = {logs[i][0], logs[i][1], logs[i][2], s(0, 0), s(1, 1), s(0, 1), s(0, 2), s(1, 2)};
+    const Eigen::Matrix<double, 3, 2> planar = gradient[i] * frame.leftCols<2>();
+    for (std::size_t c = 0; c < kNonlinear; ++c) out.nonlinear[kNonlinear * i + c] = float(nonlinear[c]);
+    for (std::size_t c = 0; c < kGradient; ++c) out.gradient[kGradient * i + c] = float(planar.data()[c]);
   }
   return out;
 }
@@ -329,11 +347,12 @@ void build_triangle_terms(SolverModel& model, const std::vector<ShapeDeformation
   // Rotation logs and stretches are relative: 1e-5 rad moves a triangle's far corner by
   // 1e-5 of its size (ICT: at most 4.5e-6 cm on any vertex, docs/solver.md).
   constexpr double kTolerance = 1e-5;
-  model.triangle_nonlinear = quantise(model.triangle_blocks, 9, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
-    return double(shapes[std::size_t(s)].nonlinear[9 * std::size_t(t) + std::size_t(c)]);
+  constexpr int kNonlinear = SolverModel::kNonlinearComponents, kGradient = SolverModel::kGradientComponents;
+  model.triangle_nonlinear = quantise(model.triangle_blocks, kNonlinear, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
+    return double(shapes[std::size_t(s)].nonlinear[std::size_t(kNonlinear * t + c)]);
   });
-  model.triangle_gradient = quantise(model.triangle_blocks, 9, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
-    return double(shapes[std::size_t(s)].gradient[9 * std::size_t(t) + std::size_t(c)]);
+  model.triangle_gradient = quantise(model.triangle_blocks, kGradient, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
+    return double(shapes[std::size_t(s)].gradient[std::size_t(kGradient * t + c)]);
   });
 }
 
@@ -480,6 +499,25 @@ Eigen::Vector3d SolverModel::rotation_log(Eigen::Index shape, Eigen::Index trian
   return {triangle_nonlinear.at(e, 0, i), triangle_nonlinear.at(e, 1, i), triangle_nonlinear.at(e, 2, i)};
 }
 
+Eigen::Matrix3d SolverModel::world_stretch(Eigen::Index triangle, const double* local) const noexcept {
+  Eigen::Matrix3d s;
+  s << local[0], local[2], local[3], local[2], local[1], local[4], local[3], local[4], 0.0;
+  const Eigen::Map<const Eigen::Matrix3d> frame(triangle_frames.col(triangle).data());
+  return frame * s * frame.transpose();
+}
+
+Eigen::Matrix3d rest_frame(const Eigen::Vector3d& a0, const Eigen::Vector3d& b0, const Eigen::Vector3d& c0,
+                           double degenerate_area) {
+  const Eigen::Vector3d n = (b0 - a0).cross(c0 - a0);
+  const double twice_area = n.norm();
+  if (!(twice_area > degenerate_area)) return Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d frame;
+  frame.col(0) = (b0 - a0).normalized();
+  frame.col(2) = n / twice_area;
+  frame.col(1) = frame.col(2).cross(frame.col(0));
+  return frame;
+}
+
 Eigen::Matrix3d deformation_gradient(const Eigen::Vector3d& a0, const Eigen::Vector3d& b0, const Eigen::Vector3d& c0,
                                      const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
   auto frame = [](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
@@ -541,13 +579,14 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   const TriangleAdjacency adjacency(rig.triangles);
   {
     const auto t0 = Clock::now();
+    build_triangle_frames(*model);
     const Eigen::Index M = rig.shape_count();
     auto shapes = std::vector<ShapeDeformation>(std::size_t(M));
     const unsigned threads = std::max(1u, std::min(std::thread::hardware_concurrency(), unsigned(M)));
     std::vector<std::thread> pool;
     for (unsigned w = 0; w < threads; ++w)
       pool.emplace_back([&, w] {
-        for (Eigen::Index s = w; s < M; s += threads) shapes[std::size_t(s)] = build_shape_deformation(rig, s, adjacency);
+        for (Eigen::Index s = w; s < M; s += threads) shapes[std::size_t(s)] = build_shape_deformation(*model, s, adjacency);
       });
     for (auto& t : pool) t.join();
     build_triangle_terms(*model, shapes);

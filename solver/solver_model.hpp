@@ -128,11 +128,18 @@ class SolverModel {
   BlendTerms vertex_deltas;  // B's columns (x, y, z), for x0 + B w
 
   // Eq. 3-5: per triangle j, Q_j = area_j [grad phi_1, grad phi_2, grad phi_3] so the
-  // right-hand side gains T_j Q_j on the triangle's three vertices.
+  // right-hand side gains T_j Q_j on the triangle's three vertices. Q_j's columns lie in
+  // the rest triangle's plane: with its rest frame (t1, t2, n), Q_j = t1 q1^T + t2 q2^T,
+  // and only T_j t1 and T_j t2 reach the right-hand side.
   Eigen::Matrix<double, 9, Eigen::Dynamic> triangle_operator;  // 9 x T, column-major 3x3
+  Eigen::Matrix<double, 9, Eigen::Dynamic> triangle_frames;    // 9 x T: t1, t2, n; zero if degenerate
   ShapeBlocks triangle_blocks;
-  BlendTerms triangle_nonlinear;  // Eq. 3: log R (x, y, z), then S - I (xx, yy, zz, xy, xz, yz)
-  BlendTerms triangle_gradient;   // F - I, column-major (deformation transfer)
+  // Eq. 3: log R (x, y, z; world), then S - I in the rest frame: xx, yy, xy, xz, yz (its
+  // zz, along the normal, is left out: it never reaches the right-hand side).
+  BlendTerms triangle_nonlinear;
+  // Deformation transfer: (F - I) t1, then (F - I) t2 (world).
+  BlendTerms triangle_gradient;
+  static constexpr int kNonlinearComponents = 8, kGradientComponents = 6;
   std::unique_ptr<SparseLdlt> factor;  // A0 = G^T W G + beta C^T C with every marker present
 
   // Low-rank modifications of A0 without refactoring: a marker dropping out removes
@@ -170,9 +177,18 @@ class SolverModel {
   Eigen::Index marker_count() const { return Eigen::Index(markers.size()); }
   // The rotation log of `shape` at `triangle`; zero where the shape leaves it unchanged.
   Eigen::Vector3d rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept;
+  // S - I in world coordinates from the rest-frame components triangle_nonlinear stores
+  // (xx, yy, xy, xz, yz), with nothing along the normal.
+  Eigen::Matrix3d world_stretch(Eigen::Index triangle, const double* local) const noexcept;
   Eigen::Index shape_count() const { return rig.shape_count(); }
   Eigen::Index vertex_count() const { return rig.vertex_count(); }
 };
+
+// The rest frame of a triangle (a0, b0, c0): t1 along a0 -> b0, the unit normal n and
+// t2 = n x t1, as columns; zero for a degenerate triangle (twice its area at most
+// degenerate_area).
+Eigen::Matrix3d rest_frame(const Eigen::Vector3d& a0, const Eigen::Vector3d& b0, const Eigen::Vector3d& c0,
+                           double degenerate_area);
 
 // Deformation gradient (Sumner & Popovic 2004, fourth vertex along the normal) of one
 // triangle from rest (a0, b0, c0) to deformed (a, b, c).

@@ -366,16 +366,27 @@ class PoissonSolver : public FaceSolver {
     const SolverModel& m = *model_;
     const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count(), K = m.marker_count();
     constexpr std::size_t B = ShapeBlocks::kBlock;
-    operator_.assign(std::size_t(m.triangle_blocks.block_count()) * 9 * B, 0.0f);
+    operator_.assign(std::size_t(m.triangle_blocks.block_count()) * kOperatorComponents * B, 0.0f);
     slot_corners_.assign(m.triangle_blocks.element_of_slot.size(), {-1, -1, -1});
-    // G^T W G x0, the right-hand side of T = I everywhere; Q_j copied in blocks like the terms.
+    // G^T W G x0, the right-hand side of T = I everywhere.
     identity_rhs_.setZero(3, N);
     for (Eigen::Index t = 0; t < T; ++t) {
       const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
-      for (int k = 0; k < 3; ++k) identity_rhs_.col(m.rig.triangles(k, t)) += Q.col(k);
+      const auto corners = m.rig.triangles.col(t);
+      for (int k = 0; k < 3; ++k) identity_rhs_.col(corners[k]) += Q.col(k);
+      // The rest frame's t1, t2 and half the rest corners' coordinates in it, (0, 0),
+      // (L, 0) and (u, v): Q_j = t1 q1^T + t2 q2^T with q1 = (-v, v, 0) / 2 and
+      // q2 = (u - L, -u, L) / 2 (area times the hat functions' gradients).
+      const Eigen::Map<const Eigen::Matrix3d> frame(m.triangle_frames.col(t).data());
+      const Eigen::Vector3d edge = m.rig.neutral.col(corners[1]) - m.rig.neutral.col(corners[0]);
+      const Eigen::Vector3d other = m.rig.neutral.col(corners[2]) - m.rig.neutral.col(corners[0]);
+      const double values[kOperatorComponents] = {frame(0, 0), frame(1, 0), frame(2, 0), frame(0, 1), frame(1, 1), frame(2, 1),
+                                                  0.5 * edge.dot(frame.col(0)), 0.5 * other.dot(frame.col(0)),
+                                                  0.5 * other.dot(frame.col(1))};
       const auto slot = std::size_t(m.triangle_blocks.slot_of_element[std::size_t(t)]);
-      for (int c = 0; c < 9; ++c) operator_[(slot / B * 9 + std::size_t(c)) * B + slot % B] = float(Q.data()[c]);
-      slot_corners_[slot] = {m.rig.triangles(0, t), m.rig.triangles(1, t), m.rig.triangles(2, t)};
+      for (int c = 0; c < kOperatorComponents; ++c)
+        operator_[(slot / B * kOperatorComponents + std::size_t(c)) * B + slot % B] = float(values[c]);
+      slot_corners_[slot] = {corners[0], corners[1], corners[2]};
     }
     rhs_.resize(3, N);
     work_.resize(4, N);
@@ -481,16 +492,18 @@ class PoissonSolver : public FaceSolver {
     const BlendTerms& terms = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
     active_weights(w, m.params.active_weight, active_);
     constexpr int B = ShapeBlocks::kBlock;
-    constexpr std::size_t E = 9 * B;
-    alignas(64) float sum[E];
+    constexpr int kNonlinear = SolverModel::kNonlinearComponents, kGradient = SolverModel::kGradientComponents;
+    alignas(64) float sum[std::max(kNonlinear, kGradient) * B];
+    alignas(64) float out[9 * B];  // (T_j - I) Q_j: column k, row r at [(3 k + r) B + slot]
     for (int block = 0; block < blocks.block_count(); ++block) {
-      sum_block<9>(terms, block, active_.data(), sum);
-      const float* Q = operator_.data() + std::size_t(block) * E;
-      alignas(64) float out[E];  // (T_j - I) Q_j, component-major like sum
-      if (blend_ == Blend::kDeformationTransfer)
-        transfer_block(sum, Q, out);
-      else
-        nonlinear_block(sum, Q, out);
+      const float* frame = operator_.data() + std::size_t(block) * kOperatorComponents * B;
+      if (blend_ == Blend::kDeformationTransfer) {
+        sum_block<kGradient>(terms, block, active_.data(), reinterpret_cast<float(&)[kGradient * B]>(sum));
+        transfer_block(sum, frame, out);
+      } else {
+        sum_block<kNonlinear>(terms, block, active_.data(), reinterpret_cast<float(&)[kNonlinear * B]>(sum));
+        nonlinear_block(sum, frame, out);
+      }
       const std::array<int32_t, 3>* corners = slot_corners_.data() + std::size_t(block) * B;
       for (int i = 0; i < B; ++i) {
         if (corners[i][0] < 0) continue;  // padding
@@ -502,21 +515,33 @@ class PoissonSolver : public FaceSolver {
     }
   }
 
-  // out = sum Q per slot of a block: deformation transfer's T - I = sum w_i (F_i - I).
-  static void transfer_block(const float* sum, const float* Q, float* out) noexcept {
+  // The rows q1, q2 of Q_j = t1 q1^T + t2 q2^T for the slots of a block from t.
+  template <class V>
+  static void rest_gradients(const float* frame, int t, V (&q1)[3], V (&q2)[3]) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-    for (int t = 0; t < B; t += 16)
-      for (int r = 0; r < 3; ++r)
-        for (int k = 0; k < 3; ++k)
-          store_lanes(out + (3 * k + r) * B + t,
-                      load_lanes<Lanes16>(sum + r * B + t) * load_lanes<Lanes16>(Q + (3 * k) * B + t) +
-                          load_lanes<Lanes16>(sum + (3 + r) * B + t) * load_lanes<Lanes16>(Q + (3 * k + 1) * B + t) +
-                          load_lanes<Lanes16>(sum + (6 + r) * B + t) * load_lanes<Lanes16>(Q + (3 * k + 2) * B + t));
+    const V half_l = load_lanes<V>(frame + 6 * B + t), half_u = load_lanes<V>(frame + 7 * B + t),
+            half_v = load_lanes<V>(frame + 8 * B + t);
+    q1[0] = -half_v, q1[1] = half_v, q1[2] = V{};
+    q2[0] = half_u - half_l, q2[1] = -half_u, q2[2] = half_l;
   }
 
-  // out = (exp(sum_log) (I + sum_stretch) - I) Q per slot of a block (Eq. 4), in float,
+  // out = (F - I) Q_j = g1 q1^T + g2 q2^T per slot of a block: deformation transfer, with
+  // g1 = sum w_i (F_i - I) t1 and g2 the same for t2.
+  static void transfer_block(const float* sum, const float* frame, float* out) noexcept {
+    constexpr int B = ShapeBlocks::kBlock;
+    for (int t = 0; t < B; t += 16) {
+      Lanes16 q1[3], q2[3];
+      rest_gradients(frame, t, q1, q2);
+      for (int r = 0; r < 3; ++r) {
+        const Lanes16 g1 = load_lanes<Lanes16>(sum + r * B + t), g2 = load_lanes<Lanes16>(sum + (3 + r) * B + t);
+        for (int k = 0; k < 3; ++k) store_lanes(out + (3 * k + r) * B + t, g1 * q1[k] + g2 * q2[k]);
+      }
+    }
+  }
+
+  // out = (exp(sum_log) (I + sum_stretch) - I) Q_j per slot of a block (Eq. 4), in float,
   // 16 triangles at a time: the rounding (1e-7 of T) is far below the stored terms'.
-  static void nonlinear_block(const float* sum, const float* Q, float* out) noexcept {
+  static void nonlinear_block(const float* sum, const float* frame, float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
     constexpr float kLargestSeriesAngleSq = 6.25f;
     for (int t = 0; t < B; t += 16) {
@@ -531,37 +556,45 @@ class PoissonSolver : public FaceSolver {
         a = kInvFactorial[i] - x * a;
         b = kInvFactorialEven[i] - x * b;
       }
-      finish_triangles(t, rx, ry, rz, x, a, b, sum, Q, out);
+      finish_triangles(t, rx, ry, rz, x, a, b, sum, frame, out);
       for (int i = 0; i < 16; ++i) {
         if (x[i] <= kLargestSeriesAngleSq) continue;
         const double theta = std::sqrt(double(x[i]));
         finish_triangles(t + i, rx[i], ry[i], rz[i], x[i], float(std::sin(theta) / theta),
-                         float((1.0 - std::cos(theta)) / double(x[i])), sum, Q, out);
+                         float((1.0 - std::cos(theta)) / double(x[i])), sum, frame, out);
       }
     }
   }
 
-  // out = (R (I + S) - I) Q for the triangles of a block from slot t (16 of them with
-  // V = Lanes16, one with V = float), R = I + a [r]x + b [r]x^2.
+  // out = (R (I + S) - I) Q_j for the triangles of a block from slot t (16 of them with
+  // V = Lanes16, one with V = float), R = I + a [r]x + b [r]x^2 and S - I from its
+  // rest-frame components (xx, yy, xy, xz, yz at sum[3..7]). With U = (S - I) in the rest
+  // frame times q and W = frame U: R (I + S) Q - Q = (R - I)(Q + W) + W, R - I and W
+  // small, so nothing cancels against I.
   template <class V>
-  static void finish_triangles(int t, V rx, V ry, V rz, V x, V a, V b, const float* S, const float* Q, float* out) noexcept {
+  static void finish_triangles(int t, V rx, V ry, V rz, V x, V a, V b, const float* sum, const float* frame,
+                               float* out) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-    V D[9];  // R - I, column-major: small, so no precision is lost against I
+    V D[9];  // R - I, column-major
     D[0] = b * (rx * rx - x);     D[3] = -a * rz + b * rx * ry;  D[6] = a * ry + b * rx * rz;
     D[1] = a * rz + b * rx * ry;  D[4] = b * (ry * ry - x);      D[7] = -a * rx + b * ry * rz;
     D[2] = -a * ry + b * rx * rz; D[5] = a * rx + b * ry * rz;   D[8] = b * (rz * rz - x);
-    const V sxx = load_lanes<V>(S + 3 * B + t), syy = load_lanes<V>(S + 4 * B + t), szz = load_lanes<V>(S + 5 * B + t);
-    const V sxy = load_lanes<V>(S + 6 * B + t), sxz = load_lanes<V>(S + 7 * B + t), syz = load_lanes<V>(S + 8 * B + t);
-    const V E[9] = {sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz};  // S - I
-    V M[9];  // R S - I = D + E + D E
-    for (int c = 0; c < 3; ++c)
-      for (int r = 0; r < 3; ++r)
-        M[3 * c + r] = D[3 * c + r] + E[3 * c + r] + D[r] * E[3 * c] + D[3 + r] * E[3 * c + 1] + D[6 + r] * E[3 * c + 2];
-    for (int k = 0; k < 3; ++k)
-      for (int r = 0; r < 3; ++r)
-        store_lanes(out + (3 * k + r) * B + t, M[r] * load_lanes<V>(Q + (3 * k) * B + t) +
-                                                   M[3 + r] * load_lanes<V>(Q + (3 * k + 1) * B + t) +
-                                                   M[6 + r] * load_lanes<V>(Q + (3 * k + 2) * B + t));
+    const V t1[3] = {load_lanes<V>(frame + t), load_lanes<V>(frame + B + t), load_lanes<V>(frame + 2 * B + t)};
+    const V t2[3] = {load_lanes<V>(frame + 3 * B + t), load_lanes<V>(frame + 4 * B + t), load_lanes<V>(frame + 5 * B + t)};
+    const V n[3] = {t1[1] * t2[2] - t1[2] * t2[1], t1[2] * t2[0] - t1[0] * t2[2], t1[0] * t2[1] - t1[1] * t2[0]};
+    V q1[3], q2[3];
+    rest_gradients(frame, t, q1, q2);
+    const V sxx = load_lanes<V>(sum + 3 * B + t), syy = load_lanes<V>(sum + 4 * B + t), sxy = load_lanes<V>(sum + 5 * B + t);
+    const V sxz = load_lanes<V>(sum + 6 * B + t), syz = load_lanes<V>(sum + 7 * B + t);
+    for (int k = 0; k < 3; ++k) {
+      const V u0 = sxx * q1[k] + sxy * q2[k], u1 = sxy * q1[k] + syy * q2[k], u2 = sxz * q1[k] + syz * q2[k];
+      V w[3], y[3];  // W and Q + W, column k
+      for (int r = 0; r < 3; ++r) {
+        w[r] = t1[r] * u0 + t2[r] * u1 + n[r] * u2;
+        y[r] = t1[r] * q1[k] + t2[r] * q2[k] + w[r];
+      }
+      for (int r = 0; r < 3; ++r) store_lanes(out + (3 * k + r) * B + t, D[r] * y[0] + D[3 + r] * y[1] + D[6 + r] * y[2] + w[r]);
+    }
   }
 
   // Triangle pairs closer than epsilon pin their vertices to the linear blend
@@ -776,7 +809,10 @@ class PoissonSolver : public FaceSolver {
   WeightsStage weights_;
   std::vector<std::span<const std::byte>> streamed_;  // the blend's terms and Q_j (streamed_memory)
   std::vector<float> active_;                         // per shape: its weight, 0 if inactive
-  std::vector<float> operator_;        // Q_j, in triangle_blocks' slots, component-major per block
+  // Per slot of triangle_blocks, component-major per block: the rest frame's t1 and t2 and
+  // (L, u, v) / 2, from which Q_j = t1 q1^T + t2 q2^T (see the constructor).
+  static constexpr int kOperatorComponents = 9;
+  std::vector<float> operator_;
   std::vector<std::array<int32_t, 3>> slot_corners_;  // per slot of triangle_blocks: its vertices, -1 for padding
   Eigen::Matrix3Xd identity_rhs_, rhs_;
   Eigen::Matrix4Xd work_;
