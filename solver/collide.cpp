@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cstring>
 #include <cctype>
 #include <cmath>
 #include <iterator>
@@ -304,6 +305,136 @@ uint32_t lane_bits(const LaneMask& m) noexcept {
   for (int i = 0; i < kMaxLeafSize; ++i) bits |= uint32_t(m[i] != 0) << i;
   return bits;
 #endif
+}
+
+// ---- Batched closeness: a float pass over 16 pairs at once ---------------------------
+
+// Per lane a 3-vector: one coordinate per Lanes.
+struct Lanes3 {
+  Lanes x, y, z;
+};
+Lanes3 operator+(const Lanes3& a, const Lanes3& b) noexcept { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+Lanes3 operator-(const Lanes3& a, const Lanes3& b) noexcept { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+Lanes3 operator*(const Lanes3& a, const Lanes& s) noexcept { return {a.x * s, a.y * s, a.z * s}; }
+Lanes dot(const Lanes3& a, const Lanes3& b) noexcept { return a.x * b.x + a.y * b.y + a.z * b.z; }
+Lanes3 cross(const Lanes3& a, const Lanes3& b) noexcept {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+Lanes3 select(const LaneMask& m, const Lanes3& a, const Lanes3& b) noexcept {
+  return {m ? a.x : b.x, m ? a.y : b.y, m ? a.z : b.z};
+}
+Lanes lanes_min(const Lanes& a, const Lanes& b) noexcept { return a < b ? a : b; }
+Lanes lanes_max(const Lanes& a, const Lanes& b) noexcept { return a > b ? a : b; }
+
+// point_triangle_sq per lane (Ericson 5.1.5), every Voronoi region computed and the first
+// one that holds chosen. Degenerate triangles give meaningless values: callers leave
+// them out.
+Lanes point_triangle_sq(const Lanes3& p, const Lanes3& a, const Lanes3& b, const Lanes3& c) noexcept {
+  const Lanes3 ab = b - a, ac = c - a, ap = p - a, bp = p - b, cp = p - c;
+  const Lanes d1 = dot(ab, ap), d2 = dot(ac, ap), d3 = dot(ab, bp), d4 = dot(ac, bp), d5 = dot(ab, cp), d6 = dot(ac, cp);
+  const Lanes va = d3 * d6 - d5 * d4, vb = d5 * d2 - d1 * d6, vc = d1 * d4 - d3 * d2;
+  const Lanes denom = 1.0f / (va + vb + vc);
+  Lanes3 q = a + ab * (vb * denom) + ac * (vc * denom);  // inside
+  const Lanes e43 = d4 - d3, e56 = d5 - d6;
+  q = select((va <= 0.0f) & (e43 >= 0.0f) & (e56 >= 0.0f), b + (c - b) * (e43 / (e43 + e56)), q);
+  q = select((vb <= 0.0f) & (d2 >= 0.0f) & (d6 <= 0.0f), a + ac * (d2 / (d2 - d6)), q);
+  q = select((d6 >= 0.0f) & (d5 <= d6), c, q);
+  q = select((vc <= 0.0f) & (d1 >= 0.0f) & (d3 <= 0.0f), a + ab * (d1 / (d1 - d3)), q);
+  q = select((d3 >= 0.0f) & (d4 <= d3), b, q);
+  q = select((d1 <= 0.0f) & (d2 <= 0.0f), a, q);
+  const Lanes3 d = p - q;
+  return dot(d, d);
+}
+
+// segment_segment_sq per lane (Ericson 5.1.9): always the distance between two points of
+// the segments, so it never falls below the true one by more than rounding.
+Lanes segment_segment_sq(const Lanes3& p1, const Lanes3& q1, const Lanes3& p2, const Lanes3& q2) noexcept {
+  const Lanes3 d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
+  const Lanes a = dot(d1, d1), e = dot(d2, d2), f = dot(d2, r), c = dot(d1, r), b = dot(d1, d2);
+  auto clamp01 = [](const Lanes& x) { return lanes_min(lanes_max(x, Lanes{}), Lanes{} + 1.0f); };
+  const Lanes denom = a * e - b * b;
+  Lanes s = (denom > 1e-6f * a * e) ? clamp01((b * f - c * e) / denom) : Lanes{};
+  Lanes t = (b * s + f) / e;
+  const LaneMask below = t < 0.0f, above = t > 1.0f;
+  s = below ? clamp01(-c / a) : (above ? clamp01((b - c) / a) : s);
+  t = clamp01(t);
+  const Lanes3 d = (p1 + d1 * s) - (p2 + d2 * t);
+  return dot(d, d);
+}
+
+// Whether the projections of a and b on `axis` are at least `gap` * |axis| apart.
+LaneMask separated_along(const Lanes3& axis, const Lanes3* a, const Lanes3* b, const Lanes& gap) noexcept {
+  const Lanes a0 = dot(axis, a[0]), a1 = dot(axis, a[1]), a2 = dot(axis, a[2]);
+  const Lanes b0 = dot(axis, b[0]), b1 = dot(axis, b[1]), b2 = dot(axis, b[2]);
+  const Lanes between = lanes_max(lanes_min(lanes_min(b0, b1), b2) - lanes_max(lanes_max(a0, a1), a2),
+                                  lanes_min(lanes_min(a0, a1), a2) - lanes_max(lanes_max(b0, b1), b2));
+  return (between > 0.0f) & (between * between >= gap * gap * dot(axis, axis));
+}
+
+// Which of `count` (<= 16) pairs are closer than epsilon: closer_than_impl for each. A
+// float pass settles the clear cases with a margin far above its rounding: apart along
+// a separating axis (centroids, normals, edge pairs), or closer by a corner's distance
+// to the other triangle or an edge's to an edge. The exact test decides the rest (on
+// the lips mostly pairs that cross).
+uint32_t closer_than_16(const TrianglePairCorners* pairs, int count, double epsilon) noexcept {
+  static_assert(kMaxLeafSize == 16);
+  if (count <= 0 || !(epsilon > 0.0)) return 0;
+  // Corners relative to a's first corner, so that float keeps their detail.
+  alignas(64) float corner[5][3][16] = {};
+  alignas(64) float extent[16] = {};
+  for (int lane = 0; lane < count; ++lane) {
+    const TrianglePairCorners& pair = pairs[lane];
+    const Vec3 points[5] = {pair.a[1], pair.a[2], pair.b[0], pair.b[1], pair.b[2]};
+    double largest = 0.0;
+    for (int k = 0; k < 5; ++k) {
+      const Vec3 d = points[k] - pair.a[0];
+      largest = std::max(largest, d.cwiseAbs().maxCoeff());
+      for (int c = 0; c < 3; ++c) corner[k][c][lane] = float(d[c]);
+    }
+    extent[lane] = float(largest);
+  }
+  auto load = [&](int k) {
+    Lanes3 v;
+    std::memcpy(&v.x, corner[k][0], sizeof v.x);
+    std::memcpy(&v.y, corner[k][1], sizeof v.y);
+    std::memcpy(&v.z, corner[k][2], sizeof v.z);
+    return v;
+  };
+  const Lanes3 a[3] = {Lanes3{}, load(0), load(1)}, b[3] = {load(2), load(3), load(4)};
+  Lanes scale;
+  std::memcpy(&scale, extent, sizeof scale);
+  // Float rounding here stays below 1e-5 of the pair's extent; the margin covers it.
+  const float eps = float(epsilon);
+  const Lanes margin = 1e-3f * eps + 1e-5f * scale;
+  const Lanes apart_gap = eps + margin, close_distance = lanes_max(eps - margin, Lanes{});
+  LaneMask apart = separated_along((b[0] + b[1] + b[2]) - (a[1] + a[2]), a, b, apart_gap);
+  const Lanes3 na = cross(a[1], a[2]), nb = cross(b[1] - b[0], b[2] - b[0]);
+  apart |= separated_along(na, a, b, apart_gap) | separated_along(nb, a, b, apart_gap);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      apart |= separated_along(cross(a[(i + 1) % 3] - a[i], b[(j + 1) % 3] - b[j]), a, b, apart_gap);
+  // Corner-to-triangle distances only for well-shaped triangles (sine of the corner
+  // angle above 1e-4), where the float closest point lies on the triangle.
+  const Lanes3 eb1 = b[1] - b[0], eb2 = b[2] - b[0];
+  const LaneMask shaped = (dot(na, na) > 1e-8f * dot(a[1], a[1]) * dot(a[2], a[2])) &
+                          (dot(nb, nb) > 1e-8f * dot(eb1, eb1) * dot(eb2, eb2));
+  Lanes nearest = point_triangle_sq(a[0], b[0], b[1], b[2]);
+  for (int k = 1; k < 3; ++k) nearest = lanes_min(nearest, point_triangle_sq(a[k], b[0], b[1], b[2]));
+  for (int k = 0; k < 3; ++k) nearest = lanes_min(nearest, point_triangle_sq(b[k], a[0], a[1], a[2]));
+  Lanes nearest_edges = segment_segment_sq(a[0], a[1], b[0], b[1]);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      nearest_edges = lanes_min(nearest_edges, segment_segment_sq(a[i], a[(i + 1) % 3], b[j], b[(j + 1) % 3]));
+  const LaneMask close = (shaped & (nearest < close_distance * close_distance)) |
+                         (nearest_edges < close_distance * close_distance);
+  const uint32_t used = (1u << count) - 1;
+  uint32_t result = lane_bits(close) & used;
+  uint32_t undecided = used & ~result & ~lane_bits(apart);
+  for (; undecided != 0; undecided &= undecided - 1) {
+    const int lane = std::countr_zero(undecided);
+    if (closer_than_impl(pairs[lane].a, pairs[lane].b, epsilon)) result |= 1u << lane;
+  }
+  return result;
 }
 
 // Which slots of `leaf` overlap `box`, as bits.
@@ -827,6 +958,10 @@ bool triangles_closer_than(const Vec3& a0, const Vec3& a1, const Vec3& a2, const
   return closer_than_impl(a, b, epsilon);
 }
 
+uint32_t triangles_closer_than(std::span<const TrianglePairCorners> pairs, double epsilon) noexcept {
+  return closer_than_16(pairs.data(), int(std::min<std::size_t>(pairs.size(), kCloserBatch)), epsilon);
+}
+
 // ---- Candidate sets ----------------------------------------------------------------
 
 std::vector<int> all_triangles(Eigen::Index triangle_count) {
@@ -1080,20 +1215,35 @@ bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& position
     ++out.vertices_found;
   };
   const auto slot_triangles = s.tree.slot_triangles();
+  // Candidates are tested kCloserBatch at a time.
+  TrianglePairCorners batch[kCloserBatch];
+  std::array<int32_t, 2> batch_slots[kCloserBatch];
+  int batched = 0;
+  auto test_batch = [&] {
+    for (uint32_t close = closer_than_16(batch, batched, epsilon); close != 0; close &= close - 1) {
+      const auto [slot_a, slot_b] = batch_slots[std::countr_zero(close)];
+      const int32_t ta = slot_triangles[std::size_t(slot_a)], tb = slot_triangles[std::size_t(slot_b)];
+      if (out.pair_count < pair_capacity) out.pairs[std::size_t(out.pair_count++)] = {std::min(ta, tb), std::max(ta, tb)};
+      ++out.pairs_found;
+      for (int k = 0; k < 3; ++k) {
+        collect_vertex(s.tree.slot_vertices(slot_a)[std::size_t(k)]);
+        collect_vertex(s.tree.slot_vertices(slot_b)[std::size_t(k)]);
+      }
+    }
+    batched = 0;
+  };
   const bool complete = s.tree.for_each_overlapping_pair([&](int32_t slot_a, int32_t slot_b) {
     const auto& va = s.tree.slot_vertices(slot_a);
     const auto& vb = s.tree.slot_vertices(slot_b);
-    const Vec3 a[3] = {positions.col(va[0]), positions.col(va[1]), positions.col(va[2])};
-    const Vec3 b[3] = {positions.col(vb[0]), positions.col(vb[1]), positions.col(vb[2])};
-    if (!closer_than_impl(a, b, epsilon)) return;
-    const int32_t ta = slot_triangles[std::size_t(slot_a)], tb = slot_triangles[std::size_t(slot_b)];
-    if (out.pair_count < pair_capacity) out.pairs[std::size_t(out.pair_count++)] = {std::min(ta, tb), std::max(ta, tb)};
-    ++out.pairs_found;
+    TrianglePairCorners& pair = batch[batched];
     for (int k = 0; k < 3; ++k) {
-      collect_vertex(va[std::size_t(k)]);
-      collect_vertex(vb[std::size_t(k)]);
+      pair.a[k] = positions.col(va[std::size_t(k)]);
+      pair.b[k] = positions.col(vb[std::size_t(k)]);
     }
+    batch_slots[batched] = {slot_a, slot_b};
+    if (++batched == kCloserBatch) test_batch();
   });
+  test_batch();
   // std::sort is in place (introsort): no allocation.
   std::sort(out.pairs.begin(), out.pairs.begin() + out.pair_count);
   std::sort(out.vertices.begin(), out.vertices.begin() + out.vertex_count);

@@ -46,6 +46,19 @@ bool triangles_closer_than(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1,
                            const Eigen::Vector3d& b0, const Eigen::Vector3d& b1, const Eigen::Vector3d& b2,
                            double epsilon) noexcept;
 
+// The corners of two triangles a and b, for the batched test below.
+struct TrianglePairCorners {
+  Eigen::Vector3d a[3];
+  Eigen::Vector3d b[3];
+};
+
+inline constexpr int kCloserBatch = 16;
+
+// triangles_closer_than for up to kCloserBatch pairs (more are ignored): bit k is set
+// when pair k is closer than epsilon. A float pass over all of them settles the clear
+// cases, with margins far above its rounding; the double test decides the rest.
+uint32_t triangles_closer_than(std::span<const TrianglePairCorners> pairs, double epsilon) noexcept;
+
 // ---- Candidate triangle sets (configuration time: allocate, may throw) -----------
 
 // 0, 1, ..., triangle_count - 1: the whole face as the candidate set.

@@ -618,20 +618,35 @@ class PoissonSolver : public FaceSolver {
         if (pin_stamp_[std::size_t(v)] != frame_stamp_) return true;
       return false;
     };
+    // The pairs' references are tested kCloserBatch at a time, the pins then made in order.
+    TrianglePairCorners batch[kCloserBatch];
+    const TrianglePair* batch_pairs[kCloserBatch];
+    int batched = 0;
+    auto pin_batch = [&] {
+      const uint32_t close = triangles_closer_than(std::span(batch, std::size_t(batched)), epsilon);
+      for (int k = 0; k < batched; ++k) {
+        const auto ta = m.rig.triangles.col(batch_pairs[k]->first), tb = m.rig.triangles.col(batch_pairs[k]->second);
+        if (!adds_pins(ta, tb)) continue;
+        if ((close >> k) & 1u) {
+          // The reference is in contact too: pin only if the solve crosses where it does not.
+          const auto& [a, b] = batch[k];
+          if (triangles_intersect(a[0], a[1], a[2], b[0], b[1], b[2]) ||
+              !triangles_intersect(out.vertices.col(ta[0]), out.vertices.col(ta[1]), out.vertices.col(ta[2]),
+                                   out.vertices.col(tb[0]), out.vertices.col(tb[1]), out.vertices.col(tb[2])))
+            continue;
+        }
+        for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins);
+      }
+      batched = 0;
+    };
     for (const TrianglePair& pair : collisions_.valid_pairs()) {
       const auto ta = m.rig.triangles.col(pair.first), tb = m.rig.triangles.col(pair.second);
       if (!adds_pins(ta, tb)) continue;
-      const Eigen::Vector3d a[3] = {reference(ta[0]), reference(ta[1]), reference(ta[2])};
-      const Eigen::Vector3d b[3] = {reference(tb[0]), reference(tb[1]), reference(tb[2])};
-      if (triangles_closer_than(a[0], a[1], a[2], b[0], b[1], b[2], epsilon)) {
-        // The reference is in contact too: pin only if the solve crosses where it does not.
-        if (triangles_intersect(a[0], a[1], a[2], b[0], b[1], b[2]) ||
-            !triangles_intersect(out.vertices.col(ta[0]), out.vertices.col(ta[1]), out.vertices.col(ta[2]),
-                                 out.vertices.col(tb[0]), out.vertices.col(tb[1]), out.vertices.col(tb[2])))
-          continue;
-      }
-      for (const int v : {ta[0], ta[1], ta[2], tb[0], tb[1], tb[2]}) pin(v, pins);
+      batch[batched] = {{reference(ta[0]), reference(ta[1]), reference(ta[2])}, {reference(tb[0]), reference(tb[1]), reference(tb[2])}};
+      batch_pairs[batched] = &pair;
+      if (++batched == kCloserBatch) pin_batch();
     }
+    pin_batch();
     // Folds: neighbours across an edge turned more than 90 degrees against each other
     // where the linear blend keeps them less than 90 degrees apart. Such a crease folds
     // the skin through itself within a few triangles, where pairs are too near to test.
@@ -718,16 +733,21 @@ class PoissonSolver : public FaceSolver {
     const Eigen::Index s = modification_count_;
     if (s == 0) return;
     auto u_dot = [](const Modification& u, const Modification& z) {
-      return u.weights[0] * z.column_at(u.vertices[0]) + u.weights[1] * z.column_at(u.vertices[1]) +
-             u.weights[2] * z.column_at(u.vertices[2]);
+      double sum = 0.0;  // a pin has one vertex (weights 1, 0, 0), a marker up to three
+      for (int a = 0; a < 3; ++a)
+        if (u.weights[a] != 0.0) sum += u.weights[a] * z.column_at(u.vertices[a]);
+      return sum;
     };
+    // U^T Z = U^T A0^-1 U is symmetric: its lower triangle, mirrored.
+    for (Eigen::Index i = 0; i < s; ++i)
+      for (Eigen::Index j = 0; j <= i; ++j)
+        small_(i, j) = small_(j, i) = u_dot(modifications_[std::size_t(i)], modifications_[std::size_t(j)]);
     for (Eigen::Index i = 0; i < s; ++i) {
       const Modification& mi = modifications_[std::size_t(i)];
       Eigen::Vector3d uy = Eigen::Vector3d::Zero();
       for (int a = 0; a < 3; ++a) uy += mi.weights[a] * y.col(mi.vertices[a]);
       for (Eigen::Index j = 0; j < s; ++j) {
         const Modification& mj = modifications_[std::size_t(j)];
-        small_(i, j) = u_dot(mi, mj);
         uy += small_(i, j) * mj.scale * mj.target;
       }
       small_(i, i) += 1.0 / mi.scale;

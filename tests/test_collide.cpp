@@ -292,6 +292,54 @@ TEST_CASE("triangle distance matches brute-force sampling and is symmetric") {
   CHECK(intersecting < 40);
 }
 
+// The batched test must agree with the single one pair for pair, also where the
+// distance is within a hair of epsilon, for crossing, touching, sliver and zero-area
+// triangles, and far from the origin (its float pass works relative to a corner).
+TEST_CASE("the batched closeness test agrees with the single-pair test at the threshold") {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> coord(-1.0, 1.0), near(0.998, 1.002);
+  std::vector<TrianglePairCorners> pairs;
+  std::vector<double> epsilons;
+  auto add = [&](const std::array<Vec3, 3>& a, const std::array<Vec3, 3>& b, double epsilon) {
+    pairs.push_back({{a[0], a[1], a[2]}, {b[0], b[1], b[2]}});
+    epsilons.push_back(epsilon);
+  };
+  for (int trial = 0; trial < 400; ++trial) {
+    const Vec3 origin = trial % 4 == 3 ? Vec3(1e3, -2e3, 5e2) : Vec3::Zero();
+    const double size = trial % 5 == 0 ? 1e-3 : 0.3;  // lip-sized and tiny triangles
+    std::array<Vec3, 3> a, b;
+    const Vec3 offset(coord(rng), coord(rng), coord(rng));
+    for (auto& p : a) p = origin + size * Vec3(coord(rng), coord(rng), coord(rng));
+    for (auto& p : b) p = origin + size * (Vec3(coord(rng), coord(rng), coord(rng)) + 0.8 * offset);
+    if (trial % 7 == 0) b[2] = b[0] + 1e-9 * (b[1] - b[0]);  // a sliver
+    if (trial % 11 == 0) b[2] = b[1];                        // zero area
+    const double distance = tri_distance(a, b);
+    add(a, b, distance > 0.0 ? distance * near(rng) : 1e-3 * size);  // epsilon within 0.2% of the distance
+    add(a, b, 0.01);                                                 // the solver's default
+  }
+  std::size_t closer = 0;
+  for (std::size_t first = 0; first < pairs.size(); first += kCloserBatch) {
+    const std::size_t count = std::min<std::size_t>(kCloserBatch, pairs.size() - first);
+    // One epsilon per batch call: run each pair's epsilon through its own batch of one
+    // and the whole batch at the default.
+    for (std::size_t k = 0; k < count; ++k) {
+      const auto& p = pairs[first + k];
+      const bool single = triangles_closer_than(p.a[0], p.a[1], p.a[2], p.b[0], p.b[1], p.b[2], epsilons[first + k]);
+      const uint32_t batched = triangles_closer_than(std::span(&p, 1), epsilons[first + k]);
+      INFO("pair " << first + k << " epsilon " << epsilons[first + k]);
+      CHECK(batched == (single ? 1u : 0u));
+      closer += single;
+    }
+    const uint32_t bits = triangles_closer_than(std::span(pairs.data() + first, count), 0.01);
+    for (std::size_t k = 0; k < count; ++k) {
+      const auto& p = pairs[first + k];
+      CHECK(((bits >> k) & 1u) == (triangles_closer_than(p.a[0], p.a[1], p.a[2], p.b[0], p.b[1], p.b[2], 0.01) ? 1u : 0u));
+    }
+  }
+  CHECK(closer > pairs.size() / 10);  // both outcomes are exercised
+  CHECK(closer < pairs.size() * 9 / 10);
+}
+
 TEST_CASE("degenerate triangles are measured as segments") {
   const std::array<Vec3, 3> a{Vec3(-1, -1, 0), Vec3(2, -1, 0), Vec3(-1, 2, 0)};
   // A zero-area "triangle" (a segment) hanging above a, and one crossing it.
