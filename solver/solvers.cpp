@@ -795,7 +795,8 @@ class PoissonSolver : public FaceSolver {
         sz[j] += cz * z[j];
       }
     }
-    // Float sums of four pin columns at a time: one pass over the sums per four columns.
+    // Float sums of eight pin columns at a time: one pass over the sums per eight columns
+    // (four measured 20% slower, sixteen no faster).
     auto add_pins = [&]<int Count>(std::integral_constant<int, Count>) {
       const int16_t* __restrict z[Count];
       float cx[Count], cy[Count], cz[Count];
@@ -820,7 +821,7 @@ class PoissonSolver : public FaceSolver {
       }
       i += Count;
     };
-    while (i + 4 <= s) add_pins(std::integral_constant<int, 4>{});
+    while (i + 8 <= s) add_pins(std::integral_constant<int, 8>{});
     while (i < s) add_pins(std::integral_constant<int, 1>{});
     x += correction_.transpose();
   }
