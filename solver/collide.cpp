@@ -376,18 +376,19 @@ LaneMask separated_along(const Lanes3& axis, const Lanes3* a, const Lanes3* b, c
 // a separating axis (centroids, normals, edge pairs), or closer by a corner's distance
 // to the other triangle or an edge's to an edge. The exact test decides the rest (on
 // the lips mostly pairs that cross).
-uint32_t closer_than_16(const TrianglePairCorners* pairs, int count, double epsilon) noexcept {
+// corner(lane, k) gives pair `lane`'s corner k: a's three, then b's three.
+template <class Corner>
+uint32_t closer_than_16(const Corner& corner_of, int count, double epsilon) noexcept {
   static_assert(kMaxLeafSize == 16);
   if (count <= 0 || !(epsilon > 0.0)) return 0;
   // Corners relative to a's first corner, so that float keeps their detail.
   alignas(64) float corner[5][3][16] = {};
   alignas(64) float extent[16] = {};
   for (int lane = 0; lane < count; ++lane) {
-    const TrianglePairCorners& pair = pairs[lane];
-    const Vec3 points[5] = {pair.a[1], pair.a[2], pair.b[0], pair.b[1], pair.b[2]};
+    const Vec3 origin = corner_of(lane, 0);
     double largest = 0.0;
     for (int k = 0; k < 5; ++k) {
-      const Vec3 d = points[k] - pair.a[0];
+      const Vec3 d = corner_of(lane, k + 1) - origin;
       largest = std::max(largest, d.cwiseAbs().maxCoeff());
       for (int c = 0; c < 3; ++c) corner[k][c][lane] = float(d[c]);
     }
@@ -432,7 +433,9 @@ uint32_t closer_than_16(const TrianglePairCorners* pairs, int count, double epsi
   uint32_t undecided = used & ~result & ~lane_bits(apart);
   for (; undecided != 0; undecided &= undecided - 1) {
     const int lane = std::countr_zero(undecided);
-    if (closer_than_impl(pairs[lane].a, pairs[lane].b, epsilon)) result |= 1u << lane;
+    const Vec3 pa[3] = {corner_of(lane, 0), corner_of(lane, 1), corner_of(lane, 2)};
+    const Vec3 pb[3] = {corner_of(lane, 3), corner_of(lane, 4), corner_of(lane, 5)};
+    if (closer_than_impl(pa, pb, epsilon)) result |= 1u << lane;
   }
   return result;
 }
@@ -959,7 +962,8 @@ bool triangles_closer_than(const Vec3& a0, const Vec3& a1, const Vec3& a2, const
 }
 
 uint32_t triangles_closer_than(std::span<const TrianglePairCorners> pairs, double epsilon) noexcept {
-  return closer_than_16(pairs.data(), int(std::min<std::size_t>(pairs.size(), kCloserBatch)), epsilon);
+  auto corner = [&](int lane, int k) -> const Vec3& { return k < 3 ? pairs[std::size_t(lane)].a[k] : pairs[std::size_t(lane)].b[k - 3]; };
+  return closer_than_16(corner, int(std::min<std::size_t>(pairs.size(), kCloserBatch)), epsilon);
 }
 
 // ---- Candidate sets ----------------------------------------------------------------
@@ -1216,11 +1220,13 @@ bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& position
   };
   const auto slot_triangles = s.tree.slot_triangles();
   // Candidates are tested kCloserBatch at a time.
-  TrianglePairCorners batch[kCloserBatch];
   std::array<int32_t, 2> batch_slots[kCloserBatch];
   int batched = 0;
+  auto corner = [&](int lane, int k) {
+    return Vec3(positions.col(s.tree.slot_vertices(batch_slots[lane][std::size_t(k / 3)])[std::size_t(k % 3)]));
+  };
   auto test_batch = [&] {
-    for (uint32_t close = closer_than_16(batch, batched, epsilon); close != 0; close &= close - 1) {
+    for (uint32_t close = closer_than_16(corner, batched, epsilon); close != 0; close &= close - 1) {
       const auto [slot_a, slot_b] = batch_slots[std::countr_zero(close)];
       const int32_t ta = slot_triangles[std::size_t(slot_a)], tb = slot_triangles[std::size_t(slot_b)];
       if (out.pair_count < pair_capacity) out.pairs[std::size_t(out.pair_count++)] = {std::min(ta, tb), std::max(ta, tb)};
@@ -1233,13 +1239,6 @@ bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& position
     batched = 0;
   };
   const bool complete = s.tree.for_each_overlapping_pair([&](int32_t slot_a, int32_t slot_b) {
-    const auto& va = s.tree.slot_vertices(slot_a);
-    const auto& vb = s.tree.slot_vertices(slot_b);
-    TrianglePairCorners& pair = batch[batched];
-    for (int k = 0; k < 3; ++k) {
-      pair.a[k] = positions.col(va[std::size_t(k)]);
-      pair.b[k] = positions.col(vb[std::size_t(k)]);
-    }
     batch_slots[batched] = {slot_a, slot_b};
     if (++batched == kCloserBatch) test_batch();
   });
