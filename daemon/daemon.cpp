@@ -62,7 +62,7 @@ std::shared_ptr<const Rig> load_configured_rig(const config::RigSection& section
 struct Daemon::Sample {
   int64_t time_ns = 0;
   int64_t cpu_ns = 0;
-  uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed = 0, skipped = 0;
+  uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed = 0, late_start = 0, skipped = 0;
   drivers::SourceHealth source;
   uint64_t recorder_dropped = 0;
   LatencyHistogram::Snapshot latency;
@@ -167,6 +167,7 @@ Daemon::Sample Daemon::take_sample() const {
   s.frames_solved = counters.frames_solved.load();
   s.idle_ticks = counters.idle_ticks.load();
   s.missed = counters.missed_deadlines.load();
+  s.late_start = counters.late_start_misses.load();
   s.skipped = counters.skipped_ticks.load();
   s.source = source_->health();
   s.recorder_dropped = recorder_ ? recorder_->counters().dropped : 0;
@@ -181,6 +182,7 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
   f.frames_solved = to.frames_solved - from.frames_solved;
   f.idle_ticks = to.idle_ticks - from.idle_ticks;
   f.missed_deadlines = to.missed - from.missed;
+  f.late_start_misses = to.late_start - from.late_start;
   f.skipped_ticks = to.skipped - from.skipped;
   f.solved_fps = f.seconds > 0 ? double(f.frames_solved) / f.seconds : 0.0;
   const LatencyHistogram::Snapshot latency = to.latency.since(from.latency);
@@ -305,9 +307,10 @@ void Daemon::supervise_once(int64_t now_ns) {
   if (c.logging.stats_interval_s > 0 && now_ns >= next_stats_ns_) {
     const Sample sample = take_sample();
     const Figures f = figures_between(*stats_sample_, sample);
-    spdlog::info("{:.1f} fps over {:.0f} s, latency p50 {:.2f} p99 {:.2f} max {:.2f} ms, {} missed deadlines, "
-                 "{} idle ticks, CPU {:.0f}%", f.solved_fps, f.seconds, ms(f.latency_p50_ns), ms(f.latency_p99_ns),
-                 ms(f.latency_max_ns), f.missed_deadlines, f.idle_ticks, f.cpu_percent);
+    spdlog::info("{:.1f} fps over {:.0f} s, latency p50 {:.2f} p99 {:.2f} max {:.2f} ms, {} missed deadlines "
+                 "({} started late), {} idle ticks, CPU {:.0f}%", f.solved_fps, f.seconds, ms(f.latency_p50_ns),
+                 ms(f.latency_p99_ns), ms(f.latency_max_ns), f.missed_deadlines, f.late_start_misses, f.idle_ticks,
+                 f.cpu_percent);
     *stats_sample_ = sample;
     next_stats_ns_ = now_ns + int64_t(c.logging.stats_interval_s * kNsPerSecond);
   }
@@ -367,9 +370,9 @@ void Daemon::shutdown(const std::string& reason) {
   }
   const Figures run = figures_since_start();
   spdlog::info("run: {} frames solved in {:.1f} s ({:.1f} fps), latency p50 {:.2f} p99 {:.2f} max {:.2f} ms, "
-               "{} missed deadlines ({} ticks skipped), CPU {:.0f}%", run.frames_solved, run.seconds, run.solved_fps,
-               ms(run.latency_p50_ns), ms(run.latency_p99_ns), ms(run.latency_max_ns), run.missed_deadlines,
-               run.skipped_ticks, run.cpu_percent);
+               "{} missed deadlines ({} started late, {} ticks skipped), CPU {:.0f}%", run.frames_solved, run.seconds,
+               run.solved_fps, ms(run.latency_p50_ns), ms(run.latency_p99_ns), ms(run.latency_max_ns),
+               run.missed_deadlines, run.late_start_misses, run.skipped_ticks, run.cpu_percent);
   write_stats_file(run);
   loop_.reset();
   recorder_.reset();
@@ -392,8 +395,10 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["solved_fps"] = f.solved_fps;
   j["idle_ticks"] = f.idle_ticks;
   j["missed_deadlines"] = f.missed_deadlines;
+  j["late_start_misses"] = f.late_start_misses;
   j["skipped_ticks"] = f.skipped_ticks;
   j["max_wake_late_ms"] = ms(loop_->counters().max_wake_late_ns.load());
+  j["max_tick_ms"] = ms(loop_->counters().max_tick_ns.load());
   j["latency_ms"] = {{"p50", ms(f.latency_p50_ns)}, {"p99", ms(f.latency_p99_ns)}, {"max", ms(f.latency_max_ns)}};
   j["cpu_percent"] = f.cpu_percent;
   j["source"] = {{"overwritten", f.source_overwritten}, {"late", f.source_late}};

@@ -189,9 +189,11 @@ void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
     // Overrun: the work ran past the next deadline. Skip the slots already gone and
     // stay on the grid rather than running late ticks back to back.
     const int64_t end_ns = monotonic_now_ns();
+    store_max(counters_.max_tick_ns, end_ns - wake_ns);
     if (end_ns > deadline_ns) {
       const int64_t skipped = (end_ns - deadline_ns) / period_ns_ + 1;
       add(counters_.missed_deadlines);
+      if (end_ns - wake_ns <= period_ns_) add(counters_.late_start_misses);
       add(counters_.skipped_ticks, uint64_t(skipped));
       deadline_ns += skipped * period_ns_;
     }

@@ -42,8 +42,13 @@ struct LoopCounters {
   std::atomic<uint64_t> frames_solved{0};
   std::atomic<uint64_t> idle_ticks{0};          // no new frame at the tick
   std::atomic<uint64_t> missed_deadlines{0};    // ticks whose work ran past the next deadline
+  // Of those, the ticks whose work took no longer than a period: they missed because
+  // they started late, the thread not running when due (another task or the hypervisor
+  // held its CPU). The others ran longer than a period.
+  std::atomic<uint64_t> late_start_misses{0};
   std::atomic<uint64_t> skipped_ticks{0};       // ticks given up to get back on the grid
   std::atomic<int64_t> max_wake_late_ns{0};     // worst wake-up after a deadline
+  std::atomic<int64_t> max_tick_ns{0};          // longest tick, wake-up to the end of its work
   std::atomic<uint64_t> pipeline_swaps{0};
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_total_ns{};
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_max_ns{};

@@ -66,7 +66,9 @@ missed=$(field missed_deadlines)
 p50=$(field p50)
 p99=$(field p99)
 echo "frames solved $frames in $(num seconds 1) s ($(num solved_fps 1) fps), ticks skipped $(field skipped_ticks)"
-echo "missed deadlines $missed, worst wake-up after a deadline $(num max_wake_late_ms 2) ms"
+late=$(field late_start_misses)
+echo "missed deadlines $missed: $late started late (the solve thread was not running at its deadline), $((missed - late)) ran longer than a period"
+echo "worst wake-up after a deadline $(num max_wake_late_ms 2) ms, longest tick $(num max_tick_ms 2) ms"
 echo "latency received -> published: p50 $(num p50 2) ms, p99 $(num p99 2) ms, max $(num max 2) ms"
 echo "CPU $(num cpu_percent 0)% of one core (whole process)"
 # Mean cost per frame of each stage that costs anything ("stages" in the stats file).
