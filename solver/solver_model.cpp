@@ -235,6 +235,11 @@ ShapeBlocks make_shape_blocks(const Eigen::Matrix3Xd& positions, Eigen::Index sh
   return out;
 }
 
+// The scale BlendTerms stores for a step of at least `step`.
+float stored_scale(double step) noexcept {
+  return half_to_float(half_at_least(float(step / double(BlendTerms::kScaleUnit)))) * BlendTerms::kScaleUnit;
+}
+
 // value(shape, element, component) stored entry by entry within `tolerance` (BlendTerms).
 template <class Value>
 BlendTerms quantise(const ShapeBlocks& blocks, int components, double tolerance, Value&& value) {
@@ -260,12 +265,14 @@ BlendTerms quantise(const ShapeBlocks& blocks, int components, double tolerance,
       }
       widest = std::max(widest, high[e * C + c] - low[e * C + c]);
     }
-    width[e] = 0.5 * widest / kLevels[0] <= tolerance ? 0 : 0.5 * widest / kLevels[1] <= tolerance ? 1 : 2;
+    auto fits = [&](double levels) { return 0.5 * double(stored_scale(widest / levels)) <= tolerance; };
+    width[e] = fits(kLevels[0]) ? 0 : fits(kLevels[1]) ? 1 : 2;
   }
   // Positions: per block its entries by width; each block's values start on a cache line.
   out.position_of_entry.resize(entries);
   out.shape.resize(entries);
-  out.scale_offset.resize(entries * 2 * C);
+  out.scales.resize(entries * C);
+  out.offsets.resize(entries * C);
   std::vector<std::size_t> value_at(entries);
   std::size_t bytes = 0;
   int32_t position = 0;
@@ -287,10 +294,11 @@ BlendTerms quantise(const ShapeBlocks& blocks, int components, double tolerance,
     out.blocks.push_back(run);
   }
   out.values.assign(bytes, std::byte{0});
+  std::vector<float> scale(C);
   for (std::size_t e = 0; e < entries; ++e) {
     const int32_t* slots = blocks.element_of_slot.data() + std::size_t(blocks.entries[e].block) * B;
-    float* scale = out.scale_offset.data() + std::size_t(out.position_of_entry[e]) * 2 * C;
-    float* offset = scale + C;
+    const std::size_t position = std::size_t(out.position_of_entry[e]);
+    float* offset = out.offsets.data() + position * C;
     std::byte* values = out.values.data() + value_at[e];
     for (std::size_t c = 0; c < C; ++c) {
       const double range = high[e * C + c] - low[e * C + c];
@@ -299,8 +307,9 @@ BlendTerms quantise(const ShapeBlocks& blocks, int components, double tolerance,
         offset[c] = 0.0f;
       } else {
         offset[c] = float(0.5 * (low[e * C + c] + high[e * C + c]));
-        scale[c] = range > 0.0 ? float(range / kLevels[width[e]]) : 1.0f;
+        scale[c] = range > 0.0 ? stored_scale(range / kLevels[width[e]]) : 1.0f;
       }
+      out.scales[position * C + c] = half_at_least(scale[c] / BlendTerms::kScaleUnit);
       const long limit = width[e] == 0 ? 127 : 32767;
       for (int i = 0; i < B; ++i) {
         const double v = slots[i] < 0 ? double(offset[c]) : value(blocks.entries[e].shape, slots[i], int(c));
@@ -469,7 +478,6 @@ double BlendTerms::at(int32_t entry, int component, int slot) const noexcept {
   }
   at += (std::size_t(k) * entry_values() + std::size_t(component) * ShapeBlocks::kBlock + std::size_t(slot)) *
         std::size_t(kBytesPerValue[w]);
-  const float* scale = scale_offset.data() + std::size_t(position) * 2 * C;
   double q = 0.0;
   if (w == 0) {
     q = double(int8_t(values[at]));
@@ -482,7 +490,27 @@ double BlendTerms::at(int32_t entry, int component, int slot) const noexcept {
     std::memcpy(&v, values.data() + at, sizeof v);
     q = double(v);
   }
-  return double(scale[C + std::size_t(component)]) + double(scale[component]) * q;
+  const std::size_t at_component = std::size_t(position) * C + std::size_t(component);
+  return double(offsets[at_component]) + double(half_to_float(scales[at_component]) * kScaleUnit) * q;
+}
+
+float half_to_float(uint16_t h) noexcept {
+  const int exponent = (h >> 10) & 0x1f, mantissa = h & 0x3ff;
+  const float magnitude = exponent == 0    ? std::ldexp(float(mantissa), -24)
+                          : exponent == 31 ? (mantissa ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity())
+                                           : std::ldexp(float(1024 + mantissa), exponent - 25);
+  return (h & 0x8000) ? -magnitude : magnitude;
+}
+
+uint16_t half_at_least(float x) noexcept {
+  // Positive halves grow with their bit patterns: the first one not below x.
+  uint16_t low = 0, high = 0x7bff;  // 0x7bff: 65504, the largest finite half
+  while (low < high) {
+    const auto middle = uint16_t(low + (high - low) / 2);
+    if (half_to_float(middle) < x) low = uint16_t(middle + 1);
+    else high = middle;
+  }
+  return low;
 }
 
 int32_t ShapeBlocks::find_entry(Eigen::Index shape, int block) const noexcept {

@@ -50,7 +50,9 @@ struct ShapeBlocks {
 // - plain float (offset 0, scale 1) where even 16 bits would be.
 // Per block the 8-bit entries come first, then the 16-bit and the float ones, their
 // values in one contiguous run. Every value costs the same: one widening load, one
-// conversion and one multiply-add.
+// conversion and one multiply-add. The scales are IEEE half floats in units of
+// kScaleUnit (the smallest at least the step needed; 11 bits keep them within 0.1%),
+// the offsets floats.
 struct BlendTerms {
   struct BlockRun {
     std::size_t values = 0;  // byte offset of the block's first value (64-byte aligned)
@@ -59,12 +61,14 @@ struct BlendTerms {
   };
   static constexpr int kWidths = 3;
   static constexpr int kBytesPerValue[kWidths] = {1, 2, 4};
+  static constexpr float kScaleUnit = 1.0f / 32768.0f;  // float entries' scale, 1, is the half 32768
 
   int components = 0;
   std::vector<BlockRun> blocks;
   // Per position (entries in stored order):
   std::vector<int32_t> shape;
-  HugePageVector<float> scale_offset;  // 2 * components: the scales, then the offsets
+  HugePageVector<uint16_t> scales;  // components: half floats, times kScaleUnit
+  HugePageVector<float> offsets;    // components
   HugePageVector<std::byte> values;
   std::vector<int32_t> position_of_entry;  // per ShapeBlocks entry
 
@@ -72,6 +76,11 @@ struct BlendTerms {
   double at(int32_t entry, int component, int slot) const noexcept;
   std::size_t entry_values() const noexcept { return std::size_t(components) * ShapeBlocks::kBlock; }
 };
+
+// IEEE half-precision floats (BlendTerms' scales): the value of h, and the smallest
+// half at least x (0 <= x <= 65504).
+float half_to_float(uint16_t h) noexcept;
+uint16_t half_at_least(float x) noexcept;
 
 // Columns of an N-row matrix as 16-bit fixed point, scale * q with one scale per column
 // spanning its largest magnitude: rounding is at most 1/65534 of that, and a quarter of

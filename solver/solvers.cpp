@@ -73,6 +73,19 @@ Lanes16 load_head(const float* p) noexcept {
 #endif
 }
 
+// `Components` half floats from p as floats into the first lanes, zeros after.
+template <int Components>
+Lanes16 load_half_head(const uint16_t* p) noexcept {
+  static_assert(Components <= 16);
+#if defined(__AVX512F__) && defined(__AVX512BW__) && defined(__AVX512VL__)
+  return Lanes16(_mm512_cvtph_ps(_mm256_maskz_loadu_epi16(__mmask16((1u << Components) - 1), p)));
+#else
+  Lanes16 out = {};
+  for (int i = 0; i < Components; ++i) out[i] = half_to_float(p[i]);
+  return out;
+#endif
+}
+
 class StageClock {
  public:
   explicit StageClock(SolveResult& out) : out_(out), start_(monotonic_now_ns()), last_(start_) { out.stage_ns.fill(0); }
@@ -278,10 +291,10 @@ void sum_block(const BlendTerms& terms, int block, const float* weights, float (
     for (const int32_t end = position + run.count[Width]; position < end; ++position, values += kEntryBytes) {
       const float w = weights[terms.shape[std::size_t(position)]];
       if (w == 0.0f) continue;
-      const float* scale = terms.scale_offset.data() + std::size_t(position) * 2 * Components;
+      const auto at = std::size_t(position) * Components;
       const Lanes16 wv = Lanes16{} + w;
-      offsets += wv * load_head<Components>(scale + Components);
-      const Lanes16 f = wv * load_head<Components>(scale);
+      offsets += wv * load_head<Components>(terms.offsets.data() + at);
+      const Lanes16 f = (wv * BlendTerms::kScaleUnit) * load_half_head<Components>(terms.scales.data() + at);
       std::memcpy(factor, &f, sizeof f);
 #pragma GCC unroll 16
       for (int c = 0; c < Components; ++c)
@@ -420,8 +433,8 @@ class PoissonSolver : public FaceSolver {
     correction_.resize(N, 3);
     active_.resize(std::size_t(m.shape_count()));
     const BlendTerms& terms = blend_ == Blend::kNonlinear ? m.triangle_nonlinear : m.triangle_gradient;
-    streamed_ = {std::as_bytes(std::span(terms.values)), std::as_bytes(std::span(terms.scale_offset)),
-                 std::as_bytes(std::span(operator_))};
+    streamed_ = {std::as_bytes(std::span(terms.values)), std::as_bytes(std::span(terms.scales)),
+                 std::as_bytes(std::span(terms.offsets)), std::as_bytes(std::span(operator_))};
   }
 
   std::string_view name() const noexcept override { return blend_ == Blend::kNonlinear ? "nonlinear" : "dt"; }

@@ -1,3 +1,4 @@
+#include <cmath>
 #include <numbers>
 #include <random>
 
@@ -236,11 +237,32 @@ TEST_CASE("too few markers hold the previous result and unknown solvers are reje
   CHECK_THROWS_WITH(build_solver_model(rig, layout, too_many), Catch::Contains("collision_max_pins 2000 is not in [0, 1024]"));
 }
 
+TEST_CASE("half floats decode exactly and half_at_least gives the smallest half not below x") {
+  CHECK(half_to_float(0x3c00) == 1.0f);
+  CHECK(half_to_float(0x0001) == std::ldexp(1.0f, -24));  // smallest subnormal
+  CHECK(half_to_float(0x0400) == std::ldexp(1.0f, -14));  // smallest normal
+  CHECK(half_to_float(0x7bff) == 65504.0f);
+  CHECK(half_to_float(0xc000) == -2.0f);
+  CHECK(half_at_least(32768.0f) == 0x7800);  // BlendTerms' float entries: scale 1 in units of 2^-15
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> exponent(-26.0f, 15.9f);
+  for (int i = 0; i < 2000; ++i) {
+    const float x = std::exp2(exponent(rng));
+    const uint16_t h = half_at_least(x);
+    INFO("x " << x << " half " << h);
+    CHECK(half_to_float(h) >= x);
+    if (h > 0) CHECK(half_to_float(uint16_t(h - 1)) < x);
+    if (x >= std::ldexp(1.0f, -14)) CHECK(half_to_float(h) <= x * (1.0f + std::ldexp(1.0f, -10)));  // normal: 10-bit mantissa
+  }
+}
+
 TEST_CASE("the Poisson solvers stream their blend's terms and operators, the linear solver nothing") {
   const Rig& rig = BuiltinFace::instance().rig();
   const auto model = build_solver_model(rig, spread_marker_layout(rig, 60));
   const std::size_t operators = std::size_t(model->triangle_blocks.block_count()) * 9 * ShapeBlocks::kBlock * sizeof(float);
-  auto bytes_of = [](const BlendTerms& t) { return t.values.size() + t.scale_offset.size() * sizeof(float); };
+  auto bytes_of = [](const BlendTerms& t) {
+    return t.values.size() + t.scales.size() * sizeof(uint16_t) + t.offsets.size() * sizeof(float);
+  };
   auto streamed = [&](const char* name) {
     const auto solver = make_solver(name, model);
     std::size_t total = 0;
