@@ -54,14 +54,14 @@ struct ShapeBlocks {
 // kScaleUnit (the smallest at least the step needed; 11 bits keep them within 0.1%),
 // the offsets floats.
 struct BlendTerms {
-  struct BlockRun {
-    std::size_t values = 0;  // byte offset of the block's first value (64-byte aligned)
-    int32_t first = 0;       // its first position
-    int32_t count[3] = {};   // its 8-bit, 16-bit and float entries, in that order
-  };
   static constexpr int kWidths = 3;
   static constexpr int kBytesPerValue[kWidths] = {1, 2, 4};
   static constexpr float kScaleUnit = 1.0f / 32768.0f;  // float entries' scale, 1, is the half 32768
+  struct BlockRun {
+    std::size_t values = 0;       // byte offset of the block's first value (64-byte aligned)
+    int32_t first = 0;            // its first position
+    int32_t count[kWidths] = {};  // its 8-bit, 16-bit and float entries, in that order
+  };
 
   int components = 0;
   std::vector<BlockRun> blocks;
