@@ -131,7 +131,7 @@ class WeightsStage {
   WeightsStage(const SolverModel& model, bool follow_paths)
       : model_(model), refinements_(follow_paths && !model.marker_paths.empty() ? model.params.weight_refinements : 0),
         qp_(model.shape_count()), H_(model.shape_count(), model.shape_count()), g_(model.shape_count()),
-        previous_(Eigen::VectorXd::Zero(model.shape_count())), residual_(3 * model.marker_count()),
+        previous_(Eigen::VectorXd::Zero(model.shape_count())), previous_linear_(previous_), residual_(3 * model.marker_count()),
         present_(model.marker_count()) {
     if (refinements_ > 0) {
       const std::size_t P = model.marker_paths.size();
@@ -178,13 +178,19 @@ class WeightsStage {
     H_.diagonal().array() += p.alpha + p.mu;
     g_.noalias() = m.marker_basis.transpose() * residual_;
     g_ += p.alpha * previous_;
-    weights = previous_;
+    // Warm start: the last frame's solution of this same problem, whose bounds are the
+    // likeliest to hold again (the refined weights' differ more).
+    weights = previous_linear_;
     qp_.solve(H_, g_, 0.0, 1.0, weights);
+    previous_linear_ = weights;
     for (int i = 0; i < refinements_; ++i) refine(targets, weights);
     previous_ = weights;
     return used;
   }
-  void reset() noexcept { previous_.setZero(); }
+  void reset() noexcept {
+    previous_.setZero();
+    previous_linear_.setZero();
+  }
   bool usable(std::span<const uint8_t> present, const Eigen::Matrix3Xd& targets) const noexcept {
     uint32_t n = 0;
     for (Eigen::Index k = 0; k < model_.marker_count(); ++k) n += present[std::size_t(k)] && targets.col(k).allFinite();
@@ -259,7 +265,9 @@ class WeightsStage {
   std::vector<int> turning_shapes_;       // shapes with marker paths
   std::vector<int> turning_of_shape_;     // per shape: index into turning_shapes_ or -1
   std::vector<double> path_turn_, path_cos_, path_sin_;  // per marker path: w_shape * angle, its cos and sin
-  Eigen::VectorXd g_, previous_, residual_;
+  Eigen::VectorXd g_, previous_;
+  Eigen::VectorXd previous_linear_;  // the last Eq. 2 solution before refinement
+  Eigen::VectorXd residual_;
   Eigen::Matrix3Xd path_difference_;
   std::vector<int> path_start_, path_of_marker_;  // marker paths grouped by marker (CSR)
   Eigen::Array<bool, Eigen::Dynamic, 1> present_;
