@@ -32,20 +32,22 @@ template <class F>
 void for_each_changed_triangle(const SolverModel& m, Eigen::Index shape, F&& f) {
   constexpr int B = ShapeBlocks::kBlock;
   constexpr int C = SolverModel::kNonlinearComponents;
+  double stored[C * B];
   for (const int32_t e : m.triangle_blocks.entries_of_shape(shape)) {
     const std::size_t first = std::size_t(m.triangle_blocks.entries[std::size_t(e)].block) * B;
+    m.triangle_nonlinear.decode(e, stored);
     for (int i = 0; i < B; ++i) {
       const int32_t t = m.triangle_blocks.element_of_slot[first + std::size_t(i)];
       if (t < 0) continue;
-      double stored[C];
+      double local[C];
       bool changes = false;
       for (int c = 0; c < C; ++c) {
-        stored[c] = m.triangle_nonlinear.at(e, c, i);
-        changes = changes || stored[c] != 0.0;
+        local[c] = stored[c * B + i];
+        changes = changes || local[c] != 0.0;
       }
       if (!changes) continue;
-      const Eigen::Matrix3d s = m.world_stretch(t, stored + 3);
-      const std::array<double, 9> v = {stored[0], stored[1], stored[2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
+      const Eigen::Matrix3d s = m.world_stretch(t, local + 3);
+      const std::array<double, 9> v = {local[0], local[1], local[2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
       f(Eigen::Index(t), v);
     }
   }

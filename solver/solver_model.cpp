@@ -464,24 +464,29 @@ void PinColumns::set_column(Eigen::Index c, const Eigen::Ref<const Eigen::Vector
     q[r] = int16_t(std::clamp(std::lround(column[r] / double(float(step))), -32767L, 32767L));
 }
 
-double BlendTerms::at(int32_t entry, int component, int slot) const noexcept {
-  const int32_t position = position_of_entry[std::size_t(entry)];
-  const auto run = std::prev(std::upper_bound(blocks.begin(), blocks.end(), position,
+BlendTerms::Located BlendTerms::locate(int32_t entry) const noexcept {
+  Located l;
+  l.position = std::size_t(position_of_entry[std::size_t(entry)]);
+  const auto run = std::prev(std::upper_bound(blocks.begin(), blocks.end(), int32_t(l.position),
                                               [](int32_t p, const BlockRun& r) { return p < r.first; }));
-  const auto C = std::size_t(components);
-  std::size_t at = run->values;
-  int32_t k = position - run->first;
-  int w = 0;
-  for (; w + 1 < kWidths && k >= run->count[w]; ++w) {
-    at += std::size_t(run->count[w]) * entry_values() * std::size_t(kBytesPerValue[w]);
-    k -= run->count[w];
+  const std::size_t entry_values = std::size_t(components) * ShapeBlocks::kBlock;
+  l.values = run->values;
+  int32_t k = int32_t(l.position) - run->first;
+  for (; l.width + 1 < kWidths && k >= run->count[l.width]; ++l.width) {
+    l.values += std::size_t(run->count[l.width]) * entry_values * std::size_t(kBytesPerValue[l.width]);
+    k -= run->count[l.width];
   }
-  at += (std::size_t(k) * entry_values() + std::size_t(component) * ShapeBlocks::kBlock + std::size_t(slot)) *
-        std::size_t(kBytesPerValue[w]);
+  l.values += std::size_t(k) * entry_values * std::size_t(kBytesPerValue[l.width]);
+  return l;
+}
+
+double BlendTerms::stored(const Located& l, int component, int slot) const noexcept {
+  const std::size_t at = l.values + (std::size_t(component) * ShapeBlocks::kBlock + std::size_t(slot)) *
+                                        std::size_t(kBytesPerValue[l.width]);
   double q = 0.0;
-  if (w == 0) {
+  if (l.width == 0) {
     q = double(int8_t(values[at]));
-  } else if (w == 1) {
+  } else if (l.width == 1) {
     int16_t v;
     std::memcpy(&v, values.data() + at, sizeof v);
     q = double(v);
@@ -490,8 +495,18 @@ double BlendTerms::at(int32_t entry, int component, int slot) const noexcept {
     std::memcpy(&v, values.data() + at, sizeof v);
     q = double(v);
   }
-  const std::size_t at_component = std::size_t(position) * C + std::size_t(component);
+  const std::size_t at_component = l.position * std::size_t(components) + std::size_t(component);
   return double(offsets[at_component]) + double(half_to_float(scales[at_component]) * kScaleUnit) * q;
+}
+
+double BlendTerms::at(int32_t entry, int component, int slot) const noexcept {
+  return stored(locate(entry), component, slot);
+}
+
+void BlendTerms::decode(int32_t entry, std::span<double> out) const noexcept {
+  const Located l = locate(entry);
+  for (int c = 0; c < components; ++c)
+    for (int i = 0; i < ShapeBlocks::kBlock; ++i) out[std::size_t(c * ShapeBlocks::kBlock + i)] = stored(l, c, i);
 }
 
 float half_to_float(uint16_t h) noexcept {

@@ -72,9 +72,18 @@ struct BlendTerms {
   HugePageVector<std::byte> values;
   std::vector<int32_t> position_of_entry;  // per ShapeBlocks entry
 
-  // The stored value of a ShapeBlocks entry.
+  // The stored value of a ShapeBlocks entry; all of them, component-major
+  // (components x kBlock).
   double at(int32_t entry, int component, int slot) const noexcept;
-  std::size_t entry_values() const noexcept { return std::size_t(components) * ShapeBlocks::kBlock; }
+  void decode(int32_t entry, std::span<double> out) const noexcept;
+
+ private:
+  struct Located {
+    std::size_t position = 0, values = 0;  // the entry's position and its first value's byte
+    int width = 0;
+  };
+  Located locate(int32_t entry) const noexcept;
+  double stored(const Located& entry, int component, int slot) const noexcept;
 };
 
 // IEEE half-precision floats (BlendTerms' scales): the value of h, and the smallest
