@@ -1,5 +1,6 @@
 #pragma once
 // Time is int64 nanoseconds on CLOCK_MONOTONIC everywhere; names end in _ns.
+#include <cerrno>
 #include <cstdint>
 #include <ctime>
 
@@ -14,6 +15,12 @@ inline int64_t monotonic_now_ns() noexcept {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return int64_t(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+}
+
+// Sleeps until deadline_ns on CLOCK_MONOTONIC, through signals. Real-time safe.
+inline void sleep_until(int64_t deadline_ns) noexcept {
+  timespec ts{time_t(deadline_ns / kNsPerSecond), long(deadline_ns % kNsPerSecond)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {}
 }
 
 // SMPTE-style timecode as carried by capture sources (Live Link Face, C3D, NatNet).

@@ -1,11 +1,10 @@
 #include "daemon/solve_loop.hpp"
 
-#include <cerrno>
+#include <algorithm>
 #include <cmath>
-#include <cstring>
-#include <ctime>
 
 #include "core/time.hpp"
+#include "daemon/deadline_grid.hpp"
 
 namespace facecap::daemon {
 namespace {
@@ -22,11 +21,6 @@ constexpr double kPhaseLockRateTolerance = 0.01;
 constexpr int64_t kLockstepIdleNs = 200 * kNsPerUs;
 // Pre-faulted so that the solve thread's stack never page-faults in the loop.
 constexpr std::size_t kStackPrefaultBytes = 256 * 1024;
-
-void sleep_until(int64_t deadline_ns) noexcept {
-  timespec ts{time_t(deadline_ns / kNsPerSecond), long(deadline_ns % kNsPerSecond)};
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {}
-}
 
 void sleep_for(int64_t ns) noexcept { sleep_until(monotonic_now_ns() + ns); }
 
@@ -176,26 +170,22 @@ void SolveLoop::wait_for_tick(int64_t deadline_ns) noexcept {
 }
 
 void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
-  int64_t deadline_ns = epoch_ns;
+  DeadlineGrid grid(epoch_ns, period_ns_);
   while (!stop_requested_.load(std::memory_order_acquire)) {
-    wait_for_tick(deadline_ns);
+    wait_for_tick(grid.deadline_ns());
     const int64_t wake_ns = monotonic_now_ns();
-    store_max(counters_.max_wake_late_ns, wake_ns - deadline_ns);
+    store_max(counters_.max_wake_late_ns, wake_ns - grid.deadline_ns());
     tick(wake_ns);
     if (source_finished_.load(std::memory_order_relaxed)) break;
 
-    deadline_ns += period_ns_ + phase_correction_ns_;
-    phase_correction_ns_ = 0;
-    // Overrun: the work ran past the next deadline. Skip the slots already gone and
-    // stay on the grid rather than running late ticks back to back.
     const int64_t end_ns = monotonic_now_ns();
     store_max(counters_.max_tick_ns, end_ns - wake_ns);
-    if (end_ns > deadline_ns) {
-      const int64_t skipped = (end_ns - deadline_ns) / period_ns_ + 1;
+    const TickOutcome outcome = grid.advance(wake_ns, end_ns, phase_correction_ns_);
+    phase_correction_ns_ = 0;
+    if (outcome.missed) {
       add(counters_.missed_deadlines);
-      if (end_ns - wake_ns <= period_ns_) add(counters_.late_start_misses);
-      add(counters_.skipped_ticks, uint64_t(skipped));
-      deadline_ns += skipped * period_ns_;
+      if (outcome.started_late) add(counters_.late_start_misses);
+      add(counters_.skipped_ticks, outcome.skipped);
     }
   }
 }

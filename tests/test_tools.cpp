@@ -216,3 +216,21 @@ TEST_CASE("Live Link Face weights drive the ICT rig by ARKit name") {
   const auto half = tools::livelinkface_curves(csv, rig, 30.0, -1);
   CHECK(std::abs(double(half.frames.size()) - double(curves.frames.size()) / 2.0) <= 1.0);
 }
+
+TEST_CASE("loopcheck accounts for every slot of its grid and refuses work longer than the period") {
+  // 0.5 s at 500 Hz with 0.2 ms of computation a tick.
+  const auto report = facecap_json("loopcheck --rate 500 --work-ms 0.2 --seconds 0.5 --json");
+  const auto ticks = report["ticks"].get<uint64_t>();
+  const auto skipped = report["skipped_ticks"].get<uint64_t>();
+  CHECK(ticks > 0);
+  CHECK(ticks + skipped == report["slots"].get<uint64_t>());
+  CHECK(report["slots"].get<uint64_t>() >= 250);
+  CHECK(report["late_start_misses"].get<uint64_t>() <= report["missed_deadlines"].get<uint64_t>());
+  // The calibrated work takes its 0.2 ms (more on a loaded machine, never much less).
+  CHECK(report["tick_ms"]["p50"].get<double>() >= 0.15);
+  CHECK(report["wake_late_ms"]["max"].get<double>() >= report["wake_late_ms"]["p50"].get<double>());
+
+  const Run too_long = facecap_run("loopcheck --rate 240 --work-ms 5 --seconds 1 2>&1");
+  CHECK(too_long.exit_code == 1);
+  CHECK_THAT(too_long.out, Catch::Matchers::Contains("--work-ms 5: allowed 0 up to the period, 4.167 ms at 240 Hz"));
+}

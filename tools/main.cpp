@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   facecap::tools::add_eval_command(app, exit_code);
   facecap::tools::add_subscribe_command(app, exit_code);
   facecap::tools::add_daemon_demo_command(app, exit_code);
+  facecap::tools::add_loopcheck_command(app, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -23,11 +23,6 @@ constexpr double kTwoPi = 2.0 * std::numbers::pi;
 // The sim thread sleeps in slices this long so that stop() returns promptly at any rate.
 constexpr int64_t kMaxSleepSliceNs = 20 * kNsPerMs;
 
-void sleep_until(int64_t deadline_ns) noexcept {
-  timespec ts{time_t(deadline_ns / kNsPerSecond), long(deadline_ns % kNsPerSecond)};
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {}
-}
-
 bool is_builtin_face(const Rig& rig) {
   const Rig& builtin = BuiltinFace::instance().rig();
   return &rig == &builtin || (rig.name == builtin.name && rig.content_hash() == builtin.content_hash());
