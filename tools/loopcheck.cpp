@@ -100,7 +100,7 @@ double percentile_ms(std::vector<int64_t> values, double q) {
 }
 
 int run_loopcheck(const LoopCheckOptions& options) {
-  if (!(options.rate_hz > 0 && options.rate_hz <= 10000)) throw Error(fmt::format("--rate {} Hz: allowed 1 to 10000", options.rate_hz));
+  if (!(options.rate_hz >= 1 && options.rate_hz <= 10000)) throw Error(fmt::format("--rate {} Hz: allowed 1 to 10000", options.rate_hz));
   const double period_ms = 1000.0 / options.rate_hz;
   if (!(options.work_ms >= 0 && options.work_ms < period_ms))
     throw Error(fmt::format("--work-ms {}: allowed 0 up to the period, {:.3f} ms at {} Hz", options.work_ms, period_ms,
