@@ -16,6 +16,7 @@
 #include "daemon/deadline_grid.hpp"
 #include "tools/commands.hpp"
 #include "tools/progress.hpp"
+#include "tools/tool_support.hpp"
 
 namespace facecap::tools {
 namespace {
@@ -37,8 +38,8 @@ struct LoopCheckResult {
   uint64_t missed = 0;
   uint64_t started_late = 0;
   uint64_t skipped = 0;
-  std::vector<int64_t> wake_late_ns;  // per tick
-  std::vector<int64_t> tick_ns;       // per tick, wake-up to the end of its work
+  std::vector<double> wake_late_ms;  // per tick
+  std::vector<double> tick_ms;       // per tick, wake-up to the end of its work
   RealtimeReport realtime;
 };
 
@@ -63,9 +64,9 @@ uint64_t calibrate_steps(int64_t work_ns) {
   return uint64_t(double(kTrialSteps) * double(work_ns) / double(std::max<int64_t>(best_ns, 1)));
 }
 
-void run_loop(const LoopCheckOptions& options, uint64_t steps, LoopCheckResult& result,
+void run_loop(const LoopCheckOptions& options, const RealtimeRequest& realtime, uint64_t steps, LoopCheckResult& result,
               std::atomic<uint64_t>& slots_done) noexcept {
-  result.realtime = apply_realtime({.fifo = true, .priority = options.priority, .cpus = options.cpus});
+  result.realtime = apply_realtime(realtime);
   const auto period_ns = int64_t(double(kNsPerSecond) / options.rate_hz + 0.5);
   const auto slots = uint64_t(options.seconds * options.rate_hz + 0.5);
   daemon::DeadlineGrid grid(monotonic_now_ns() + 10 * kNsPerMs, period_ns);
@@ -76,8 +77,8 @@ void run_loop(const LoopCheckOptions& options, uint64_t steps, LoopCheckResult& 
     const int64_t wake_ns = monotonic_now_ns();
     sink = compute(steps, sink);
     const int64_t end_ns = monotonic_now_ns();
-    result.wake_late_ns.push_back(wake_ns - grid.deadline_ns());  // reserved: no allocation
-    result.tick_ns.push_back(end_ns - wake_ns);
+    result.wake_late_ms.push_back(double(wake_ns - grid.deadline_ns()) / kNsPerMs);  // reserved: no allocation
+    result.tick_ms.push_back(double(end_ns - wake_ns) / kNsPerMs);
     const daemon::TickOutcome outcome = grid.advance(wake_ns, end_ns);
     ++result.ticks;
     slot += 1 + outcome.skipped;
@@ -92,11 +93,12 @@ void run_loop(const LoopCheckOptions& options, uint64_t steps, LoopCheckResult& 
   if (sink == 0.0) result.ticks = 0;  // keeps the computation from being optimised away
 }
 
-double percentile_ms(std::vector<int64_t> values, double q) {
-  if (values.empty()) return 0.0;
-  const auto k = std::size_t(q * double(values.size() - 1) + 0.5);
-  std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(k), values.end());
-  return double(values[k]) / kNsPerMs;
+struct Spread {
+  double p50, p99, max;
+};
+
+Spread spread_of(std::vector<double>& values) {
+  return {percentile(values, 50.0), percentile(values, 99.0), percentile(values, 100.0)};
 }
 
 int run_loopcheck(const LoopCheckOptions& options) {
@@ -110,11 +112,12 @@ int run_loopcheck(const LoopCheckOptions& options) {
   const uint64_t steps = calibrate_steps(int64_t(options.work_ms * kNsPerMs));
   LoopCheckResult result;
   const auto slots = std::size_t(options.seconds * options.rate_hz + 0.5);
-  result.wake_late_ns.reserve(slots);
-  result.tick_ns.reserve(slots);
+  result.wake_late_ms.reserve(slots);
+  result.tick_ms.reserve(slots);
   std::atomic<uint64_t> slots_done{0};
   // The loop runs on a thread of its own, as facecapd's does; this one draws progress.
-  std::thread loop([&] { run_loop(options, steps, result, slots_done); });
+  const RealtimeRequest realtime{.fifo = true, .priority = options.priority, .cpus = options.cpus};
+  std::thread loop([&] { run_loop(options, realtime, steps, result, slots_done); });
   {
     ProgressBar bar("loopcheck", options.progress || stderr_is_terminal());
     while (slots_done.load(std::memory_order_relaxed) < slots) {
@@ -124,7 +127,7 @@ int run_loopcheck(const LoopCheckOptions& options) {
   }
   loop.join();
 
-  const RealtimeRequest request{.fifo = true, .priority = options.priority, .cpus = options.cpus};
+  const Spread wake_late = spread_of(result.wake_late_ms), tick = spread_of(result.tick_ms);
   const double missed_percent = result.ticks ? 100.0 * double(result.missed) / double(result.ticks) : 0.0;
   if (options.json) {
     nlohmann::json j;
@@ -138,24 +141,18 @@ int run_loopcheck(const LoopCheckOptions& options) {
     j["missed_deadlines"] = result.missed;
     j["late_start_misses"] = result.started_late;
     j["skipped_ticks"] = result.skipped;
-    j["wake_late_ms"] = {{"p50", percentile_ms(result.wake_late_ns, 0.5)},
-                         {"p99", percentile_ms(result.wake_late_ns, 0.99)},
-                         {"max", percentile_ms(result.wake_late_ns, 1.0)}};
-    j["tick_ms"] = {{"p50", percentile_ms(result.tick_ns, 0.5)},
-                    {"p99", percentile_ms(result.tick_ns, 0.99)},
-                    {"max", percentile_ms(result.tick_ns, 1.0)}};
+    j["wake_late_ms"] = {{"p50", wake_late.p50}, {"p99", wake_late.p99}, {"max", wake_late.max}};
+    j["tick_ms"] = {{"p50", tick.p50}, {"p99", tick.p99}, {"max", tick.max}};
     fmt::print("{}\n", j.dump(2));
   } else {
-    for (const std::string& line : result.realtime.describe(request)) fmt::print("{}\n", line);
+    for (const std::string& line : result.realtime.describe(realtime)) fmt::print("{}\n", line);
     fmt::print("{:g} Hz for {:g} s with {:.2f} ms of computation a tick: {} ticks, {} slots skipped\n",
                options.rate_hz, options.seconds, options.work_ms, result.ticks, result.skipped);
     fmt::print("missed deadlines {} ({:.2f}% of ticks): {} started late, {} ran longer than a period\n", result.missed,
                missed_percent, result.started_late, result.missed - result.started_late);
-    fmt::print("wake-up after the deadline: p50 {:.3f} p99 {:.3f} max {:.2f} ms\n",
-               percentile_ms(result.wake_late_ns, 0.5), percentile_ms(result.wake_late_ns, 0.99),
-               percentile_ms(result.wake_late_ns, 1.0));
-    fmt::print("tick, wake-up to end of work: p50 {:.3f} p99 {:.3f} max {:.2f} ms\n", percentile_ms(result.tick_ns, 0.5),
-               percentile_ms(result.tick_ns, 0.99), percentile_ms(result.tick_ns, 1.0));
+    fmt::print("wake-up after the deadline: p50 {:.3f} p99 {:.3f} max {:.2f} ms\n", wake_late.p50, wake_late.p99,
+               wake_late.max);
+    fmt::print("tick, wake-up to end of work: p50 {:.3f} p99 {:.3f} max {:.2f} ms\n", tick.p50, tick.p99, tick.max);
     if (result.missed == 0)
       fmt::print("no deadline missed: the machine held {:g} Hz for {:g} s\n", options.rate_hz, options.seconds);
     else
