@@ -1,5 +1,6 @@
 #include <catch2/catch.hpp>
 
+#include "core/enum_table.hpp"
 #include "core/error.hpp"
 #include "core/frame.hpp"
 #include "core/huge_pages.hpp"
@@ -69,4 +70,23 @@ TEST_CASE("huge-page vectors are aligned, hold their values and map large arrays
   HugePageVector<double> copy = large;
   CHECK(copy == large);
   CHECK(small[999] == 1.5f);
+}
+
+namespace {
+enum class Fruit : uint8_t { kApple, kPear, kPlum };
+constexpr EnumTable kFruits{std::array{EnumEntry{Fruit::kApple, "apple", "red or green"},
+                                       EnumEntry{Fruit::kPear, "pear", "tapered"}}};
+static_assert(kFruits.parse("pear") == Fruit::kPear);
+static_assert(!kFruits.parse("Pear"));
+}  // namespace
+
+TEST_CASE("an enum table parses and names exactly its rows, in order") {
+  CHECK(kFruits.parse("apple") == Fruit::kApple);
+  CHECK_FALSE(kFruits.parse("plum"));
+  CHECK(kFruits.name(Fruit::kPear) == "pear");
+  CHECK(kFruits.name(Fruit::kPlum) == "?");  // a value the table lacks
+  CHECK(kFruits.description(Fruit::kApple) == "red or green");
+  CHECK(kFruits.names() == std::vector<std::string_view>{"apple", "pear"});
+  REQUIRE(kFruits.choices().size() == 2);
+  CHECK(kFruits.choices()[1].description == "tapered");
 }
