@@ -17,4 +17,10 @@ std::string_view solve_stage_name(SolveStage stage) noexcept {
   return "?";
 }
 
+std::string_view solved_flag_name(std::size_t bit) noexcept {
+  static constexpr std::string_view kNames[kSolvedFlagCount] = {
+      "head_pose_held", "too_few_markers", "qp_iteration_cap", "pins_beyond_capacity", "singular_correction"};
+  return bit < kSolvedFlagCount ? kNames[bit] : "?";
+}
+
 }  // namespace facecap

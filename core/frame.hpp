@@ -69,10 +69,19 @@ enum class SolveStage : uint8_t {
 inline constexpr std::size_t kSolveStageCount = static_cast<std::size_t>(SolveStage::kCount);
 std::string_view solve_stage_name(SolveStage stage) noexcept;
 
+// Why a solved frame may be less than it should be. Set by the solve (the solver's
+// SolveResult::status and the marker mapper), counted per bit by the loop, published in
+// shared memory (docs/shm-format.md), recorded, and shown in STATUS and the stats file.
 enum SolvedFlags : uint32_t {
-  kSolvedHeadPoseHeld = 1u << 0,  // too few stable markers: previous head pose reused
-  kSolvedNoMarkers = 1u << 1,     // nothing to solve from: previous face reused
+  kSolvedHeadPoseHeld = 1u << 0,        // too few head markers: the previous head pose reused
+  kSolvedTooFewMarkers = 1u << 1,       // too few face markers to solve: the previous face reused
+  kSolvedQpIterationCap = 1u << 2,      // Eq. 2's box QP stopped at its iteration cap unconverged
+  kSolvedPinsBeyondCapacity = 1u << 3,  // the collision stage needed more pins than collision_max_pins
+  kSolvedSingularCorrection = 1u << 4,  // a low-rank pin correction was singular: solved without it
 };
+inline constexpr std::size_t kSolvedFlagCount = 5;
+// "head_pose_held", "too_few_markers", ... for bit 0, 1, ...; "?" beyond. RT-safe.
+std::string_view solved_flag_name(std::size_t bit) noexcept;
 
 struct SolvedFrame {
   int64_t frame_no = 0;

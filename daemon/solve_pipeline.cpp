@@ -66,7 +66,7 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.stage_ns[std::size_t(SolveStage::kStabilise)] = mapped_ns - out.solve_start_ns;
   out.markers_used = result_.markers_used;
   out.collision_constraints = result_.collision_constraints;
-  out.flags = (mapped.head_pose_held ? kSolvedHeadPoseHeld : 0u) | (result_.held ? kSolvedNoMarkers : 0u);
+  out.flags = (mapped.head_pose_held ? kSolvedHeadPoseHeld : 0u) | (result_.held ? kSolvedTooFewMarkers : 0u);
   out.solve_end_ns = monotonic_now_ns();
 }
 

@@ -140,7 +140,7 @@ void run_solve(const Options& o) {
       solved.stage_ns = result.stage_ns;
       solved.collision_constraints = result.collision_constraints;
       solved.markers_used = result.markers_used;
-      solved.flags = (mapped.head_held ? kSolvedHeadPoseHeld : 0u) | (result.held ? kSolvedNoMarkers : 0u);
+      solved.flags = (mapped.head_held ? kSolvedHeadPoseHeld : 0u) | (result.held ? kSolvedTooFewMarkers : 0u);
       recording->append_marker_frame(frame);
       recording->append_solved_frame(solved);
     }
