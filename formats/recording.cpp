@@ -111,6 +111,9 @@ void encode_header(ByteWriter& w, const RecordingHeader& h, int64_t created_unix
   w.i64(created_unix_ns);
   put_strings(w, h.marker_labels);
   put_strings(w, h.shape_names);
+  // Format version 2 appends:
+  put_string(w, h.rig_units);
+  put_string(w, h.solver_settings);
 }
 
 void decode_header(ByteReader& r, RecordingHeader& h) {
@@ -123,6 +126,10 @@ void decode_header(ByteReader& r, RecordingHeader& h) {
   h.created_unix_ns = r.i64("creation time");
   h.marker_labels = get_strings(r, "marker labels");
   h.shape_names = get_strings(r, "shape names");
+  if (h.format_version >= 2) {
+    h.rig_units = get_string(r, "rig units");
+    h.solver_settings = get_string(r, "solver settings");
+  }
   // Later format versions may append fields; this reader ignores them.
 }
 

@@ -19,13 +19,14 @@
 
 namespace facecap::formats {
 
-inline constexpr uint16_t kRecordingFormatVersion = 1;
+// 2: HEAD gains rig_units and solver_settings (version 1 readers skip them).
+inline constexpr uint16_t kRecordingFormatVersion = 2;
 // Readers of this version understand files whose minimum reader version is <= this.
 inline constexpr uint16_t kRecordingReaderVersion = 1;
 
 struct RecordingHeader {
   uint16_t format_version = kRecordingFormatVersion;  // as read; writers write theirs
-  uint16_t min_reader_version = kRecordingFormatVersion;
+  uint16_t min_reader_version = kRecordingReaderVersion;
   std::string rig_name;                    // empty for marker-only recordings
   uint64_t rig_hash = 0;                   // identity of the rig the solved frames refer to
   std::string source_description;          // "natnet 10.0.0.5:1511", "converted from take.c3d", ...
@@ -35,6 +36,9 @@ struct RecordingHeader {
   int64_t created_unix_ns = 0;             // wall clock at open (CLOCK_REALTIME)
   std::vector<std::string> marker_labels;  // expected marker set, may be empty
   std::vector<std::string> shape_names;    // rig shapes, the order of SolvedFrame::weights
+  // Format version 2 (empty when read from version 1):
+  std::string rig_units;                   // the solved frames' length unit ("mm", "cm", "m")
+  std::string solver_settings;             // the [solver] section the frames were solved with (TOML)
 };
 
 enum class ChunkKind : uint8_t { kMarkerFrame, kSolvedFrame };

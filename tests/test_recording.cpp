@@ -26,6 +26,8 @@ RecordingHeader test_header() {
   h.created_unix_ns = 1'700'000'000'000'000'000;
   h.marker_labels = {"nose", "chin", "brow"};
   h.shape_names = {"jawOpen", "eyeBlink_L"};
+  h.rig_units = "cm";
+  h.solver_settings = "method = \"nonlinear\"\nalpha = 0.1\n";
   return h;
 }
 
@@ -123,6 +125,8 @@ TEST_CASE("Recording: header and frames round-trip through the index", "[recordi
   CHECK(h.rate_hz == want.rate_hz);
   CHECK(h.created_unix_ns == want.created_unix_ns);
   CHECK(h.marker_labels == want.marker_labels);
+  CHECK(h.rig_units == want.rig_units);
+  CHECK(h.solver_settings == want.solver_settings);
   CHECK(h.shape_names == want.shape_names);
   REQUIRE(reader.marker_frame_count() == 3);
   REQUIRE(reader.solved_frame_count() == 2);
@@ -302,4 +306,16 @@ TEST_CASE("Recording <-> take: labels become slots, absent markers missing", "[r
   CHECK(live.frames[1].markers[1].position == Eigen::Vector3d(4, 5, 6));
   CHECK(live.rate_hz == Approx(100.0));  // from the timestamps: the header had none
   CHECK(count_gaps(live).missing_samples == 2);
+}
+
+TEST_CASE("Recording: a format version 1 header reads without the fields version 2 appended", "[recording]") {
+  const auto path = write_small_recording(facecap::test::scratch_dir("recording-v1"));
+  std::vector<char> bytes = read_file_bytes(path);
+  bytes[8] = 1;  // format_version: the HEAD payload's appended fields are then unknown
+  const RecordingReader reader(std::span<const char>(bytes), "v1");
+  CHECK(reader.header().format_version == 1);
+  CHECK(reader.header().shape_names == test_header().shape_names);
+  CHECK(reader.header().rig_units.empty());
+  CHECK(reader.header().solver_settings.empty());
+  CHECK(reader.solved_frame_count() == 2);
 }
