@@ -1,4 +1,4 @@
-// Marker sources: the mailbox, the registry, the simulated capture and replay pacing.
+// Marker sources: the driver table, the simulated capture and replay pacing.
 #include <cmath>
 #include <thread>
 
@@ -6,7 +6,6 @@
 
 #include "core/error.hpp"
 #include "core/time.hpp"
-#include "drivers/latest_mailbox.hpp"
 #include "drivers/registry.hpp"
 #include "drivers/replay/replay_source.hpp"
 #include "drivers/sim/sim_source.hpp"
@@ -62,51 +61,6 @@ ReplayOptions replay_options(const std::filesystem::path& file) {
 }
 
 }  // namespace
-
-TEST_CASE("the mailbox hands over the newest value and counts the ones overwritten") {
-  LatestMailbox<int> box(0);
-  CHECK(box.take() == nullptr);
-  box.write_buffer() = 1;
-  box.publish();
-  box.write_buffer() = 2;
-  box.publish();
-  const int* v = box.take();
-  REQUIRE(v != nullptr);
-  CHECK(*v == 2);
-  CHECK(box.overwritten() == 1);
-  CHECK(box.take() == nullptr);  // nothing new
-  box.write_buffer() = 3;
-  box.publish();
-  v = box.take();
-  REQUIRE(v != nullptr);
-  CHECK(*v == 3);
-  CHECK(box.published() == 3);
-}
-
-TEST_CASE("the mailbox never hands out a value the producer is still writing") {
-  LatestMailbox<std::array<int64_t, 64>> box(std::array<int64_t, 64>{});
-  std::atomic<bool> done{false};
-  std::thread producer([&] {
-    for (int64_t n = 1; n <= 200000; ++n) {
-      box.write_buffer().fill(n);
-      box.publish();
-    }
-    done = true;
-  });
-  int64_t last = 0, torn = 0, taken = 0;
-  while (!done.load()) {
-    if (const auto* v = box.take()) {
-      ++taken;
-      for (const int64_t x : *v) torn += x != (*v)[0] ? 1 : 0;
-      CHECK((*v)[0] > last);
-      last = (*v)[0];
-    }
-  }
-  producer.join();
-  CHECK(taken > 0);
-  CHECK(torn == 0);
-  CHECK(box.overwritten() + uint64_t(taken) <= 200000);
-}
 
 TEST_CASE("the driver table is ordered and bounded and knows which drivers can lockstep") {
   const auto table = driver_table();
