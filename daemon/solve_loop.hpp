@@ -17,7 +17,7 @@
 #include "core/realtime.hpp"
 #include "daemon/shm_writer.hpp"
 #include "daemon/solve_pipeline.hpp"
-#include "drivers/marker_source.hpp"
+#include "drivers/api/marker_source.hpp"
 
 namespace facecap::daemon {
 

@@ -85,7 +85,7 @@ TEST_CASE("solved frames match the sim's ground truth under noise and dropouts a
 TEST_CASE("head stabilisation undoes a known rigid motion exactly") {
   const Rig& rig = BuiltinFace::instance().rig();
   MarkerCalibration calibration;
-  calibration.markers = drivers::default_marker_set(rig, 6, 4);
+  calibration.markers = default_marker_set(rig, 6, 4);
   calibration.origin = "test";
   const std::vector<std::string> labels = calibration.markers.labels();
   MarkerMapper mapper(calibration, labels, 1.0, true, 0.1);
@@ -120,7 +120,7 @@ TEST_CASE("head stabilisation undoes a known rigid motion exactly") {
 
 TEST_CASE("a source with none of the calibration's markers is refused") {
   MarkerCalibration calibration;
-  calibration.markers = drivers::default_marker_set(BuiltinFace::instance().rig(), 4, 0);
+  calibration.markers = default_marker_set(BuiltinFace::instance().rig(), 4, 0);
   calibration.origin = "default marker set";
   CHECK_THROWS_WITH(MarkerMapper(calibration, {"LeftCheek", "Chin"}, 1.0, true, 0.1),
                     Contains("none of the 4 face markers of the default marker set (M000, ...) is among the source's 2 markers"));
@@ -316,13 +316,13 @@ TEST_CASE("a reload rejects an invalid file and applies live keys and rebuilds t
   d.request_reload();
   REQUIRE(wait_for([&] { return d.reloads_accepted() == 1; }));
   CHECK(d.config().solver.alpha == 0.5);        // rebuilt aside and swapped in
-  CHECK(d.config().logging.level == "warn");    // live
+  CHECK(d.config().logging.level == LogLevel::kWarn);    // live
   CHECK(d.config().loop.rate_hz == 120.0);      // needs a restart: kept
   CHECK(wait_for([&] { return d.loop()->counters().pipeline_swaps.load() == 1; }));
   REQUIRE(reader.wait_next(frame, 5 * kNsPerSecond) == FACECAP_OK);  // still solving
   d.request_stop();
   supervisor.join();
-  set_log_level("info");
+  set_log_level(LogLevel::kInfo);
 }
 
 TEST_CASE("the fixed-rate loop stays on its deadline grid and counts what it skips when solves overrun") {

@@ -54,6 +54,10 @@ TEST_CASE("the mailbox never hands out a value the producer is still writing") {
     }
   }
   producer.join();
+  if (const auto* v = box.take()) {  // the last value, when the producer outran the loop above
+    ++taken;
+    for (const int64_t x : *v) torn += x != (*v)[0] ? 1 : 0;
+  }
   CHECK(taken > 0);
   CHECK(torn == 0);
   CHECK(box.overwritten() + uint64_t(taken) <= 200000);

@@ -9,6 +9,7 @@
 
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "core/units.hpp"
 
 namespace facecap::align {
 

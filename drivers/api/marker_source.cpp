@@ -1,4 +1,4 @@
-#include "drivers/marker_source.hpp"
+#include "drivers/api/marker_source.hpp"
 
 namespace facecap::drivers {
 
