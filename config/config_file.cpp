@@ -36,6 +36,12 @@ std::string describe_node(const toml::node& node) {
   return "a date or time";
 }
 
+// Sections that moved: the old path is still read, with a warning.
+struct RenamedSection {
+  std::string_view old_path, new_path;
+};
+constexpr RenamedSection kRenamedSections[] = {{"recording", "outputs.recording"}};
+
 // Parent sections of every key ("outputs", "outputs.shm", ...).
 const std::set<std::string, std::less<>>& section_paths() {
   static const std::set<std::string, std::less<>> sections = [] {
@@ -75,6 +81,14 @@ class Loader {
     for (const auto& [name, node] : table) {
       const std::string path = prefix.empty() ? std::string(name.str()) : prefix + "." + std::string(name.str());
       const ErrorLocation where = location_of(node, file, path);
+      const auto renamed = std::find_if(std::begin(kRenamedSections), std::end(kRenamedSections),
+                                        [&](const RenamedSection& r) { return r.old_path == path; });
+      if (renamed != std::end(kRenamedSections) && node.is_table()) {
+        out_.warnings.push_back(fmt::format("{}: [{}] is now [{}]; the old name still works but is deprecated",
+                                            where.to_string(), renamed->old_path, renamed->new_path));
+        apply_table(*node.as_table(), std::string(renamed->new_path), origin, file, base_dir);
+        continue;
+      }
       if (const KeySpec* key = find_key(path)) {
         apply_value(*key, node, origin, where, base_dir);
       } else if (section_paths().count(path)) {
@@ -112,6 +126,10 @@ class Loader {
       problem(where("loop.mode"), fmt::format("lockstep needs a source that can hand every frame on request; the {} "
                                               "driver runs on its own clock (use mode = \"fixed\")",
                                               drivers::kDriverIds.name(c.source.driver)));
+    if (c.solver.method == "meshik" && c.loop.mode == LoopMode::kFixed)
+      problem(where("solver.method"), "meshik is an offline baseline that takes seconds a frame and cannot keep a "
+                                      "fixed-rate loop: use \"nonlinear\" live, or meshik with loop.mode = \"lockstep\" and "
+                                      "a replay (or `facecap solve --set solver.method=meshik`)");
     if (c.calibration.file.empty() && (c.calibration.head_markers == 1 || c.calibration.head_markers == 2))
       problem(where("calibration.head_markers"),
               fmt::format("{} head markers cannot fix a rigid pose: use 0 (no stabilisation) or at least 3",
@@ -119,8 +137,8 @@ class Loader {
     if (c.outputs.shm.enabled && !shm::valid_name(c.outputs.shm.name))
       problem(where("outputs.shm.name"), fmt::format("\"{}\" is not a valid name (1 to 200 of A-Z a-z 0-9 - _ .)",
                                                      c.outputs.shm.name));
-    if (c.recording.enabled && c.recording.directory.empty())
-      problem(where("recording.directory"), "recording is enabled but no directory is given");
+    if (c.outputs.recording.enabled && c.outputs.recording.directory.empty())
+      problem(where("outputs.recording.directory"), "recording is enabled but no directory is given");
   }
 
   void problem(ErrorLocation where, std::string what) { problems_.emplace_back(std::move(what), std::move(where)); }
@@ -310,27 +328,24 @@ std::string closest_match(std::string_view word, const std::vector<std::string>&
   return best_distance <= limit ? best : std::string();
 }
 
-LoadedConfig load_config(const std::string& file, const std::vector<std::string>& overrides) {
+namespace {
+
+// Defaults, then `read` (which applies a file or text, or nothing), then the overrides,
+// then the checks. Throws ConfigError with every problem.
+template <typename Read>
+LoadedConfig load(const std::string& name, const std::vector<std::string>& overrides, Checks checks, Read&& read) {
   LoadedConfig out;
   out.values = default_config();
   out.origins.resize(config_schema().size());
-  out.file = file;
+  out.file = name;
   Loader loader(out);
-  if (!file.empty()) {
-    try {
-      const toml::table table = toml::parse_file(file);
-      loader.apply_table(table, "", Origin::kFile, file, fs::path(file).parent_path());
-    } catch (const toml::parse_error& e) {
-      const auto& begin = e.source().begin;
-      const bool missing = !fs::exists(file);
-      loader.problem({.file = file, .line = missing ? -1 : int64_t(begin.line), .column = missing ? -1 : int64_t(begin.column)},
-                     missing ? "cannot open the configuration file" : std::string(e.description()));
-    }
-  }
+  read(loader);
   for (const std::string& text : overrides)
     loader.apply_table(parse_override(text, loader), "", Origin::kCommandLine, "--set", fs::current_path());
-  loader.check_input_files();
-  if (loader.problems().empty()) loader.check_across_keys();
+  if (checks == Checks::kAll) {
+    loader.check_input_files();
+    if (loader.problems().empty()) loader.check_across_keys();
+  }
   if (!loader.problems().empty()) {
     auto& problems = loader.problems();
     std::stable_sort(problems.begin(), problems.end(), [](const Error& a, const Error& b) {
@@ -340,6 +355,37 @@ LoadedConfig load_config(const std::string& file, const std::vector<std::string>
   }
   return out;
 }
+
+}  // namespace
+
+LoadedConfig load_config(const std::string& file, const std::vector<std::string>& overrides, Checks checks) {
+  return load(file, overrides, checks, [&](Loader& loader) {
+    if (file.empty()) return;
+    try {
+      const toml::table table = toml::parse_file(file);
+      loader.apply_table(table, "", Origin::kFile, file, fs::path(file).parent_path());
+    } catch (const toml::parse_error& e) {
+      const auto& begin = e.source().begin;
+      const bool missing = !fs::exists(file);
+      loader.problem({.file = file, .line = missing ? -1 : int64_t(begin.line), .column = missing ? -1 : int64_t(begin.column)},
+                     missing ? "cannot open the configuration file" : std::string(e.description()));
+    }
+  });
+}
+
+LoadedConfig load_config_text(std::string_view text, const std::string& name, const std::vector<std::string>& overrides,
+                              Checks checks) {
+  return load(name, overrides, checks, [&](Loader& loader) {
+    try {
+      const toml::table table = toml::parse(text, name);
+      loader.apply_table(table, "", Origin::kFile, name, fs::current_path());
+    } catch (const toml::parse_error& e) {
+      loader.problem({.file = name, .line = int64_t(e.source().begin.line), .column = int64_t(e.source().begin.column)},
+                     std::string(e.description()));
+    }
+  });
+}
+
 
 namespace {
 

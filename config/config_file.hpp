@@ -22,6 +22,7 @@ struct LoadedConfig {
   DaemonConfig values;
   std::vector<KeyOrigin> origins;  // parallel to config_schema()
   std::string file;                // the file read, empty for defaults only
+  std::vector<std::string> warnings;  // deprecated names used, for the log
 
   const KeyOrigin& origin_of(std::string_view key_path) const;
 };
@@ -36,11 +37,22 @@ class ConfigError : public Error {
   std::vector<Error> problems_;
 };
 
+// What a load checks besides each value's type, range and choices and unknown keys:
+// kAll (facecapd) adds the rules across keys and that every input file named exists;
+// kValues is for tools that read only some sections (the solve settings).
+enum class Checks : uint8_t { kAll, kValues };
+
 // Defaults, then the file (when not empty), then overrides ("loop.rate_hz=240", a string
 // may be given without quotes). Input-file paths in the file are relative to the file's
-// directory. Checks types, ranges, choices, unknown keys (with a "did you mean"), rules
-// across keys, and that every input file named exists. Throws ConfigError.
-LoadedConfig load_config(const std::string& file, const std::vector<std::string>& overrides = {});
+// directory. Checks types, ranges, choices, unknown keys (with a "did you mean"), and with
+// kAll the rules across keys and that every input file named exists. Throws ConfigError.
+LoadedConfig load_config(const std::string& file, const std::vector<std::string>& overrides = {},
+                         Checks checks = Checks::kAll);
+
+// The same from TOML text (a recording's stored settings); `name` labels errors, relative
+// input paths are relative to the working directory.
+LoadedConfig load_config_text(std::string_view text, const std::string& name,
+                              const std::vector<std::string>& overrides = {}, Checks checks = Checks::kAll);
 
 // `--print-config`: every effective value and where it came from, as TOML.
 std::string render_effective_config(const LoadedConfig& config);

@@ -62,17 +62,19 @@ struct ShmSection {
   bool vertices = true;
 };
 
-struct OutputsSection {
-  ShmSection shm;
-};
-
 struct RecordingSection {
   bool enabled = false;
   std::string directory;
   bool markers = true;
   bool solved = true;
+  bool vertices = false;
   int64_t queue_frames = 0;
 };
+struct OutputsSection {
+  ShmSection shm;
+  RecordingSection recording;
+};
+
 
 struct ControlSection {
   double status_interval_s = 0.0;
@@ -93,7 +95,6 @@ struct DaemonConfig {
   SolverSection solver;
   LoopSection loop;
   OutputsSection outputs;
-  RecordingSection recording;
   ControlSection control;
   LoggingSection logging;
 };

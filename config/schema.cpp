@@ -173,14 +173,17 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(outputs.shm.vertices), .default_value = true,
        .description = "Publish the solved vertex positions as well as the weights."},
 
-      {FACECAP_KEY(recording.enabled), .default_value = false,
+      {FACECAP_KEY(outputs.recording.enabled), .default_value = false,
        .description = "Record raw marker frames and solved frames while running."},
-      {FACECAP_KEY(recording.directory), .default_value = std::string("recordings"),
+      {FACECAP_KEY(outputs.recording.directory), .default_value = std::string("recordings"),
        .description = "Where recordings go, one facecapd-<date>-<time>.fcrec per run (relative to the working "
                       "directory; the systemd unit runs in /var/lib/facecap)."},
-      {FACECAP_KEY(recording.markers), .default_value = true, .description = "Record the raw marker frames."},
-      {FACECAP_KEY(recording.solved), .default_value = true, .description = "Record the solved frames."},
-      {FACECAP_KEY(recording.queue_frames), .default_value = int64_t{512}, .unit = "frames", .min = 8, .max = 65536,
+      {FACECAP_KEY(outputs.recording.markers), .default_value = true, .description = "Record the raw marker frames."},
+      {FACECAP_KEY(outputs.recording.solved), .default_value = true, .description = "Record the solved frames."},
+      {FACECAP_KEY(outputs.recording.vertices), .default_value = false,
+       .description = "Record the solved vertex positions with each solved frame (large: 80 KB a frame for a "
+                      "6,706-vertex face); without them, `facecap solve` of the recording reproduces them."},
+      {FACECAP_KEY(outputs.recording.queue_frames), .default_value = int64_t{512}, .unit = "frames", .min = 8, .max = 65536,
        .description = "How far the recorder may fall behind before frames are dropped (and counted) rather than "
                       "slowing the loop."},
 
@@ -212,7 +215,8 @@ const SectionSpec kSections[] = {
     {"solver", "The per-frame face solve (the paper's Eq. 2-5)."},
     {"loop", "The real-time solve loop."},
     {"outputs.shm", "The shared-memory output renderers read (docs/shm-format.md)."},
-    {"recording", "Recording what the daemon receives and solves (.fcrec, docs/recording-format.md)."},
+    {"outputs.recording", "Recording what the daemon receives and solves (.fcrec, docs/recording-format.md). "
+                          "Formerly [recording], which is still read, with a warning."},
     {"control", "Supervision by systemd and run control."},
     {"logging", "Logs and figures."},
 };

@@ -25,6 +25,10 @@ struct EnumEntry {
   std::string_view description;  // one sentence for --help, the schema and docs
 };
 
+// Spelled out for compilers without aggregate deduction (clang before 17).
+template <typename E>
+EnumEntry(E, std::string_view, std::string_view) -> EnumEntry<E>;
+
 // A row without its type, for the config schema and documentation.
 struct Choice {
   std::string_view name;

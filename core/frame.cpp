@@ -2,6 +2,17 @@
 
 namespace facecap {
 
+MarkerFrame make_marker_frame(const std::vector<std::string>& labels) {
+  MarkerFrame frame;
+  frame.markers.resize(labels.size());
+  for (std::size_t i = 0; i < labels.size(); ++i) {
+    frame.markers[i].id = int32_t(i);
+    frame.markers[i].label.assign(labels[i]);
+    frame.markers[i].flags = kMarkerMissing;
+  }
+  return frame;
+}
+
 std::string_view solve_stage_name(SolveStage stage) noexcept {
   switch (stage) {
     case SolveStage::kStabilise: return "stabilise";

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <cstring>
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -61,6 +62,10 @@ struct MarkerFrame {
     return n;
   }
 };
+
+// A frame with one marker per label (ids 0, 1, ..., all missing), so that copies of frames
+// of that size into it never allocate. Not RT-safe.
+MarkerFrame make_marker_frame(const std::vector<std::string>& labels);
 
 // Stages of one solve, in order; timings are reported per stage.
 enum class SolveStage : uint8_t {

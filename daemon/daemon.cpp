@@ -14,6 +14,10 @@
 #include "core/log.hpp"
 #include "core/time.hpp"
 #include "drivers/table.hpp"
+#include "outputs/recording/recorder.hpp"
+#include "outputs/table.hpp"
+#include "pipeline/recording_header.hpp"
+#include "pipeline/settings.hpp"
 #include "solver/builtin_face.hpp"
 
 namespace facecap::daemon {
@@ -64,7 +68,8 @@ struct Daemon::Sample {
   int64_t cpu_ns = 0;
   uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed = 0, late_start = 0, skipped = 0;
   drivers::SourceHealth source;
-  uint64_t recorder_dropped = 0;
+  uint64_t outputs_dropped = 0;
+  std::array<uint64_t, kSolvedFlagCount> flagged{};
   LatencyHistogram::Snapshot latency;
 };
 
@@ -79,73 +84,45 @@ void Daemon::start() {
   const config::DaemonConfig& c = config_.values;
   apply_live_settings();
   spdlog::info("configuration: {}", config_.file.empty() ? "defaults" : config_.file);
+  for (const std::string& warning : config_.warnings) spdlog::warn("{}", warning);
   if (c.loop.lock_memory) {
     const MemoryLockReport report = lock_memory();
     (report.locked ? spdlog::info("{}", report.describe()) : spdlog::warn("{}", report.describe()));
   }
 
   rig_ = load_configured_rig(c.rig);
-  calibration_ = load_calibration(c.calibration, *rig_);
-  source_ = drivers::make_source(c.source, {.rig = rig_, .markers = calibration_.markers});
+  calibration_ = pipeline::load_calibration(pipeline::calibration_spec(c), *rig_);
+  source_ = drivers::make_source(c.source, {.rig = rig_, .markers = pipeline::rest_marker_set(calibration_)});
   source_->open();
   spdlog::info("source {}", source_->description());
+  const pipeline::SourceDescription source{source_->info().labels, source_->info().units};
 
   const int64_t build_start = monotonic_now_ns();
-  auto pipeline = std::make_unique<SolvePipeline>(*rig_, calibration_, source_->info(), c.solver, c.calibration.stabilise_head);
-  const MarkerMapper& mapper = pipeline->mapper();
-  spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes) built in {:.2f} s; {} of {} face markers matched "
-               "({}), head stabilisation {}, marker scale {:g}", pipeline->method(), rig_->name, rig_->vertex_count(),
-               rig_->shape_count(), ms(monotonic_now_ns() - build_start) / 1000.0, mapper.matched_face_markers(),
-               mapper.face_marker_count(), calibration_.origin,
-               mapper.stabilising() ? fmt::format("on ({} head markers)", mapper.head_marker_count()) : "off",
-               pipeline->marker_scale());
-  if (mapper.matched_face_markers() < mapper.face_marker_count())
-    spdlog::warn("the source lacks {} of the calibration's face markers; they count as missing in every frame",
-                 mapper.face_marker_count() - mapper.matched_face_markers());
+  auto solve = std::make_unique<pipeline::SolvePipeline>(*rig_, calibration_, source, pipeline::solve_settings(c));
+  log_pipeline(*solve, ms(monotonic_now_ns() - build_start) / 1000.0);
 
-  if (c.outputs.shm.enabled) {
-    ShmOutputSpec spec;
-    spec.name = c.outputs.shm.name;
-    spec.shape_names = rig_->shape_names;
-    spec.vertex_count = c.outputs.shm.vertices ? uint32_t(rig_->vertex_count()) : 0;
-    spec.slot_count = uint32_t(c.outputs.shm.slots);
-    spec.nominal_rate_hz = c.loop.rate_hz;
-    spec.rig_name = rig_->name;
-    spec.rig_hash = rig_->content_hash();
-    shm_ = std::make_unique<ShmWriter>(spec);
-    spdlog::info("shared memory {} ({} slots{})", shm_->name(), spec.slot_count, spec.vertex_count ? ", with vertices" : "");
-  }
-
-  if (c.recording.enabled) {
-    RecorderOptions r;
-    r.file = new_recording_path(c.recording.directory);
-    r.queue_frames = std::size_t(c.recording.queue_frames);
-    r.markers = c.recording.markers;
-    r.solved = c.recording.solved;
-    r.header.rig_name = rig_->name;
-    r.header.rig_hash = rig_->content_hash();
-    r.header.source_description = source_->description();
-    r.header.units = source_->info().units;
-    r.header.rate_hz = c.loop.mode == config::LoopMode::kLockstep ? source_->info().nominal_rate_hz : c.loop.rate_hz;
-    r.header.marker_labels = source_->info().labels;
-    r.header.shape_names = rig_->shape_names;
-    if (!c.calibration.file.empty()) {
-      const auto bytes = read_file_bytes(c.calibration.file);
-      r.header.calibration.assign(bytes.begin(), bytes.end());
-    }
-    recorder_ = std::make_unique<Recorder>(r, drivers::make_marker_frame(source_->info().labels), rig_->shape_count());
-    recording_file_ = recorder_->file();
-    spdlog::info("recording to {}", recorder_->file().string());
+  const bool lockstep = c.loop.mode == config::LoopMode::kLockstep;
+  outputs::SinkContext context;
+  context.header = pipeline::make_recording_header(*rig_, calibration_, source, source_->description(),
+                                                   lockstep ? source_->info().nominal_rate_hz : c.loop.rate_hz,
+                                                   pipeline::solve_settings_toml(c));
+  context.vertex_count = uint32_t(rig_->vertex_count());
+  context.loop_rate_hz = c.loop.rate_hz;
+  sinks_ = outputs::make_outputs(c, context);
+  std::vector<outputs::OutputSink*> sinks;
+  for (const auto& sink : sinks_) {
+    spdlog::info("output {}", sink->description());
+    if (const auto* recorder = dynamic_cast<const outputs::Recorder*>(sink.get())) recording_file_ = recorder->file();
+    sinks.push_back(sink.get());
   }
 
   LoopOptions loop_options;
   loop_options.rate_hz = c.loop.rate_hz;
-  loop_options.lockstep = c.loop.mode == config::LoopMode::kLockstep;
+  loop_options.lockstep = lockstep;
   loop_options.phase_margin_ns = c.loop.phase_margin_us * kNsPerUs;
   loop_options.prefetch_lead_ns = c.loop.prefetch_lead_us * kNsPerUs;
   loop_options.realtime = {.fifo = c.loop.realtime, .priority = int(c.loop.priority), .cpus = c.loop.cpu_affinity};
-  loop_ = std::make_unique<SolveLoop>(loop_options, *source_, std::move(pipeline), shm_.get(), recorder_.get(),
-                                      c.outputs.shm.vertices);
+  loop_ = std::make_unique<SolveLoop>(loop_options, *source_, std::move(solve), std::move(sinks));
   loop_->start();
   start_ns_ = monotonic_now_ns();
   start_sample_ = std::make_unique<Sample>(take_sample());
@@ -170,7 +147,8 @@ Daemon::Sample Daemon::take_sample() const {
   s.late_start = counters.late_start_misses.load();
   s.skipped = counters.skipped_ticks.load();
   s.source = source_->health();
-  s.recorder_dropped = recorder_ ? recorder_->counters().dropped : 0;
+  for (const auto& sink : sinks_) s.outputs_dropped += sink->health().dropped;
+  for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) s.flagged[bit] = counters.flagged_frames[bit].load();
   s.latency = loop_->latency();
   return s;
 }
@@ -192,7 +170,8 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
   f.cpu_percent = f.seconds > 0 ? 100.0 * double(to.cpu_ns - from.cpu_ns) / (f.seconds * kNsPerSecond) : 0.0;
   f.source_overwritten = to.source.frames_overwritten - from.source.frames_overwritten;
   f.source_late = to.source.frames_late - from.source.frames_late;
-  f.recorder_dropped = to.recorder_dropped - from.recorder_dropped;
+  f.outputs_dropped = to.outputs_dropped - from.outputs_dropped;
+  for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) f.flagged_frames[bit] = to.flagged[bit] - from.flagged[bit];
   return f;
 }
 
@@ -203,8 +182,34 @@ std::string Daemon::status_line(const Figures& w) const {
                                  ms(w.latency_p50_ns), ms(w.latency_p99_ns), loop_->counters().missed_deadlines.load());
   if (w.source_overwritten + w.source_late > 0)
     line += fmt::format(", source frames lost {}", w.source_overwritten + w.source_late);
-  if (recorder_) line += fmt::format(", recorder dropped {}", recorder_->counters().dropped);
+  if (w.outputs_dropped > 0) line += fmt::format(", outputs dropped {}", w.outputs_dropped);
+  if (const std::string flagged = flagged_text(w); !flagged.empty()) line += ", " + flagged;
   return line;
+}
+
+// "head_pose_held 12, too_few_markers 3": the frames in a window with each status bit.
+std::string Daemon::flagged_text(const Figures& w) {
+  std::string text;
+  for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit)
+    if (w.flagged_frames[bit] > 0)
+      text += fmt::format("{}{} {}", text.empty() ? "" : ", ", solved_flag_name(bit), w.flagged_frames[bit]);
+  return text;
+}
+
+void Daemon::log_pipeline(const pipeline::SolvePipeline& solve, double build_seconds) const {
+  const pipeline::MarkerMapper& mapper = solve.mapper();
+  spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes) built in {:.2f} s; calibration {}: {} of {} markers "
+               "in the source, head stabilisation {}{}", solve.method(), rig_->name, rig_->vertex_count(),
+               rig_->shape_count(), build_seconds, calibration_.source_take, mapper.markers_found(),
+               calibration_.markers.size(),
+               mapper.stabilising() ? fmt::format("on ({} stable markers)", mapper.stable_markers_found()) : "off",
+               mapper.source_to_take() != 1.0 ? fmt::format(", source units scaled by {:g}", mapper.source_to_take()) : "");
+  if (mapper.markers_found() < calibration_.markers.size())
+    spdlog::warn("the source lacks {} of the calibration's markers; they count as missing in every frame",
+                 calibration_.markers.size() - mapper.markers_found());
+  if (config_.values.calibration.stabilise_head && !mapper.stabilising() && !calibration_.stable_markers.empty())
+    spdlog::warn("head stabilisation is off: {} of the calibration's {} stable markers are in the source, 3 are needed",
+                 mapper.stable_markers_found(), calibration_.stable_markers.size());
 }
 
 void Daemon::apply_live_settings() {
@@ -253,11 +258,11 @@ void Daemon::start_rebuild() {
     return;
   }
   spdlog::info("rebuilding the solver aside");
-  rebuild_ = std::async(std::launch::async, [rig = rig_, info = source_->info(), solver = config_.values.solver,
-                                             section = config_.values.calibration] {
-    MarkerCalibration calibration = load_calibration(section, *rig);
-    auto pipeline = std::make_unique<SolvePipeline>(*rig, calibration, info, solver, section.stabilise_head);
-    return Rebuilt{std::move(pipeline), std::move(calibration)};
+  rebuild_ = std::async(std::launch::async, [rig = rig_, info = source_->info(), config = config_.values] {
+    pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(config), *rig);
+    auto solve = std::make_unique<pipeline::SolvePipeline>(*rig, calibration, pipeline::SourceDescription{info.labels, info.units},
+                                                           pipeline::solve_settings(config));
+    return Rebuilt{std::move(solve), std::move(calibration)};
   });
 }
 
@@ -267,7 +272,8 @@ void Daemon::adopt_rebuilt_pipeline() {
     Rebuilt rebuilt = rebuild_.get();
     calibration_ = std::move(rebuilt.calibration);
     loop_->offer_pipeline(std::move(rebuilt.pipeline));
-    spdlog::info("new solver handed to the loop ({}, {})", config_.values.solver.method, calibration_.origin);
+    spdlog::info("new solver handed to the loop ({}, calibration {})", config_.values.solver.method,
+                 calibration_.source_take);
   } catch (const std::exception& e) {
     spdlog::error("rebuilding the solver failed; the running one stays: {}", e.what());
   }
@@ -311,6 +317,8 @@ void Daemon::supervise_once(int64_t now_ns) {
                  "({} started late), {} idle ticks, CPU {:.0f}%", f.solved_fps, f.seconds, ms(f.latency_p50_ns),
                  ms(f.latency_p99_ns), ms(f.latency_max_ns), f.missed_deadlines, f.late_start_misses, f.idle_ticks,
                  f.cpu_percent);
+    if (const std::string flagged = flagged_text(f); !flagged.empty()) spdlog::warn("frames flagged: {}", flagged);
+    if (f.outputs_dropped > 0) spdlog::warn("{} frames dropped by the outputs", f.outputs_dropped);
     *stats_sample_ = sample;
     next_stats_ns_ = now_ns + int64_t(c.logging.stats_interval_s * kNsPerSecond);
   }
@@ -357,15 +365,14 @@ void Daemon::shutdown(const std::string& reason) {
   loop_->request_stop();
   loop_->join();
   source_->stop();
-  if (shm_) shm_->mark_stopped();
-  if (recorder_) {
+  for (const auto& sink : sinks_) {
     try {
-      recorder_->stop();
-      const RecorderCounters r = recorder_->counters();
-      spdlog::info("recording {} closed: {} marker frames, {} solved frames, {} dropped", recorder_->file().string(),
-                   r.marker_frames, r.solved_frames, r.dropped);
+      sink->stop();
+      const outputs::SinkHealth h = sink->health();
+      spdlog::info("output {} stopped: {} frames offered, {} delivered, {} dropped{}", sink->description(), h.offered,
+                   h.delivered, h.dropped, h.errors ? fmt::format(", {} errors", h.errors) : "");
     } catch (const std::exception& e) {
-      spdlog::error("recording {}: {}", recorder_->file().string(), e.what());
+      spdlog::error("output {}: {}", sink->description(), e.what());
     }
   }
   const Figures run = figures_since_start();
@@ -373,10 +380,10 @@ void Daemon::shutdown(const std::string& reason) {
                "{} missed deadlines ({} started late, {} ticks skipped), CPU {:.0f}%", run.frames_solved, run.seconds,
                run.solved_fps, ms(run.latency_p50_ns), ms(run.latency_p99_ns), ms(run.latency_max_ns),
                run.missed_deadlines, run.late_start_misses, run.skipped_ticks, run.cpu_percent);
+  if (const std::string flagged = flagged_text(run); !flagged.empty()) spdlog::info("frames flagged: {}", flagged);
   write_stats_file(run);
   loop_.reset();
-  recorder_.reset();
-  shm_.reset();
+  sinks_.clear();
   source_.reset();
   spdlog::info("stopped in {:.0f} ms", ms(monotonic_now_ns() - begin));
 }
@@ -387,7 +394,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   nlohmann::json j;
   j["seconds"] = f.seconds;
   j["rate_hz"] = config_.values.loop.rate_hz;
-  j["mode"] = config_.values.loop.mode;
+  j["mode"] = config::kLoopModes.name(config_.values.loop.mode);
   j["rig"] = rig_->name;
   j["solver"] = config_.values.solver.method;
   j["ticks"] = f.ticks;
@@ -402,7 +409,22 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["latency_ms"] = {{"p50", ms(f.latency_p50_ns)}, {"p99", ms(f.latency_p99_ns)}, {"max", ms(f.latency_max_ns)}};
   j["cpu_percent"] = f.cpu_percent;
   j["source"] = {{"overwritten", f.source_overwritten}, {"late", f.source_late}};
-  j["recorder_dropped"] = f.recorder_dropped;
+  j["outputs_dropped"] = f.outputs_dropped;
+  nlohmann::json flagged = nlohmann::json::object();
+  for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) flagged[std::string(solved_flag_name(bit))] = f.flagged_frames[bit];
+  j["flagged_frames"] = flagged;
+  nlohmann::json outputs = nlohmann::json::object();
+  for (std::size_t i = 0; i < loop_->sinks().size(); ++i) {
+    const outputs::OutputSink& sink = *loop_->sinks()[i];
+    const outputs::SinkHealth h = sink.health();
+    const LatencyHistogram::Snapshot offer = loop_->sink_timing(i).offer_ns.snapshot();
+    outputs[std::string(sink.name())] = {
+        {"description", sink.description()}, {"offered", h.offered}, {"delivered", h.delivered},
+        {"dropped", h.dropped}, {"errors", h.errors}, {"failed", h.failed},
+        {"offer_us", {{"p50", double(offer.quantile_ns(0.5)) / kNsPerUs}, {"p99", double(offer.quantile_ns(0.99)) / kNsPerUs},
+                      {"max", double(loop_->sink_timing(i).max_ns.load()) / kNsPerUs}}}};
+  }
+  j["outputs"] = outputs;
   nlohmann::json stages;
   const LoopCounters& counters = loop_->counters();
   const double frames = f.frames_solved > 0 ? double(f.frames_solved) : 1.0;

@@ -3,6 +3,7 @@
 // configuration (configure), starts the solve loop (activate), then handles signals,
 // sd_notify (READY, WATCHDOG, STATUS, STOPPING), figures, SIGHUP reloads and a clean stop.
 // Nothing here is real-time code; the solve thread is SolveLoop.
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
@@ -12,12 +13,11 @@
 #include <vector>
 
 #include "config/config_file.hpp"
-#include "daemon/calibration.hpp"
-#include "daemon/recorder.hpp"
-#include "daemon/shm_writer.hpp"
 #include "daemon/solve_loop.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "drivers/api/marker_source.hpp"
+#include "outputs/api/sink.hpp"
+#include "pipeline/calibration.hpp"
 
 namespace facecap::daemon {
 
@@ -37,7 +37,8 @@ struct Figures {
   double cpu_percent = 0.0;    // whole process, of one CPU
   uint64_t source_overwritten = 0;
   uint64_t source_late = 0;
-  uint64_t recorder_dropped = 0;
+  uint64_t outputs_dropped = 0;  // over every output
+  std::array<uint64_t, kSolvedFlagCount> flagged_frames{};  // solved frames with each SolvedFlags bit
 };
 
 struct DaemonOptions {
@@ -53,8 +54,8 @@ class Daemon {
   Daemon(const Daemon&) = delete;
   Daemon& operator=(const Daemon&) = delete;
 
-  // Loads the rig and calibration, opens the source, builds the solver, creates the shared
-  // memory and the recording, and starts the solve loop. Throws Error.
+  // Loads the rig and calibration, opens the source, builds the solve pipeline, makes the
+  // outputs (shared memory, recording, ...) and starts the solve loop. Throws Error.
   void start();
   // Supervises until SIGTERM/SIGINT, request_stop(), control.run_seconds or the end of a
   // replay; then stops cleanly. Returns the process exit status.
@@ -70,7 +71,7 @@ class Daemon {
   const SolveLoop* loop() const noexcept { return loop_.get(); }
   drivers::MarkerSource* source() noexcept { return source_.get(); }
   const Rig& rig() const noexcept { return *rig_; }
-  const MarkerCalibration& calibration() const noexcept { return calibration_; }
+  const pipeline::Calibration& calibration() const noexcept { return calibration_; }
   // The run's recording (empty when not recording); still known after the run.
   const std::filesystem::path& recording_file() const noexcept { return recording_file_; }
   Figures figures_since_start() const;
@@ -88,20 +89,21 @@ class Daemon {
   void apply_live_settings();
   void shutdown(const std::string& reason);
   void write_stats_file(const Figures& run) const;
+  void log_pipeline(const pipeline::SolvePipeline& solve, double build_seconds) const;
+  static std::string flagged_text(const Figures& window);
 
   DaemonOptions options_;
   config::LoadedConfig config_;
   SystemdNotifier notifier_;
   std::shared_ptr<const Rig> rig_;
-  MarkerCalibration calibration_;
+  pipeline::Calibration calibration_;
   std::unique_ptr<drivers::MarkerSource> source_;
-  std::unique_ptr<ShmWriter> shm_;
-  std::unique_ptr<Recorder> recorder_;
+  std::vector<std::unique_ptr<outputs::OutputSink>> sinks_;
   std::filesystem::path recording_file_;
   std::unique_ptr<SolveLoop> loop_;  // last: it borrows the members above
   struct Rebuilt {
-    std::unique_ptr<SolvePipeline> pipeline;
-    MarkerCalibration calibration;
+    std::unique_ptr<pipeline::SolvePipeline> pipeline;
+    pipeline::Calibration calibration;
   };
   std::future<Rebuilt> rebuild_;  // in flight
   bool rebuild_again_ = false;    // a reload arrived while one was in flight

@@ -65,7 +65,8 @@ int main(int argc, char** argv) {
   }
   if (!check_file.empty()) {
     try {
-      config::load_config(check_file, overrides);
+      const config::LoadedConfig checked = config::load_config(check_file, overrides);
+      for (const std::string& warning : checked.warnings) fmt::print(stderr, "warning: {}\n", warning);
       fmt::print("{}: valid\n", check_file);
       return 0;
     } catch (const Error& e) {

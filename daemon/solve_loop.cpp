@@ -43,23 +43,28 @@ std::string_view loop_stage_name(LoopStage stage) noexcept {
   switch (stage) {
     case LoopStage::kTake: return "take";
     case LoopStage::kSolve: return "solve";
-    case LoopStage::kPublish: return "publish";
-    case LoopStage::kRecord: return "record";
+    case LoopStage::kOutputs: return "outputs";
     case LoopStage::kCount: break;
   }
   return "?";
 }
 
-SolveLoop::SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::unique_ptr<SolvePipeline> pipeline,
-                     ShmWriter* shm, Recorder* recorder, bool publish_vertices)
+namespace {
+bool any_wants_vertices(const std::vector<outputs::OutputSink*>& sinks) {
+  return std::any_of(sinks.begin(), sinks.end(), [](const outputs::OutputSink* s) { return s->wants_vertices(); });
+}
+}  // namespace
+
+SolveLoop::SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::unique_ptr<pipeline::SolvePipeline> pipeline,
+                     std::vector<outputs::OutputSink*> sinks)
     : options_(std::move(options)),
       source_(source),
       pipeline_(std::move(pipeline)),
-      shm_(shm),
-      recorder_(recorder),
+      sinks_(std::move(sinks)),
+      sink_timing_(sinks_.size()),
       period_ns_(int64_t(std::llround(double(kNsPerSecond) / options_.rate_hz))),
-      marker_frame_(drivers::make_marker_frame(source.info().labels)),
-      solved_frame_(pipeline_->make_solved_frame(publish_vertices && shm != nullptr)) {
+      marker_frame_(make_marker_frame(source.info().labels)),
+      solved_frame_(pipeline_->make_solved_frame(any_wants_vertices(sinks_))) {
   const double source_rate = source.info().nominal_rate_hz;
   phase_lock_ = !options_.lockstep && options_.phase_margin_ns > 0 && source.info().own_clock && source_rate > 0.0 &&
                 std::abs(source_rate - options_.rate_hz) <= kPhaseLockRateTolerance * options_.rate_hz;
@@ -83,7 +88,7 @@ void SolveLoop::join() {
   if (thread_.joinable()) thread_.join();
 }
 
-void SolveLoop::offer_pipeline(std::unique_ptr<SolvePipeline> pipeline) { pipeline_handoff_.offer(std::move(pipeline)); }
+void SolveLoop::offer_pipeline(std::unique_ptr<pipeline::SolvePipeline> pipeline) { pipeline_handoff_.offer(std::move(pipeline)); }
 
 void SolveLoop::collect_retired() { pipeline_handoff_.collect(); }
 
@@ -110,7 +115,7 @@ void SolveLoop::follow_source_phase(int64_t waited_ns) noexcept {
 
 bool SolveLoop::tick(int64_t now_ns) noexcept {
   add(counters_.ticks);
-  if (shm_) shm_->beat(now_ns);
+  for (outputs::OutputSink* sink : sinks_) sink->tick(now_ns);
   adopt_offered_pipeline();
 
   const bool got = source_.take_frame(now_ns, marker_frame_);
@@ -129,19 +134,24 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
     auto& total = counters_.solver_stage_total_ns[s];
     total.store(total.load(std::memory_order_relaxed) + solved_frame_.stage_ns[s], std::memory_order_relaxed);
   }
+  for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit)
+    if (solved_frame_.flags & (1u << bit)) add(counters_.flagged_frames[bit]);
 
-  const int64_t published_ns = shm_ ? shm_->publish(solved_frame_) : monotonic_now_ns();
-  record_stage(LoopStage::kPublish, published_ns - solved_ns);
-  latency_.record(published_ns - marker_frame_.receive_time_ns);
-
-  if (recorder_) {
-    // Lockstep is not real time: there the recorder may hold the loop back instead of
+  int64_t offered_ns = solved_ns;
+  for (std::size_t i = 0; i < sinks_.size(); ++i) {
+    outputs::OutputSink& sink = *sinks_[i];
+    // Lockstep is not real time: there a queued output may hold the loop back instead of
     // dropping frames.
-    while (options_.lockstep && !recorder_->has_room() && !stop_requested_.load(std::memory_order_relaxed))
+    while (options_.lockstep && !sink.ready() && !stop_requested_.load(std::memory_order_relaxed))
       sleep_for(kLockstepIdleNs);
-    recorder_->offer(&marker_frame_, &solved_frame_);
-    record_stage(LoopStage::kRecord, monotonic_now_ns() - published_ns);
+    const int64_t begin_ns = monotonic_now_ns();
+    sink.offer(marker_frame_, solved_frame_);
+    offered_ns = monotonic_now_ns();
+    sink_timing_[i].offer_ns.record(offered_ns - begin_ns);
+    store_max(sink_timing_[i].max_ns, offered_ns - begin_ns);
   }
+  record_stage(LoopStage::kOutputs, offered_ns - solved_ns);
+  latency_.record(offered_ns - marker_frame_.receive_time_ns);
 
   if (phase_lock_) follow_source_phase(now_ns - marker_frame_.receive_time_ns);
   counters_.frames_solved.store(counters_.frames_solved.load(std::memory_order_relaxed) + 1, std::memory_order_release);

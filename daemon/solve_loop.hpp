@@ -1,23 +1,24 @@
 #pragma once
 // The solve thread: a fixed-rate loop on absolute CLOCK_MONOTONIC deadlines (or
 // lockstep: every frame of a replay, as fast as possible). Each tick takes the newest
-// frame from the source, solves it, publishes it to shared memory and queues it for the
-// recorder. The loop reports through counters and a histogram only; the main thread
-// turns them into logs and STATUS= lines.
+// frame from the source, solves it (pipeline::SolvePipeline) and offers it to every
+// output, timing each. The loop reports through counters and histograms only; the main
+// thread turns them into logs and STATUS= lines.
 #include <array>
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <thread>
+#include <vector>
 
 #include "core/frame.hpp"
+#include "core/realtime.hpp"
 #include "core/rt/handoff.hpp"
 #include "daemon/latency_histogram.hpp"
-#include "daemon/recorder.hpp"
-#include "core/realtime.hpp"
-#include "daemon/shm_writer.hpp"
-#include "daemon/solve_pipeline.hpp"
 #include "drivers/api/marker_source.hpp"
+#include "outputs/api/sink.hpp"
+#include "pipeline/solve_pipeline.hpp"
 
 namespace facecap::daemon {
 
@@ -32,8 +33,9 @@ struct LoopOptions {
   RealtimeRequest realtime;
 };
 
-// Loop stages timed besides the solver's own (SolvedFrame::stage_ns).
-enum class LoopStage : uint8_t { kTake, kSolve, kPublish, kRecord, kCount };
+// Loop stages timed besides the solver's own (SolvedFrame::stage_ns); each output's offer
+// is timed on its own as well (SinkTiming).
+enum class LoopStage : uint8_t { kTake, kSolve, kOutputs, kCount };
 inline constexpr std::size_t kLoopStageCount = std::size_t(LoopStage::kCount);
 std::string_view loop_stage_name(LoopStage stage) noexcept;
 
@@ -54,15 +56,23 @@ struct LoopCounters {
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_total_ns{};
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_max_ns{};
   std::array<std::atomic<int64_t>, kSolveStageCount> solver_stage_total_ns{};
+  // Solved frames with each SolvedFlags bit set (bit i: solved_flag_name(i)).
+  std::array<std::atomic<uint64_t>, kSolvedFlagCount> flagged_frames{};
   std::atomic<uint64_t> solved_sequence{0};     // bumps per solved frame; the watchdog checks it moves
+};
+
+// What one output's offer() costs the solve thread. Written by the solve thread only.
+struct SinkTiming {
+  LatencyHistogram offer_ns;
+  std::atomic<int64_t> max_ns{0};
 };
 
 class SolveLoop {
  public:
-  // The loop borrows the source, shm writer and recorder (either may be null); they
-  // must outlive it. Not RT-safe.
-  SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::unique_ptr<SolvePipeline> pipeline,
-            ShmWriter* shm, Recorder* recorder, bool publish_vertices);
+  // The loop borrows the source and the outputs, which must outlive it; it solves
+  // vertices only when some output wants them. Not RT-safe.
+  SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::unique_ptr<pipeline::SolvePipeline> pipeline,
+            std::vector<outputs::OutputSink*> sinks);
   ~SolveLoop();  // request_stop() and join()
   SolveLoop(const SolveLoop&) = delete;
   SolveLoop& operator=(const SolveLoop&) = delete;
@@ -76,12 +86,15 @@ class SolveLoop {
 
   // Hands a newly built pipeline to the loop, which adopts it between two frames.
   // A pipeline offered before the loop took the previous offer replaces it. Not RT-safe.
-  void offer_pipeline(std::unique_ptr<SolvePipeline> pipeline);
+  void offer_pipeline(std::unique_ptr<pipeline::SolvePipeline> pipeline);
   // Deletes pipelines the loop has let go of (off the solve thread). Not RT-safe.
   void collect_retired();
 
   const LoopCounters& counters() const noexcept { return counters_; }
   LatencyHistogram::Snapshot latency() const noexcept { return latency_.snapshot(); }
+  // The outputs in offer order, and what each costs the solve thread.
+  std::span<outputs::OutputSink* const> sinks() const noexcept { return sinks_; }
+  const SinkTiming& sink_timing(std::size_t i) const noexcept { return sink_timing_[i]; }
   bool first_frame_solved() const noexcept { return counters_.frames_solved.load(std::memory_order_acquire) > 0; }
   bool source_finished() const noexcept { return source_finished_.load(std::memory_order_acquire); }
   bool running() const noexcept { return thread_.joinable() && !exited_.load(std::memory_order_acquire); }
@@ -109,9 +122,9 @@ class SolveLoop {
 
   LoopOptions options_;
   drivers::MarkerSource& source_;
-  std::unique_ptr<SolvePipeline> pipeline_;
-  ShmWriter* shm_;
-  Recorder* recorder_;
+  std::unique_ptr<pipeline::SolvePipeline> pipeline_;
+  std::vector<outputs::OutputSink*> sinks_;
+  std::vector<SinkTiming> sink_timing_;
   int64_t period_ns_;
   bool phase_lock_ = false;
   int64_t phase_correction_ns_ = 0;  // applied to the next deadline
@@ -119,7 +132,7 @@ class SolveLoop {
   MarkerFrame marker_frame_;
   SolvedFrame solved_frame_;
 
-  rt::Handoff<SolvePipeline> pipeline_handoff_;
+  rt::Handoff<pipeline::SolvePipeline> pipeline_handoff_;
 
   LoopCounters counters_;
   LatencyHistogram latency_;

@@ -24,7 +24,7 @@ inline void write_sim_take(const std::filesystem::path& file, const drivers::Sim
   take.rate_hz = 120;
   take.units = sim.info().units;
   for (int64_t n = 0; n < frames; ++n) {
-    MarkerFrame f = drivers::make_marker_frame(take.labels);
+    MarkerFrame f = make_marker_frame(take.labels);
     sim.render_frame(n, f);
     take.frames.push_back(f);
   }

@@ -14,9 +14,9 @@
 #include "solver/align/calibrate.hpp"
 #include "solver/align/hull.hpp"
 #include "solver/align/label.hpp"
-#include "solver/align/mapper.hpp"
+#include "pipeline/marker_mapper.hpp"
 #include "solver/align/neutral.hpp"
-#include "solver/align/pipeline.hpp"
+#include "solver/align/calibrate_take.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/align/stabilise.hpp"
 #include "solver/align/surface.hpp"
@@ -212,8 +212,8 @@ TEST_CASE("Calibrated offsets give the rig neutral at rest despite identity mism
   std::iota(by_height.begin(), by_height.end(), 0);
   std::sort(by_height.begin(), by_height.end(), [&](std::size_t a, std::size_t b) { return neutral(1, Eigen::Index(a)) > neutral(1, Eigen::Index(b)); });
   for (int i = 0; i < 5; ++i) cal.stable_markers.push_back(labels[by_height[std::size_t(i)]]);
-  MarkerMapper mapper(cal, labels);
-  auto model = build_solver_model(rig, calibration_bindings(cal));
+  pipeline::MarkerMapper mapper(cal, labels, "");
+  auto model = build_solver_model(rig, cal.bindings());
   for (const char* name : {"nonlinear", "linear"}) {
     auto solver = make_solver(name, model);
     auto result = solver->make_result();
@@ -568,10 +568,15 @@ TEST_CASE("Calibration gives clear errors for too few markers NaN and flat marke
   CHECK_THROWS_WITH(find_stable_markers(std::span<const MarkerFrame>(take.frames.data(), 1), 4), Catch::Contains("at least 2"));
   // Labeller with too few markers.
   CHECK_THROWS_WITH(MarkerLabeller({"a", "b"}, Eigen::Matrix3Xd::Zero(3, 2)), Catch::Contains("at least 3"));
-  // Mapper whose stable markers are not in the take.
+  // Mapper whose stable markers are not in the take: it maps without stabilising.
   Calibration no_stable = c;
   no_stable.stable_markers = {"nope1", "nope2", "nope3"};
-  CHECK_THROWS_WITH(MarkerMapper(no_stable, take.labels), Catch::Contains("3 stable markers"));
+  const pipeline::MarkerMapper unstabilised(no_stable, take.labels, "");
+  CHECK_FALSE(unstabilised.stabilising());
+  CHECK(unstabilised.stable_markers_found() == 0);
+  // Mapper with none of the calibration's markers in the frames.
+  CHECK_THROWS_WITH(pipeline::MarkerMapper(c, std::vector<std::string>{"x", "y", "z"}, ""),
+                    Catch::Contains("only 0 of the calibration's"));
 }
 
 TEST_CASE("Per-frame stabilise map and label steps allocate nothing") {
@@ -581,7 +586,7 @@ TEST_CASE("Per-frame stabilise map and label steps allocate nothing") {
   const auto take = make_synthetic_take(o);
   const Rig& rig = BuiltinFace::instance().rig();
   const Calibration cal = calibrate_whole_take(rig, take.labels, take.frames, 60.0, 1.0);
-  MarkerMapper mapper(cal, take.labels, StabiliserParams{.outlier_floor = 1.0});
+  pipeline::MarkerMapper mapper(cal, take.labels, "");
   auto mapped = mapper.make_output();
   std::vector<uint8_t> present;
   const Eigen::Matrix3Xd reference = positions_of(take.frames[0], present);

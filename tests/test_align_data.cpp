@@ -10,9 +10,9 @@
 #include "formats/take.hpp"
 #include "solver/align/calibrate.hpp"
 #include "solver/align/label.hpp"
-#include "solver/align/mapper.hpp"
+#include "pipeline/marker_mapper.hpp"
 #include "solver/align/neutral.hpp"
-#include "solver/align/pipeline.hpp"
+#include "solver/align/calibrate_take.hpp"
 #include "solver/align/stabilise.hpp"
 #include "solver/rig.hpp"
 #include "tests/test_support.hpp"
@@ -62,15 +62,15 @@ TEST_CASE("AnimFace takes calibrate to the ICT face from the file as it is with 
     for (const auto& m : cal.markers) residuals.push_back(m.residual_mm);
     std::sort(residuals.begin(), residuals.end());
     // Head stabilisation over the whole take: residuals of the stable markers.
-    MarkerMapper mapper(cal, c.take.labels, StabiliserParams{.outlier_floor = 0.1});
+    pipeline::MarkerMapper mapper(cal, c.take.labels, c.take.units);
     auto mapped = mapper.make_output();
     std::vector<double> stable_mm;
     int held = 0;
     for (const auto& f : c.take.frames) {
       mapper.process(f, mapped);
       held += mapped.head_held;
-      for (double r : mapper.stabiliser().residuals())
-        if (!std::isnan(r)) stable_mm.push_back(r * 10.0);
+      for (std::size_t i = 0; i < mapper.stable_residual_count(); ++i)
+        if (const double r = mapper.stable_residual_mm(i); !std::isnan(r)) stable_mm.push_back(r);
     }
     std::nth_element(stable_mm.begin(), stable_mm.begin() + std::ptrdiff_t(stable_mm.size() / 2), stable_mm.end());
     const double stable_median = stable_mm[stable_mm.size() / 2];

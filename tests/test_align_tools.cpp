@@ -172,7 +172,7 @@ TEST_CASE("facecap calibrate and solve give clear errors on bad input", "[tools]
   r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "a.toml").string(), "--take", (dir / "take.trc").string(), "-o",
                         (dir / "out.csv").string(), "--solver", "magic"});
   CHECK(r.exit_code == 1);
-  CHECK(r.err.find("unknown solver 'magic'") != std::string::npos);
+  CHECK(r.err.find("\"magic\" is not allowed (allowed: one of: nonlinear") != std::string::npos);
   r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "a.toml").string(), "--take", (dir / "take.trc").string(), "-o",
                         (dir / "out.txt").string()});
   CHECK(r.exit_code == 1);

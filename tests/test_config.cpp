@@ -185,6 +185,30 @@ TEST_CASE("overrides apply after the file and are reported as such") {
   CHECK_THAT(only_problem(path, {"loop.rate_hz=0"}).what(), Contains("--set [loop.rate_hz]: 0.0 is out of range"));
 }
 
+TEST_CASE("the old [recording] section is read as [outputs.recording] with a warning naming where") {
+  const auto path = write_config("old.toml", "version = 1\n[recording]\nenabled = true\ndirectory = \"takes\"\n");
+  const LoadedConfig c = load_config(path.string(), {"recording.queue_frames=64"});
+  CHECK(c.values.outputs.recording.enabled);
+  CHECK(c.values.outputs.recording.directory == "takes");  // relative to the working directory, as documented
+  CHECK(c.values.outputs.recording.queue_frames == 64);
+  REQUIRE(c.warnings.size() == 2);
+  CHECK_THAT(c.warnings[0], Contains(path.string() + ":2") && Contains("[recording] is now [outputs.recording]"));
+  CHECK_THAT(only_problem(path, {"recording.queue_frame=64"}).what(), Contains("unknown key 'queue_frame'"));
+}
+
+TEST_CASE("a choice key is stored as its enum and written back as its name") {
+  const LoadedConfig c = load_config("", {"source.driver=replay", "source.replay.file=" + std::string(FACECAP_SOURCE_DIR) +
+                                                                      "/README.md", "loop.mode=lockstep"});
+  CHECK(c.values.source.driver == drivers::DriverId::kReplay);
+  CHECK(c.values.loop.mode == LoopMode::kLockstep);
+  CHECK(format_value(get_value(*find_key("loop.mode"), c.values)) == "\"lockstep\"");
+  CHECK_THAT(render_documented_defaults(), Contains("#   lockstep: solve every frame of the source in order"));
+  CHECK_THAT(only_problem(write_config("meshik.toml", "version = 1\n[solver]\nmethod = \"meshik\"\n")).what(),
+             Contains("meshik.toml:3:10 [solver.method]: meshik is an offline baseline that takes seconds a frame"));
+  CHECK_THAT(only_problem(write_config("lock.toml", "version = 1\n[loop]\nmode = \"lockstep\"\n")).what(),
+             Contains("[loop.mode]: lockstep needs a source that can hand every frame on request; the sim driver"));
+}
+
 TEST_CASE("changed_keys lists exactly the keys that differ") {
   DaemonConfig a = default_config(), b = default_config();
   b.solver.alpha = 0.5;

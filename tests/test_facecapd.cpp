@@ -125,8 +125,8 @@ TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth a
   const fs::path dir = test::scratch_dir("facecapd-run");
   const std::string shm = unique_shm("run");
   NotifyRecorder notify;
-  DaemonProcess d({"--set", "outputs.shm.name=" + shm, "--set", "recording.enabled=true", "--set",
-                   "recording.directory=" + (dir / "recordings").string(), "--set", "control.status_interval_s=0.25"},
+  DaemonProcess d({"--set", "outputs.shm.name=" + shm, "--set", "outputs.recording.enabled=true", "--set",
+                   "outputs.recording.directory=" + (dir / "recordings").string(), "--set", "control.status_interval_s=0.25"},
                   {"NOTIFY_SOCKET=" + notify.listener.address(), "WATCHDOG_USEC=400000"}, dir / "facecapd.log");
   INFO(d.log());
   REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
@@ -212,7 +212,7 @@ TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth a
   SolvedFrame last;
   recording.read_solved_frame(recording.solved_frame_count() - 1, last);
   CHECK(last.frame_no >= last_frame_no);
-  CHECK_THAT(d.log(), Contains("stopping: SIGTERM") && Contains("recording") && Contains("closed"));
+  CHECK_THAT(d.log(), Contains("stopping: SIGTERM") && Contains("output recording") && Contains("stopped: "));
 }
 
 TEST_CASE("SIGHUP with an invalid file keeps the running configuration and a valid one is applied") {

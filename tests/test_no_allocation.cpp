@@ -9,10 +9,12 @@
 
 #include "config/schema.hpp"
 #include "core/time.hpp"
-#include "daemon/calibration.hpp"
-#include "daemon/recorder.hpp"
-#include "daemon/shm_writer.hpp"
 #include "daemon/solve_loop.hpp"
+#include "outputs/recording/recorder.hpp"
+#include "outputs/shm/shm_sink.hpp"
+#include "pipeline/calibration.hpp"
+#include "pipeline/recording_header.hpp"
+#include "pipeline/settings.hpp"
 #include "drivers/replay/replay_source.hpp"
 #include "drivers/sim/sim_source.hpp"
 #include "solver/builtin_face.hpp"
@@ -69,36 +71,40 @@ TEST_CASE("the counter sees allocations by new and by malloc") {
   std::free(q);
 }
 
-TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, shm publish, recorder and solver swap") {
+TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, shm, recorder and solver swap") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
-  const MarkerCalibration calibration = load_calibration(c.calibration, *rig);
-  drivers::SimSource sim(c.source.sim, rig, calibration.markers);
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
+  drivers::SimSource sim(c.source.sim, rig, pipeline::rest_marker_set(calibration));
   sim.open();
-  ShmOutputSpec spec;
+  const pipeline::SourceDescription source{sim.info().labels, sim.info().units};
+  outputs::ShmOutputSpec spec;
   spec.name = fmt::format("facecap-test-{}-noalloc", ::getpid());
   spec.shape_names = rig->shape_names;
   spec.vertex_count = uint32_t(rig->vertex_count());
-  ShmWriter shm(spec);
-  RecorderOptions r;
+  outputs::ShmSink shm(spec);
+  outputs::RecorderOptions r;
   r.file = test::scratch_dir("noalloc") / "run.fcrec";
-  r.header.shape_names = rig->shape_names;
-  Recorder recorder(r, drivers::make_marker_frame(sim.info().labels), rig->shape_count());
+  r.header = pipeline::make_recording_header(*rig, calibration, source, "test", 120.0, "");
+  r.vertices = true;
+  outputs::Recorder recorder(r, rig->vertex_count());
   LoopOptions options;
   options.realtime.fifo = false;
   options.prefetch_lead_ns = 800'000;
-  SolveLoop loop(options, sim, std::make_unique<SolvePipeline>(*rig, calibration, sim.info(), c.solver, true), &shm,
-                 &recorder, true);
+  const pipeline::SolveSettings settings = pipeline::solve_settings(c);
+  SolveLoop loop(options, sim, std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, settings),
+                 {&shm, &recorder});
   sim.start({.epoch_ns = monotonic_now_ns()});
 
   const Counted first = run_ticks(loop, 120, loop.period_ns());
   CHECK(first.frames == 120);
   CHECK(first.allocations == 0);
 
-  // Swapping in a rebuilt solver happens inside a tick too.
-  config::SolverSection linear = c.solver;
+  // Swapping in a rebuilt solver happens inside a tick too; this one checks labels.
+  pipeline::SolveSettings linear = settings;
   linear.method = "linear";
-  loop.offer_pipeline(std::make_unique<SolvePipeline>(*rig, calibration, sim.info(), linear, true));
+  linear.check_labels = true;
+  loop.offer_pipeline(std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, linear));
   const Counted after_swap = run_ticks(loop, 60, loop.period_ns());
   CHECK(loop.counters().pipeline_swaps.load() == 1);
   CHECK(after_swap.frames == 60);
@@ -111,9 +117,9 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, shm publish, r
 TEST_CASE("a tick pulling from a replay allocates nothing") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
-  const MarkerCalibration calibration = load_calibration(c.calibration, *rig);
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
   const auto file = test::scratch_dir("noalloc-replay") / "take.fcrec";
-  test::write_sim_take(file, c.source.sim, rig, calibration.markers, 50);
+  test::write_sim_take(file, c.source.sim, rig, pipeline::rest_marker_set(calibration), 50);
   drivers::ReplayOptions replay_options;
   replay_options.file = file.string();
   replay_options.loop = true;
@@ -122,8 +128,11 @@ TEST_CASE("a tick pulling from a replay allocates nothing") {
   LoopOptions options;
   options.lockstep = true;
   options.realtime.fifo = false;
-  SolveLoop loop(options, replay, std::make_unique<SolvePipeline>(*rig, calibration, replay.info(), c.solver, true),
-                 nullptr, nullptr, false);
+  SolveLoop loop(options, replay,
+                 std::make_unique<pipeline::SolvePipeline>(*rig, calibration,
+                                                           pipeline::SourceDescription{replay.info().labels, replay.info().units},
+                                                           pipeline::solve_settings(c)),
+                 {});
   replay.start({.lockstep = true});
   const Counted counted = run_ticks(loop, 120, 0);  // loops the 50-frame take
   CHECK(counted.frames == 120);

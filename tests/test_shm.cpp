@@ -15,11 +15,11 @@
 #include "client/facecap_client.hpp"
 #include "core/error.hpp"
 #include "core/time.hpp"
-#include "daemon/shm_writer.hpp"
+#include "outputs/shm/shm_writer.hpp"
 
 using namespace facecap;
-using daemon::ShmOutputSpec;
-using daemon::ShmWriter;
+using outputs::ShmOutputSpec;
+using outputs::ShmWriter;
 
 namespace {
 
@@ -246,8 +246,8 @@ TEST_CASE("the client refuses segments that are not facecap rings") {
 }
 
 TEST_CASE("shared-memory names are checked before anything is created") {
-  CHECK_THROWS_WITH(daemon::shm_object_name("bad/name"), Catch::Contains("letters, digits"));
-  CHECK_THROWS_WITH(daemon::shm_object_name(""), Catch::Contains("letters, digits"));
-  CHECK(daemon::shm_object_name("facecap") == "/facecap");
-  CHECK(daemon::shm_object_name("/facecap") == "/facecap");
+  CHECK_THROWS_WITH(outputs::shm_object_name("bad/name"), Catch::Contains("letters, digits"));
+  CHECK_THROWS_WITH(outputs::shm_object_name(""), Catch::Contains("letters, digits"));
+  CHECK(outputs::shm_object_name("facecap") == "/facecap");
+  CHECK(outputs::shm_object_name("/facecap") == "/facecap");
 }

@@ -47,19 +47,4 @@ std::size_t frame_index(const formats::MarkerTake& take, int64_t frame_no, const
                                           take.frames.front().frame_no, take.frames.back().frame_no));
 }
 
-CalibratedSetup make_calibrated_setup(const Rig& rig, const align::Calibration& calibration,
-                                      const std::vector<std::string>& take_labels, const SolverParams& params) {
-  CalibratedSetup s;
-  s.calibration = calibration;
-  s.mapper = std::make_unique<align::MarkerMapper>(calibration, take_labels, align::StabiliserParams{
-      .outlier_floor = 1.0 / calibration.take_mm_per_unit});  // 1 mm
-  s.model = build_solver_model(rig, align::calibration_bindings(calibration), params);
-  return s;
-}
-
-Eigen::Vector3d bound_position(const MarkerBinding& b, const Eigen::Matrix3Xd& V) {
-  return b.barycentric[0] * V.col(b.vertices[0]) + b.barycentric[1] * V.col(b.vertices[1]) +
-         b.barycentric[2] * V.col(b.vertices[2]);
-}
-
 }  // namespace facecap::tools

@@ -11,7 +11,6 @@
 
 #include "formats/take.hpp"
 #include "solver/align/calibrate.hpp"
-#include "solver/align/mapper.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/rig.hpp"
 
@@ -29,18 +28,5 @@ Eigen::Matrix3Xd frame_positions(const MarkerFrame& frame, std::vector<uint8_t>&
 
 // Index into take.frames of the frame whose number (as in the file) is frame_no.
 std::size_t frame_index(const formats::MarkerTake& take, int64_t frame_no, const std::string& take_name);
-
-// A calibration ready to solve a take: the solver model on its bindings, and the mapper
-// from the take's marker slots.
-struct CalibratedSetup {
-  align::Calibration calibration;
-  std::shared_ptr<const SolverModel> model;
-  std::unique_ptr<align::MarkerMapper> mapper;
-};
-CalibratedSetup make_calibrated_setup(const Rig& rig, const align::Calibration& calibration,
-                                      const std::vector<std::string>& take_labels, const SolverParams& params = {});
-
-// A marker's position on a solved mesh (3 x N): its binding's barycentric point.
-Eigen::Vector3d bound_position(const MarkerBinding& binding, const Eigen::Matrix3Xd& vertices);
 
 }  // namespace facecap::tools

@@ -12,7 +12,8 @@
 #include "core/units.hpp"
 #include "formats/take.hpp"
 #include "solver/align/neutral.hpp"
-#include "solver/align/pipeline.hpp"
+#include "pipeline/marker_mapper.hpp"
+#include "solver/align/calibrate_take.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/align/stabilise.hpp"
 #include "tools/align_support.hpp"
@@ -115,16 +116,19 @@ void run_calibrate(const Options& o, bool frame_given) {
     cal.notes.push_back(fmt::format("the take states '{}' but its size says '{}'; used '{}' (override with --units)", take.units,
                                     unit_name(cal.take_mm_per_unit), unit_name(cal.take_mm_per_unit)));
 
-  // How well the stable markers hold still once the head motion is removed, over the take.
-  auto setup = make_calibrated_setup(rig, cal, take.labels);
-  auto mapped = setup.mapper->make_output();
+  // How well the stable markers hold still once the head motion is removed, over the take
+  // (in the calibration's units, which came from this take's own size).
+  pipeline::MarkerMapper mapper(cal, take.labels, "");
+  if (!mapper.stabilising())
+    throw Error(fmt::format("head stabilisation needs 3 stable markers; {} are in the take", mapper.stable_markers_found()));
+  auto mapped = mapper.make_output();
   std::vector<double> stable_residuals;
   std::size_t held = 0;
   for (const auto& f : take.frames) {
-    setup.mapper->process(f, mapped);
+    mapper.process(f, mapped);
     held += mapped.head_held;
-    for (double r : setup.mapper->stabiliser().residuals())
-      if (!std::isnan(r)) stable_residuals.push_back(r * cal.take_mm_per_unit);
+    for (std::size_t i = 0; i < mapper.stable_residual_count(); ++i)
+      if (const double r = mapper.stable_residual_mm(i); !std::isnan(r)) stable_residuals.push_back(r);
   }
   const double stable_median = median_of(stable_residuals);
 

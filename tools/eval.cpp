@@ -18,7 +18,9 @@
 #include "solver/collide.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/commands.hpp"
+#include "pipeline/settings.hpp"
 #include "tools/eval_take.hpp"
+#include "tools/solve_config.hpp"
 #include "tools/synth_truth.hpp"
 #include "tools/tool_support.hpp"
 
@@ -35,6 +37,7 @@ struct Options {
   int offline_every = 200;
   int max_frames = 0;
   bool progress = false;
+  SolveConfigOptions settings;
 };
 
 // Vertex errors in mm, binned at 1 micrometre: the p95 over millions of samples without
@@ -80,7 +83,7 @@ struct SolverRun {
   std::size_t held = 0;
 };
 
-void run_eval(const Options& o) {
+void run_eval(const Options& o, const SolverParams& params) {
   const auto solver_list = select_solvers(o.solvers);
   const std::filesystem::path take_path(o.take);
   const std::filesystem::path truth_path =
@@ -126,7 +129,7 @@ void run_eval(const Options& o) {
   }
   const std::string truth_source = truth_vertices ? "articulated vertices" : "linear blend of the truth weights";
 
-  const auto model = build_solver_model(rig, bindings);
+  const auto model = build_solver_model(rig, bindings, params);
   std::vector<SolverRun> runs;
   for (const auto& name : solver_list) {
     SolverRun run;
@@ -242,7 +245,9 @@ void add_eval_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--truth-weights", o->truth_weights,
                 "Skip the weights step: mesh each frame from the truth weights (isolates the blend from the weight fit)");
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
+  add_solve_config_options(*cmd, o->settings);
   cmd->callback([o, &exit_code] {
+    const pipeline::SolveSettings settings = pipeline::solve_settings(load_solve_config(o->settings).values);
     if (!o->calib.empty()) {
       if (o->truth_weights) throw Error("--truth-weights needs a synthetic take's truth, not --calib");
       TakeEvalOptions t;
@@ -255,11 +260,12 @@ void add_eval_command(CLI::App& app, int& exit_code) {
       t.offline_every = o->offline_every;
       t.max_frames = o->max_frames;
       t.progress = o->progress;
+      t.settings = settings;
       const auto report = evaluate_take(t);
       if (o->json) std::puts(report.dump(2).c_str());
       else print_take_evaluation(report);
     } else {
-      run_eval(*o);
+      run_eval(*o, settings.params);
     }
     exit_code = 0;
   });

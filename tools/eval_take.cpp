@@ -9,8 +9,10 @@
 
 #include "core/error.hpp"
 #include "formats/take.hpp"
-#include "solver/align/profile.hpp"
+#include "pipeline/calibration.hpp"
+#include "pipeline/marker_mapper.hpp"
 #include "solver/collide.hpp"
+#include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/align_support.hpp"
 #include "tools/progress.hpp"
@@ -56,30 +58,33 @@ struct SolverRun {
 nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   if (o.every < 1 || o.offline_every < 1) throw Error("--every and --offline-every must be at least 1");
   const Rig rig = load_rig(o.rig);
-  const align::Calibration cal = align::load_calibration_profile(o.calib);
+  const align::Calibration cal = pipeline::load_calibration({.file = o.calib}, rig);
   // The rig's units as calibrated, unless overridden.
   const double rig_mm = o.rig_units.empty() ? cal.rig_mm_per_unit : rig_mm_per_unit(rig, o.rig_units);
-  align::check_profile_matches_rig(cal, rig, o.calib);
   const formats::MarkerTake take = formats::read_take(o.take);
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
   const std::size_t F = o.max_frames > 0 ? std::min<std::size_t>(take.frames.size(), std::size_t(o.max_frames)) : take.frames.size();
 
-  auto setup = make_calibrated_setup(rig, cal, take.labels);
+  pipeline::MarkerMapper mapper(cal, take.labels, take.units, o.settings.mapper);
+  if (!mapper.stabilising() && o.settings.mapper.stabilise_head)
+    throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
+                                         mapper.stable_markers_found(), cal.stable_markers.size()));
+  const auto model = build_solver_model(rig, cal.bindings(), o.settings.params);
   const auto names = select_solvers(o.solvers);
 
-  const Eigen::Index K = setup.mapper->marker_count();
+  const Eigen::Index K = mapper.marker_count();
   std::vector<int> face_markers;  // held-out candidates: calibrated, in the take, not stable
   for (Eigen::Index k = 0; k < K; ++k)
-    if (setup.mapper->slots()[std::size_t(k)] >= 0 && !setup.mapper->is_stable()[std::size_t(k)]) face_markers.push_back(int(k));
+    if (mapper.slots()[std::size_t(k)] >= 0 && !mapper.is_stable()[std::size_t(k)]) face_markers.push_back(int(k));
 
   std::vector<SolverRun> runs;
   for (const auto& name : names) {
     SolverRun run;
     run.name = name;
     run.offline = name == "meshik";
-    run.full = make_solver(name, setup.model);
+    run.full = make_solver(name, model);
     run.result = run.full->make_result();
-    for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(name, setup.model));
+    for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(name, model));
     run.held_result = run.full->make_result();
     runs.push_back(std::move(run));
   }
@@ -95,19 +100,19 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     for (const auto& p : intersections.pairs(positions)) count += !std::binary_search(rest_pairs.begin(), rest_pairs.end(), p);
     return count;
   };
-  auto mapped = setup.mapper->make_output();
+  auto mapped = mapper.make_output();
   Summary stable_mm;
   int head_held = 0;
   std::size_t sampled = 0;
   std::vector<uint8_t> present(static_cast<std::size_t>(K));
   const bool show = o.progress || (stderr_is_terminal() && F >= 200);
   ProgressBar bar("evaluating", show);
-  const auto& bindings = setup.model->markers;
+  const auto& bindings = model->markers;
   for (std::size_t f = 0; f < F; ++f) {
-    setup.mapper->process(take.frames[f], mapped);
+    mapper.process(take.frames[f], mapped);
     head_held += mapped.head_held;
-    for (double r : setup.mapper->stabiliser().residuals())
-      if (!std::isnan(r)) stable_mm.add(r * cal.take_mm_per_unit);
+    for (std::size_t i = 0; i < mapper.stable_residual_count(); ++i)
+      if (const double r = mapper.stable_residual_mm(i); !std::isnan(r)) stable_mm.add(r);
     const bool sample = f % std::size_t(o.every) == 0;
     sampled += sample;
     for (auto& run : runs) {
@@ -119,7 +124,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       run.held += run.result.held;
       for (Eigen::Index k = 0; k < K; ++k)
         if (mapped.present[std::size_t(k)])
-          run.fit_mm.add((bound_position(bindings[std::size_t(k)], run.result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
+          run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
       if (run.frames_solved >= 2 && !run.offline) {
         // Second difference: how much the mesh shakes beyond steady motion.
         run.jitter_mm.add(((run.result.vertices - 2.0 * run.previous + run.previous2).colwise().norm().mean()) * rig_mm);
@@ -142,7 +147,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
         present[std::size_t(k)] = 0;
         run.held_out[i]->solve(mapped.targets, present, run.held_result);
         if (run.held_result.held) continue;
-        run.heldout_mm.add((bound_position(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
+        run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
       }
     }
     bar.update(f + 1, F);

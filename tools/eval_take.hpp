@@ -6,6 +6,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "pipeline/solve_pipeline.hpp"
+
 namespace facecap::tools {
 
 struct TakeEvalOptions {
@@ -14,6 +16,7 @@ struct TakeEvalOptions {
   int offline_every = 200; // offline solvers (meshik, ~0.6 s a solve): only every Nth frame, no jitter
   int max_frames = 0;      // 0: the whole take
   bool progress = false;
+  pipeline::SolveSettings settings;  // the solver parameters and mapping (the method comes from `solvers`)
 };
 
 // Throws Error on unusable input. Returns the JSON report.

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <numbers>
+#include <optional>
 
 #include <Eigen/Geometry>
 #include <fmt/format.h>
@@ -14,21 +15,22 @@
 #include "formats/livelinkface.hpp"
 #include "formats/recording.hpp"
 #include "formats/take.hpp"
-#include "solver/align/label.hpp"
-#include "solver/align/profile.hpp"
-#include "solver/solver_model.hpp"
+#include "pipeline/calibration.hpp"
+#include "pipeline/recording_header.hpp"
+#include "pipeline/settings.hpp"
+#include "pipeline/solve_pipeline.hpp"
 #include "tools/align_support.hpp"
 #include "tools/commands.hpp"
 #include "tools/progress.hpp"
-#include "tools/tool_support.hpp"
+#include "tools/solve_config.hpp"
 
 namespace facecap::tools {
 namespace {
 
 struct Options {
-  std::string rig, calib, take, output, solver = "nonlinear", rig_units;
+  std::string rig, calib, take, output, solver, rig_units;
   bool force = false, quiet = false, vertices = false, check_labels = false;
-  int max_pins = SolverParams{}.collision_max_pins;
+  SolveConfigOptions settings;
 };
 
 Timecode timecode_at(int64_t time_ns) {
@@ -45,6 +47,21 @@ Timecode timecode_at(int64_t time_ns) {
   return tc;
 }
 
+// The settings and calibration a recording was solved with, when the take is one.
+struct Stored {
+  std::optional<std::string> solver_settings;
+  std::optional<std::string> calibration;
+};
+
+Stored stored_in(const std::string& take_path) {
+  Stored stored;
+  if (formats::detect_file_format(take_path) != formats::TakeFormat::kRecording) return stored;
+  const formats::RecordingReader reader(take_path);
+  if (!reader.header().solver_settings.empty()) stored.solver_settings = reader.header().solver_settings;
+  if (!reader.header().calibration.empty()) stored.calibration = reader.header().calibration;
+  return stored;
+}
+
 void run_solve(const Options& o) {
   const std::filesystem::path output(o.output);
   const auto format = formats::format_from_extension(output);
@@ -55,73 +72,57 @@ void run_solve(const Options& o) {
 
   const Rig rig = load_rig(o.rig);
   (void)rig_mm_per_unit(rig, o.rig_units);
-  const align::Calibration cal = align::load_calibration_profile(o.calib);
-  align::check_profile_matches_rig(cal, rig, o.calib);
+  const Stored stored = stored_in(o.take);
+  if (o.calib.empty() && !stored.calibration)
+    throw file_error(o.take, "has no calibration of its own: pass --calib PROFILE");
+  const align::Calibration cal = o.calib.empty()
+                                     ? pipeline::read_calibration(*stored.calibration, o.take + " [calibration]", rig)
+                                     : pipeline::load_calibration({.file = o.calib}, rig);
+  SolveConfigOptions settings_options = o.settings;
+  if (!o.solver.empty()) settings_options.sets.push_back("solver.method=" + o.solver);
+  const SolveConfig settings = load_solve_config(settings_options, stored.solver_settings, o.take + " [solver settings]");
   const formats::MarkerTake take = formats::read_take(o.take);
   for (const auto& w : take.warnings) fmt::print(stderr, "facecap: warning: {}: {}\n", o.take, w);
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
 
-  SolverParams params;
-  params.collision_max_pins = o.max_pins;
-  auto setup = make_calibrated_setup(rig, cal, take.labels, params);
-  const auto solver_ptr = make_solver(o.solver, setup.model);
-  FaceSolver& solver = *solver_ptr;
-  SolveResult result = solver.make_result();
-  auto mapped = setup.mapper->make_output();
-
-  // Optional label check: predictions from the previous frame, the calibration frame to start.
-  std::unique_ptr<align::MarkerLabeller> labeller;
-  if (o.check_labels) {
-    Eigen::Matrix3Xd reference(3, Eigen::Index(take.labels.size()));
-    for (std::size_t s = 0; s < take.labels.size(); ++s) {
-      const int m = cal.find(take.labels[s]);
-      reference.col(Eigen::Index(s)) = m >= 0 ? cal.markers[std::size_t(m)].neutral : Eigen::Vector3d::Zero();
-    }
-    align::LabellerParams lp;
-    lp.gate = 6.0 / cal.take_mm_per_unit;  // mm in take units
-    lp.gate_growth = 1.0 / cal.take_mm_per_unit;
-    lp.max_gate = 20.0 / cal.take_mm_per_unit;
-    lp.label_margin = 1.0 / cal.take_mm_per_unit;
-    labeller = std::make_unique<align::MarkerLabeller>(take.labels, reference, lp);
-  }
+  const pipeline::SourceDescription source{take.labels, take.units};
+  pipeline::SolveSettings solve_settings = pipeline::solve_settings(settings.values);
+  solve_settings.check_labels = o.check_labels;
+  pipeline::SolvePipeline solve(rig, cal, source, solve_settings);
+  if (!cal.stable_markers.empty() && solve_settings.mapper.stabilise_head && !solve.mapper().stabilising())
+    throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
+                                         solve.mapper().stable_markers_found(), cal.stable_markers.size()));
+  const std::string method(solve.method());
 
   const auto arkit = formats::match_arkit_to_rig(rig.shape_names);
   formats::FaceTake face;
   face.rate_hz = take.rate_hz;
   std::unique_ptr<formats::RecordingWriter> recording;
   if (fcrec) {
-    formats::RecordingHeader h;
-    h.rig_name = rig.name;
-    h.rig_hash = rig.content_hash();
-    h.source_description = fmt::format("facecap solve --solver {} of {}", o.solver, o.take);
-    h.calibration = align::write_calibration_profile(cal);
-    h.units = take.units;
-    h.rate_hz = take.rate_hz;
-    h.marker_labels = take.labels;
-    h.shape_names = rig.shape_names;
-    recording = std::make_unique<formats::RecordingWriter>(output, h, formats::RecordingWriter::Options{.overwrite = o.force});
+    const formats::RecordingHeader header = pipeline::make_recording_header(
+        rig, cal, source, fmt::format("facecap solve --solver {} of {}", method, o.take), take.rate_hz,
+        pipeline::solve_settings_toml(settings.values));
+    recording = std::make_unique<formats::RecordingWriter>(output, header, formats::RecordingWriter::Options{.overwrite = o.force});
   }
-  ProgressBar bar(fmt::format("solving {} ({})", std::filesystem::path(o.take).filename().string(), o.solver), !o.quiet);
-  SolvedFrame solved;
-  solved.resize(rig.shape_count(), o.vertices ? rig.vertex_count() : 0);
-  MarkerFrame frame;
+  ProgressBar bar(fmt::format("solving {} ({})", std::filesystem::path(o.take).filename().string(), method), !o.quiet);
+  SolvedFrame solved = solve.make_solved_frame(o.vertices);
   std::size_t held_head = 0, held_face = 0, relabelled = 0;
   for (std::size_t f = 0; f < take.frames.size(); ++f) {
-    frame = take.frames[f];
-    if (labeller) relabelled += std::size_t(labeller->check(frame).relabelled);
-    setup.mapper->process(frame, mapped);
-    solver.solve(mapped.targets, mapped.present, result);
-    held_head += mapped.head_held;
-    held_face += result.held;
-    const Eigen::Vector3d euler = mapped.head_rotation.toRotationMatrix().eulerAngles(1, 0, 2);  // yaw (Y), pitch (X), roll (Z)
-    auto wrap = [](double a) { return a > std::numbers::pi / 2 ? a - std::numbers::pi : a < -std::numbers::pi / 2 ? a + std::numbers::pi : a; };
+    const MarkerFrame& frame = take.frames[f];
+    solve.process(frame, solved);
+    relabelled += std::size_t(solve.label_stats().relabelled);
+    held_head += (solved.flags & kSolvedHeadPoseHeld) != 0;
+    held_face += (solved.flags & kSolvedTooFewMarkers) != 0;
     if (csv) {
+      const Eigen::Vector3d euler = solved.head_rotation.toRotationMatrix().eulerAngles(1, 0, 2);  // yaw (Y), pitch (X), roll (Z)
+      auto wrap = [](double a) { return a > std::numbers::pi / 2 ? a - std::numbers::pi : a < -std::numbers::pi / 2 ? a + std::numbers::pi : a; };
       formats::FaceFrame out;
       out.source_time_ns = frame.source_time_ns;
       out.timecode = frame.timecode.valid() ? frame.timecode : timecode_at(frame.source_time_ns);
+      const Eigen::VectorXd& weights = solve.result().weights;
       for (std::size_t a = 0; a < formats::kArkitShapeCount; ++a) {
         double w = 0;
-        for (std::size_t s : arkit[a]) w += result.weights[Eigen::Index(s)];
+        for (std::size_t s : arkit[a]) w += weights[Eigen::Index(s)];
         out.weights[a] = arkit[a].empty() ? 0.0f : float(w / double(arkit[a].size()));
       }
       out.angles = {};
@@ -130,17 +131,6 @@ void run_solve(const Options& o) {
       out.angles[2] = float(wrap(euler[2]));
       face.frames.push_back(out);
     } else {
-      solved.frame_no = frame.frame_no;
-      solved.source_time_ns = frame.source_time_ns;
-      solved.timecode = frame.timecode;
-      solved.head_rotation = mapped.head_rotation;
-      solved.head_translation = mapped.head_translation;
-      solved.weights = result.weights.cast<float>();
-      if (o.vertices) solved.vertices = result.vertices.cast<float>();
-      solved.stage_ns = result.stage_ns;
-      solved.collision_constraints = result.collision_constraints;
-      solved.markers_used = result.markers_used;
-      solved.flags = (mapped.head_held ? kSolvedHeadPoseHeld : 0u) | (result.held ? kSolvedTooFewMarkers : 0u);
       recording->append_marker_frame(frame);
       recording->append_solved_frame(solved);
     }
@@ -155,9 +145,9 @@ void run_solve(const Options& o) {
   }
   std::size_t mapped_shapes = 0;
   for (const auto& a : arkit) mapped_shapes += !a.empty();
-  fmt::print("{} -> {}: {} frames with {} ({} of 52 ARKit shapes on the rig); head pose held in {}, face held in {}{}\n",
-             o.take, o.output, take.frames.size(), o.solver, mapped_shapes, held_head, held_face,
-             labeller ? fmt::format(", {} markers relabelled", relabelled) : std::string());
+  fmt::print("{} -> {}: {} frames with {} ({}; {} of 52 ARKit shapes on the rig); head pose held in {}, face held in {}{}\n",
+             o.take, o.output, take.frames.size(), method, settings.origin, mapped_shapes, held_head, held_face,
+             o.check_labels ? fmt::format(", {} markers relabelled", relabelled) : std::string());
 }
 
 }  // namespace
@@ -166,13 +156,15 @@ void add_solve_command(CLI::App& app, int& exit_code) {
   auto opts = std::make_shared<Options>();
   auto* cmd = app.add_subcommand("solve", "Solve a calibrated take offline to a Live Link Face CSV or a .fcrec recording");
   cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, or a .gltf/.glb file")->required();
-  cmd->add_option("--calib", opts->calib, "Calibration profile from facecap calibrate")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--calib", opts->calib, "Calibration profile (facecap calibrate) or hand-written calibration file; "
+                                          "default: the recording's own, when the take is a recording")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--take", opts->take, "Marker take (.trc, .c3d, .fcrec)")->required()->check(CLI::ExistingFile);
   cmd->add_option("-o,--output", opts->output, "out.csv (Live Link Face) or out.fcrec (recording)")->required();
-  cmd->add_option("--solver", opts->solver, "nonlinear, linear, dt or meshik (offline only: slow)")->capture_default_str();
+  cmd->add_option("--solver", opts->solver, "nonlinear, linear, dt or meshik (offline only: slow); the same as --set "
+                                            "solver.method=NAME");
   cmd->add_option("--rig-units", opts->rig_units, "Rig units mm|cm|m (default: guessed from the face's size)");
-  cmd->add_option("--max-pins", opts->max_pins, "Collision pins per frame at most (offline, more removes more lip crossings)")
-      ->capture_default_str()->check(CLI::Range(0, 1024));
+  add_solve_config_options(*cmd, opts->settings);
   cmd->add_flag("--check-labels", opts->check_labels, "Check the take's labels each frame and correct swaps");
   cmd->add_flag("--vertices", opts->vertices, "Store solved meshes in a .fcrec (large)");
   cmd->add_flag("--force", opts->force, "Replace the output file if it exists");

@@ -2,17 +2,6 @@
 
 namespace facecap::drivers {
 
-MarkerFrame make_marker_frame(const std::vector<std::string>& labels) {
-  MarkerFrame frame;
-  frame.markers.resize(labels.size());
-  for (std::size_t i = 0; i < labels.size(); ++i) {
-    frame.markers[i].id = int32_t(i);
-    frame.markers[i].label.assign(labels[i]);
-    frame.markers[i].flags = kMarkerMissing;
-  }
-  return frame;
-}
-
 void MailboxSource::configure_mailbox(const std::vector<std::string>& labels) {
   mailbox_ = std::make_unique<rt::LatestMailbox<MarkerFrame>>(make_marker_frame(labels));
 }

@@ -65,10 +65,6 @@ class MarkerSource {
   bool finished() const noexcept { return health().finished; }
 };
 
-// A frame with `count` markers reserved and labelled, so that copies into it never
-// allocate. Not RT-safe.
-MarkerFrame make_marker_frame(const std::vector<std::string>& labels);
-
 // Base for sources whose own thread produces frames (simulated or network devices):
 // the thread fills mailbox_.write_buffer() and publishes; the loop takes the newest.
 class MailboxSource : public MarkerSource {

@@ -13,12 +13,6 @@
 
 namespace facecap::align {
 
-int Calibration::find(const std::string& label) const {
-  for (std::size_t i = 0; i < markers.size(); ++i)
-    if (markers[i].label == label) return int(i);
-  return -1;
-}
-
 namespace {
 
 double rms_radius(const Eigen::Matrix3Xd& p) {
@@ -270,13 +264,6 @@ Calibration calibrate(const Rig& rig, const std::vector<std::string>& labels, co
     cal.markers.push_back(std::move(m));
   }
   return cal;
-}
-
-std::vector<MarkerBinding> calibration_bindings(const Calibration& calibration) {
-  std::vector<MarkerBinding> out;
-  out.reserve(calibration.markers.size());
-  for (const auto& m : calibration.markers) out.push_back(m.binding);
-  return out;
 }
 
 }  // namespace facecap::align

@@ -26,6 +26,7 @@
 
 #include <Eigen/Core>
 
+#include "solver/align/calibration.hpp"
 #include "solver/align/geometry.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/rig.hpp"
@@ -41,34 +42,6 @@ struct CalibrationOptions {
   int hull_iterations = 40;
   int surface_iterations = 60;
   int minimum_markers = 6;
-};
-
-struct MarkerCalibration {
-  std::string label;
-  MarkerBinding binding;                                   // the surface point it sits on
-  Eigen::Vector3d neutral = Eigen::Vector3d::Zero();       // take units, at the calibration frame
-  Eigen::Vector3d bound_point = Eigen::Vector3d::Zero();   // rig space: the binding's position on the neutral mesh
-  double residual_mm = 0.0;  // |transform(neutral) - bound_point| in rig millimetres
-};
-
-struct Calibration {
-  std::string rig_name;
-  uint64_t rig_hash = 0;
-  double rig_mm_per_unit = 10.0;
-  double take_mm_per_unit = 10.0;
-  bool units_detected = false;  // take units were detected, not given
-  Similarity take_to_rig;       // rig = s R take + t at the calibration frame
-  std::vector<MarkerCalibration> markers;
-  std::vector<std::string> stable_markers;  // labels used for head stabilisation
-  std::string source_take;
-  int64_t source_frame = -1;
-  double hull_rms_mm = 0.0;     // rig mm, the winning start's hull ICP residual
-  double trimmed_rms_mm = 0.0;  // rig mm, surface ICP residual over the kept markers
-  int start_index = -1;         // which start won (diagnostics)
-  std::vector<std::string> notes;  // what the operator should know (excluded markers, ...)
-
-  // Index of a label in markers, or -1.
-  int find(const std::string& label) const;
 };
 
 // ICP of points (3 x K) onto a mesh surface from a start transform, keeping the scale in
@@ -91,7 +64,5 @@ IcpResult icp_hulls(const Eigen::Matrix3Xd& marker_hull, const Eigen::Matrix3Xd&
 Calibration calibrate(const Rig& rig, const std::vector<std::string>& labels, const Eigen::Matrix3Xd& neutral,
                       const std::vector<uint8_t>& present, const CalibrationOptions& options = {});
 
-// Bindings in solver order (the calibration's marker order).
-std::vector<MarkerBinding> calibration_bindings(const Calibration& calibration);
 
 }  // namespace facecap::align

@@ -50,7 +50,8 @@ std::string write_calibration_profile(const Calibration& c) {
   std::string body;
   auto out = [&body](std::string_view s) { body += s; };
   out("# facecap calibration profile: written by `facecap calibrate`, read by solve, eval and facecapd.\n");
-  out(fmt::format("version = {}\n", kCalibrationProfileVersion));
+  // Version 2 only where it is needed, so that older readers keep reading the rest.
+  out(fmt::format("version = {}\n", c.head_markers.empty() ? 1 : kCalibrationProfileVersion));
   out("\n[rig]\n");
   out(fmt::format("name = {}\ncontent_hash = \"{:016x}\"\nunits = {}\n", quote(c.rig_name), c.rig_hash, quote(unit_name(c.rig_mm_per_unit))));
   out("\n[source]\n");
@@ -77,6 +78,10 @@ std::string write_calibration_profile(const Calibration& c) {
                     quote(m.label), m.binding.vertices[0], m.binding.vertices[1], m.binding.vertices[2],
                     vec3(m.binding.barycentric), vec3(m.neutral), vec3(m.bound_point),
                     vec3(c.take_to_rig.apply(m.neutral) - m.bound_point), m.residual_mm));
+  }
+  for (const auto& h : c.head_markers) {
+    out("\n[[head_marker]]  # head pose only: not bound, not pinned\n");
+    out(fmt::format("label = {}\nneutral = {}\n", quote(h.label), vec3(h.neutral)));
   }
   // The checksum line goes second; it is left out of its own sum.
   const std::size_t first_break = body.find('\n') + 1;
@@ -191,7 +196,7 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     throw Error(std::string(e.description()), ErrorLocation{.file = name, .line = b.line, .column = b.column});
   }
   Reader r(name);
-  r.only_keys(root, {"version", "checksum", "rig", "source", "transform", "fit", "stabilise", "notes", "marker"}, "");
+  r.only_keys(root, {"version", "checksum", "rig", "source", "transform", "fit", "stabilise", "notes", "marker", "head_marker"}, "");
   const int64_t version = r.integer(root, "version", "");
   if (version < 1 || version > kCalibrationProfileVersion)
     r.fail(root.get("version"), fmt::format("profile version {} is not readable by this facecap (reads 1..{})", version,
@@ -290,8 +295,24 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     }
     c.markers.push_back(std::move(m));
   }
+  if (const toml::node* heads = root.get("head_marker")) {
+    if (!heads->is_array_of_tables()) r.fail(heads, "'head_marker' must be [[head_marker]] tables", "head_marker");
+    for (const auto& node : *heads->as_array()) {
+      const auto& t = *node.as_table();
+      r.only_keys(t, {"label", "neutral"}, "head_marker.");
+      HeadMarkerCalibration h;
+      h.label = r.string(t, "label", "head_marker.");
+      if (h.label.empty()) r.fail(t.get("label"), "empty head marker label", "head_marker.label");
+      if (!seen.insert(h.label).second)
+        r.fail(t.get("label"), fmt::format("marker '{}' appears twice", h.label), "head_marker.label");
+      h.neutral = r.vector3(t, "neutral", "head_marker.");
+      c.head_markers.push_back(std::move(h));
+    }
+  }
   for (const auto& s : c.stable_markers)
-    if (c.find(s) < 0) r.fail(stab.get("markers"), fmt::format("stable marker '{}' has no [[marker]] entry", s), "stabilise.markers");
+    if (!c.neutral_of(s))
+      r.fail(stab.get("markers"), fmt::format("stable marker '{}' has no [[marker]] or [[head_marker]] entry", s),
+             "stabilise.markers");
   return c;
 }
 

@@ -12,6 +12,7 @@
 //   [stabilise]  markers = [labels]
 //   [[marker]]   label, vertices, barycentric, neutral (take units), bound_point (rig),
 //                offset (rig: transform(neutral) - bound_point, the identity mismatch), residual_mm
+//   [[head_marker]] label, neutral (take units): a head-rig marker, for the head pose only (version 2)
 //   notes = [...]
 //
 // Reading is strict: unknown keys, wrong types, a bad checksum or a newer version are
@@ -25,7 +26,8 @@
 
 namespace facecap::align {
 
-inline constexpr int kCalibrationProfileVersion = 1;
+// 2: [[head_marker]] entries (written only by profiles that have them).
+inline constexpr int kCalibrationProfileVersion = 2;
 
 std::string write_calibration_profile(const Calibration& calibration);
 void save_calibration_profile(const std::filesystem::path& path, const Calibration& calibration);

@@ -1,4 +1,4 @@
-#include "daemon/shm_writer.hpp"
+#include "outputs/shm/shm_writer.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -16,7 +16,7 @@
 #include "core/log.hpp"
 #include "core/time.hpp"
 
-namespace facecap::daemon {
+namespace facecap::outputs {
 namespace {
 
 using namespace facecap::shm;
@@ -196,4 +196,4 @@ void ShmWriter::beat(int64_t now_ns) noexcept { header_->heartbeat_ns.store(now_
 
 void ShmWriter::mark_stopped() noexcept { header_->writer_state.store(kWriterStopped, std::memory_order_release); }
 
-}  // namespace facecap::daemon
+}  // namespace facecap::outputs

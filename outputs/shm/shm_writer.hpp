@@ -12,7 +12,7 @@
 #include "client/facecap_shm_layout.hpp"
 #include "core/frame.hpp"
 
-namespace facecap::daemon {
+namespace facecap::outputs {
 
 struct ShmOutputSpec {
   std::string name;                      // "facecap" or "/facecap"
@@ -67,4 +67,4 @@ class ShmWriter {
 // "/name" from "name"; throws Error for names shm_open would refuse.
 std::string shm_object_name(const std::string& name);
 
-}  // namespace facecap::daemon
+}  // namespace facecap::outputs

@@ -11,8 +11,9 @@
 #include "core/frame.hpp"
 #include "core/rt/spsc_slots.hpp"
 #include "formats/recording.hpp"
+#include "outputs/api/sink.hpp"
 
-namespace facecap::daemon {
+namespace facecap::outputs {
 
 struct RecorderOptions {
   std::filesystem::path file;
@@ -20,35 +21,37 @@ struct RecorderOptions {
   std::size_t queue_frames = 512;
   bool markers = true;
   bool solved = true;
+  bool vertices = false;  // solved meshes too (large); a re-solve reproduces them otherwise
 };
 
 struct RecorderCounters {
   uint64_t marker_frames = 0;  // written
   uint64_t solved_frames = 0;  // written
-  uint64_t dropped = 0;        // loop frames not queued (queue full)
+  uint64_t dropped = 0;        // loop frames that did not reach the file (queue full, or the recording stopped)
   uint64_t errors = 0;         // write failures (the run continues; the recording stops)
 };
 
-class Recorder {
+class Recorder final : public OutputSink {
  public:
   // Creates the file (an existing file is an error) and starts the writer thread. The
-  // prototype sizes the queue's marker slots like the loop's frames; shape_count sizes
-  // the weights. Not RT-safe; throws Error.
-  Recorder(RecorderOptions options, const MarkerFrame& marker_prototype, Eigen::Index shape_count);
+  // queue's slots are sized from the header: its marker labels and shape names, and
+  // vertex_count vertices when options.vertices. Not RT-safe; throws Error.
+  Recorder(RecorderOptions options, Eigen::Index vertex_count);
   // stop() if still running. Not RT-safe.
-  ~Recorder();
+  ~Recorder() override;
   Recorder(const Recorder&) = delete;
   Recorder& operator=(const Recorder&) = delete;
 
-  // Queues copies of one loop frame (either may be null); false when dropped (counted).
-  // Solved frames are recorded without vertices (a re-solve from the weights and markers
-  // reproduces them). RT-safe.
-  bool offer(const MarkerFrame* markers, const SolvedFrame* solved) noexcept;
+  std::string_view name() const noexcept override { return "recording"; }
+  std::string description() const override;
+  bool wants_vertices() const noexcept override { return options_.solved && options_.vertices; }
+  // Queues copies of one loop frame; drops it (counted) when the queue is full. RT-safe.
+  void offer(const MarkerFrame& markers, const SolvedFrame& solved) noexcept override;
   // Whether offer() would queue now. Producer side only. RT-safe.
-  bool has_room() noexcept { return queue_.begin_push() != nullptr; }
-
+  bool ready() noexcept override { return queue_.begin_push() != nullptr; }
+  SinkHealth health() const noexcept override;
   // Writes what is queued, then the index, syncs and closes. Not RT-safe; idempotent.
-  void stop();
+  void stop() override;
 
   RecorderCounters counters() const noexcept;
   const std::filesystem::path& file() const noexcept { return options_.file; }
@@ -67,10 +70,10 @@ class Recorder {
   rt::SpscSlots<Entry> queue_;
   std::thread thread_;
   std::atomic<bool> stop_requested_{false};
-  std::atomic<uint64_t> marker_frames_{0}, solved_frames_{0}, dropped_{0}, errors_{0};
+  std::atomic<uint64_t> offered_{0}, written_{0}, marker_frames_{0}, solved_frames_{0}, dropped_{0}, errors_{0};
 };
 
 // "facecapd-20240131-142501.fcrec" (local time), made unique with -2, -3, ... if taken.
 std::filesystem::path new_recording_path(const std::filesystem::path& directory);
 
-}  // namespace facecap::daemon
+}  // namespace facecap::outputs

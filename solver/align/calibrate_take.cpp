@@ -1,4 +1,4 @@
-#include "solver/align/pipeline.hpp"
+#include "solver/align/calibrate_take.hpp"
 
 #include <algorithm>
 #include <limits>

@@ -1,4 +1,4 @@
-#include "daemon/recorder.hpp"
+#include "outputs/recording/recorder.hpp"
 
 #include <ctime>
 
@@ -8,7 +8,7 @@
 #include "core/log.hpp"
 #include "core/time.hpp"
 
-namespace facecap::daemon {
+namespace facecap::outputs {
 namespace {
 
 // The writer thread polls the queue; at 120-1000 Hz this batches a few frames per wake.
@@ -16,8 +16,9 @@ constexpr int64_t kPollNs = 2 * kNsPerMs;
 // Buffered chunks reach the kernel at least this often, bounding what a crash loses.
 constexpr int64_t kFlushIntervalNs = kNsPerSecond;
 
-// Everything but the vertices, into storage of the same shape count. RT-safe.
-void copy_without_vertices(const SolvedFrame& from, SolvedFrame& to) noexcept {
+// Everything, the vertices only when `to` has room for them, into storage of the same
+// sizes. RT-safe.
+void copy_solved(const SolvedFrame& from, SolvedFrame& to) noexcept {
   to.frame_no = from.frame_no;
   to.source_time_ns = from.source_time_ns;
   to.receive_time_ns = from.receive_time_ns;
@@ -27,23 +28,26 @@ void copy_without_vertices(const SolvedFrame& from, SolvedFrame& to) noexcept {
   to.head_rotation = from.head_rotation;
   to.head_translation = from.head_translation;
   if (to.weights.size() == from.weights.size()) to.weights = from.weights;
+  if (to.vertices.cols() > 0 && to.vertices.cols() == from.vertices.cols()) to.vertices = from.vertices;
   to.stage_ns = from.stage_ns;
   to.collision_constraints = from.collision_constraints;
   to.markers_used = from.markers_used;
   to.flags = from.flags;
 }
 
-SolvedFrame weights_only_frame(Eigen::Index shape_count) {
+SolvedFrame sized_frame(Eigen::Index shape_count, Eigen::Index vertex_count) {
   SolvedFrame frame;
-  frame.resize(shape_count, 0);
+  frame.resize(shape_count, vertex_count);
   return frame;
 }
 
 }  // namespace
 
-Recorder::Recorder(RecorderOptions options, const MarkerFrame& marker_prototype, Eigen::Index shape_count)
+Recorder::Recorder(RecorderOptions options, Eigen::Index vertex_count)
     : options_(std::move(options)),
-      queue_(options_.queue_frames, Entry{false, false, marker_prototype, weights_only_frame(shape_count)}) {
+      queue_(options_.queue_frames,
+             Entry{false, false, make_marker_frame(options_.header.marker_labels),
+                   sized_frame(Eigen::Index(options_.header.shape_names.size()), options_.vertices ? vertex_count : 0)}) {
   std::filesystem::create_directories(options_.file.parent_path().empty() ? "." : options_.file.parent_path());
   writer_ = std::make_unique<formats::RecordingWriter>(options_.file, options_.header);
   thread_ = std::thread([this] { run(); });
@@ -57,22 +61,35 @@ Recorder::~Recorder() {
   }
 }
 
-bool Recorder::offer(const MarkerFrame* markers, const SolvedFrame* solved) noexcept {
-  const bool want_markers = markers && options_.markers;
-  const bool want_solved = solved && options_.solved;
-  if (!want_markers && !want_solved) return true;
+std::string Recorder::description() const {
+  return fmt::format("recording {} ({}{}{})", options_.file.string(), options_.markers ? "markers" : "",
+                     options_.markers && options_.solved ? " and " : "",
+                     options_.solved ? (options_.vertices ? "solved frames with vertices" : "solved frames") : "");
+}
+
+void Recorder::offer(const MarkerFrame& markers, const SolvedFrame& solved) noexcept {
+  offered_.fetch_add(1, std::memory_order_relaxed);
   Entry* slot = queue_.begin_push();
   if (!slot) {
     dropped_.fetch_add(1, std::memory_order_relaxed);
-    return false;
+    return;
   }
   // Slots were sized like these frames, so the copies reuse their storage.
-  slot->has_markers = want_markers;
-  slot->has_solved = want_solved;
-  if (want_markers) slot->markers = *markers;
-  if (want_solved) copy_without_vertices(*solved, slot->solved);
+  slot->has_markers = options_.markers;
+  slot->has_solved = options_.solved;
+  if (options_.markers) slot->markers = markers;
+  if (options_.solved) copy_solved(solved, slot->solved);
   queue_.commit_push();
-  return true;
+}
+
+SinkHealth Recorder::health() const noexcept {
+  SinkHealth h;
+  h.offered = offered_.load(std::memory_order_relaxed);
+  h.delivered = written_.load(std::memory_order_relaxed);
+  h.dropped = dropped_.load(std::memory_order_relaxed);
+  h.errors = errors_.load(std::memory_order_relaxed);
+  h.failed = h.errors > 0;
+  return h;
 }
 
 // The writer thread. Not RT-safe (encodes, allocates, writes).
@@ -91,15 +108,19 @@ void Recorder::run() {
             writer_->append_solved_frame(entry->solved);
             solved_frames_.fetch_add(1, std::memory_order_relaxed);
           }
+          written_.fetch_add(1, std::memory_order_relaxed);
         } catch (const std::exception& e) {
           // Disk full or similar: keep the run going, stop recording, say so once.
           errors_.fetch_add(1, std::memory_order_relaxed);
+          dropped_.fetch_add(1, std::memory_order_relaxed);
           spdlog::error("recording {} stopped: {}", options_.file.string(), e.what());
           try {
             writer_->close();
           } catch (const std::exception&) {
           }
         }
+      } else {
+        dropped_.fetch_add(1, std::memory_order_relaxed);  // the recording stopped: not on disk
       }
       queue_.pop();
     }
@@ -142,4 +163,4 @@ std::filesystem::path new_recording_path(const std::filesystem::path& directory)
   return path;
 }
 
-}  // namespace facecap::daemon
+}  // namespace facecap::outputs

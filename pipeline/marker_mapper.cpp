@@ -1,0 +1,106 @@
+#include "pipeline/marker_mapper.hpp"
+
+#include <algorithm>
+#include <limits>
+
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+#include "core/units.hpp"
+
+namespace facecap::pipeline {
+namespace {
+
+int find_label(std::span<const std::string> labels, const std::string& label) {
+  const auto it = std::find(labels.begin(), labels.end(), label);
+  return it == labels.end() ? -1 : int(it - labels.begin());
+}
+
+}  // namespace
+
+MarkerMapper::MarkerMapper(const align::Calibration& calibration, std::span<const std::string> frame_labels,
+                           std::string_view source_units, MapperOptions options)
+    : calibration_(calibration) {
+  // Frames in other units than the calibration frame's are scaled into its units.
+  const std::optional<double> source_mm = millimetres_per_unit(source_units);
+  source_mm_ = source_mm.value_or(calibration_.take_mm_per_unit);
+  if (source_mm && calibration_.take_mm_per_unit > 0.0) source_to_take_ = *source_mm / calibration_.take_mm_per_unit;
+
+  for (const auto& m : calibration_.markers) {
+    const int slot = find_label(frame_labels, m.label);
+    slots_.push_back(slot);
+    found_ += slot >= 0;
+    stable_.push_back(std::find(calibration_.stable_markers.begin(), calibration_.stable_markers.end(), m.label) !=
+                      calibration_.stable_markers.end());
+  }
+  if (found_ < 3)
+    throw Error(fmt::format("only {} of the calibration's {} markers ({}{}) are among the source's {} markers ({}{})",
+                            found_, calibration_.markers.size(),
+                            calibration_.markers.empty() ? "none" : calibration_.markers.front().label,
+                            calibration_.markers.size() > 1 ? ", ..." : "", frame_labels.size(),
+                            frame_labels.empty() ? "none" : frame_labels.front(), frame_labels.size() > 1 ? ", ..." : ""));
+
+  // The stable markers' calibration-frame positions, in source units: the head pose is
+  // fitted to the frames as they come.
+  std::vector<int> stable_slots;
+  std::vector<Eigen::Vector3d> reference;
+  for (const std::string& label : calibration_.stable_markers) {
+    const int slot = find_label(frame_labels, label);
+    const Eigen::Vector3d* neutral = calibration_.neutral_of(label);
+    if (slot < 0 || !neutral) continue;
+    stable_slots.push_back(slot);
+    reference.push_back(*neutral / source_to_take_);
+  }
+  stable_found_ = stable_slots.size();
+  stabilising_ = options.stabilise_head && stable_found_ >= 3;
+  if (stabilising_) {
+    Eigen::Matrix3Xd ref(3, Eigen::Index(reference.size()));
+    for (std::size_t i = 0; i < reference.size(); ++i) ref.col(Eigen::Index(i)) = reference[i];
+    stabiliser_.emplace(std::move(stable_slots), std::move(ref),
+                        align::StabiliserParams{.outlier_floor = options.outlier_floor_mm / source_mm_});
+  }
+}
+
+MappedFrame MarkerMapper::make_output() const {
+  MappedFrame out;
+  out.targets = Eigen::Matrix3Xd::Constant(3, marker_count(), std::numeric_limits<double>::quiet_NaN());
+  out.present.assign(slots_.size(), 0);
+  return out;
+}
+
+void MarkerMapper::process(const MarkerFrame& frame, MappedFrame& out, std::span<uint32_t> marker_flags) noexcept {
+  // The head pose in source units: a point fixed to the head is at R reference + t now.
+  Eigen::Matrix3d R_head = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t_head = Eigen::Vector3d::Zero();
+  if (stabiliser_) {
+    stabiliser_->process(frame.markers, pose_, marker_flags);
+    R_head = pose_.pose.rotation;
+    t_head = pose_.pose.translation;
+  }
+  const align::Similarity& T = calibration_.take_to_rig;
+  const Eigen::Matrix3d R_head_inv = R_head.transpose();
+  out.markers_present = 0;
+  for (std::size_t k = 0; k < slots_.size(); ++k) {
+    const int slot = slots_[k];
+    const bool ok = slot >= 0 && std::size_t(slot) < frame.markers.size() && frame.markers[std::size_t(slot)].present() &&
+                    frame.markers[std::size_t(slot)].position.allFinite();
+    out.present[k] = ok;
+    if (!ok) {
+      out.targets.col(Eigen::Index(k)).setConstant(std::numeric_limits<double>::quiet_NaN());
+      continue;
+    }
+    ++out.markers_present;
+    const align::MarkerCalibration& m = calibration_.markers[k];
+    const Eigen::Vector3d stabilised = source_to_take_ * (R_head_inv * (frame.markers[std::size_t(slot)].position - t_head));
+    out.targets.col(Eigen::Index(k)) = m.bound_point + T.apply_vector(stabilised - m.neutral);
+  }
+  // Head pose in rig axes: T o H o T^-1 with H in take units (the scale cancels).
+  const Eigen::Matrix3d Rh = T.rotation * R_head * T.rotation.transpose();
+  out.head_rotation = Eigen::Quaterniond(Rh);
+  out.head_translation = T.translation - Rh * T.translation + T.scale * (T.rotation * (source_to_take_ * t_head));
+  out.head_held = stabiliser_ && pose_.held;
+  out.stable_inliers = stabiliser_ ? pose_.inliers : 0;
+  out.stable_rms_mm = stabiliser_ ? pose_.rms * source_mm_ : 0.0;
+}
+
+}  // namespace facecap::pipeline

@@ -1,0 +1,75 @@
+#pragma once
+// One frame's work, the same in facecapd's solve loop and in every tool: marker frame ->
+// (label check) -> rig-space targets with the head stabilised (MarkerMapper) -> face
+// solve -> SolvedFrame. Built whole off the real-time thread (facecapd builds a new one
+// aside on reload and swaps it in); process() then runs once per frame without
+// allocating, locking, throwing or logging.
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/frame.hpp"
+#include "pipeline/marker_mapper.hpp"
+#include "solver/align/label.hpp"
+#include "solver/face_solver.hpp"
+#include "solver/rig.hpp"
+
+namespace facecap::pipeline {
+
+// What the frames to be solved carry: their marker slots and units.
+struct SourceDescription {
+  std::vector<std::string> labels;  // MarkerFrame::markers order
+  std::string units;                // "mm", "cm", "m"; empty when unknown (the calibration's are assumed)
+};
+
+// How to solve: the [solver] section's method and parameters, and the mapping options.
+struct SolveSettings {
+  std::string method = "nonlinear";
+  SolverParams params;
+  MapperOptions mapper;
+  // Check each frame's labels against the markers' predicted positions and correct
+  // swaps before mapping (align::MarkerLabeller::check).
+  bool check_labels = false;
+};
+
+class SolvePipeline {
+ public:
+  // Precomputes the solver for the calibration's markers (up to seconds for a large rig).
+  // Throws Error (unknown method, a calibration that does not fit the rig or the source).
+  // Not RT-safe.
+  SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
+                const SolveSettings& settings);
+
+  // Solves one marker frame into `out`, which make_solved_frame() sized. RT-safe.
+  void process(const MarkerFrame& markers, SolvedFrame& out) noexcept;
+
+  // A frame sized for this rig (vertices only when wanted). Not RT-safe.
+  SolvedFrame make_solved_frame(bool with_vertices) const;
+
+  // What a loop prefetches ahead of a frame (FaceSolver::streamed_memory). RT-safe.
+  std::span<const std::span<const std::byte>> streamed_memory() const noexcept { return solver_->streamed_memory(); }
+  const MarkerMapper& mapper() const noexcept { return mapper_; }
+  // The last frame's mapping and solve, for tools that report more than a SolvedFrame.
+  const MappedFrame& mapped() const noexcept { return mapped_; }
+  const SolveResult& result() const noexcept { return result_; }
+  // The last frame's label check (zeros without check_labels).
+  const align::LabelStats& label_stats() const noexcept { return label_stats_; }
+  std::string_view method() const noexcept { return solver_->name(); }
+
+ private:
+  MarkerMapper mapper_;
+  std::unique_ptr<FaceSolver> solver_;
+  std::optional<align::MarkerLabeller> labeller_;
+  MarkerFrame checked_;  // the frame after the label check, sized at construction
+  MappedFrame mapped_;
+  SolveResult result_;
+  align::LabelStats label_stats_;
+  Eigen::Index shape_count_ = 0;
+  Eigen::Index vertex_count_ = 0;
+};
+
+}  // namespace facecap::pipeline

@@ -1,0 +1,65 @@
+#pragma once
+// The one calibration type: how an actor's markers relate to the rig. `facecap calibrate`
+// measures it (Algorithm 1, calibrate.hpp) and saves it as a profile (profile.hpp);
+// pipeline/calibration.hpp also reads it from a hand-written file or makes it for the
+// default marker set. The marker mapper (pipeline/marker_mapper.hpp) turns it into
+// per-frame solver targets, in facecapd and in every tool alike.
+//
+// Take units are the units of the calibration frame's markers; frames in other units are
+// converted on the way in (a take in mm solved with a profile made in cm).
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "solver/align/geometry.hpp"
+#include "solver/face_solver.hpp"
+
+namespace facecap::align {
+
+// A marker on the face: bound to a surface point and pinned there by the solve.
+struct MarkerCalibration {
+  std::string label;
+  MarkerBinding binding;                                   // the surface point it sits on
+  Eigen::Vector3d neutral = Eigen::Vector3d::Zero();       // take units, at the calibration frame
+  Eigen::Vector3d bound_point = Eigen::Vector3d::Zero();   // rig space: the binding's position on the neutral mesh
+  double residual_mm = 0.0;  // |transform(neutral) - bound_point| in rig millimetres
+};
+
+// A marker rigid with the skull but off the face (a headband, a cap, a helmet): used for
+// the head pose only, never bound or pinned.
+struct HeadMarkerCalibration {
+  std::string label;
+  Eigen::Vector3d neutral = Eigen::Vector3d::Zero();  // take units, at the calibration frame
+};
+
+struct Calibration {
+  std::string rig_name;
+  uint64_t rig_hash = 0;
+  double rig_mm_per_unit = 10.0;
+  double take_mm_per_unit = 10.0;
+  bool units_detected = false;  // take units were detected, not given
+  Similarity take_to_rig;       // rig = s R take + t at the calibration frame
+  std::vector<MarkerCalibration> markers;           // bound, in solver order
+  std::vector<HeadMarkerCalibration> head_markers;  // head pose only
+  // Labels whose rigid motion is the head's (stabilisation): markers or head markers.
+  std::vector<std::string> stable_markers;
+  std::string source_take;      // the take calibrated from, or what made the calibration
+  int64_t source_frame = -1;
+  double hull_rms_mm = 0.0;     // rig mm, the winning start's hull ICP residual
+  double trimmed_rms_mm = 0.0;  // rig mm, surface ICP residual over the kept markers
+  int start_index = -1;         // which start won (diagnostics)
+  std::vector<std::string> notes;  // what the operator should know (excluded markers, ...)
+
+  // Index of a label in markers, or -1.
+  int find(const std::string& label) const;
+  // Index of a label in head_markers, or -1.
+  int find_head(const std::string& label) const;
+  // The calibration-frame position (take units) of a bound or head marker, or nullptr.
+  const Eigen::Vector3d* neutral_of(const std::string& label) const;
+  // Bindings in solver order (the markers' order).
+  std::vector<MarkerBinding> bindings() const;
+};
+
+}  // namespace facecap::align
