@@ -16,8 +16,8 @@
 #include <utility>
 #include <vector>
 
-#include <dtl/dtl.hpp>
 #include <fmt/format.h>
+#include <dtl/dtl.hpp>
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
@@ -92,48 +92,56 @@ struct Place {
 // (each with its own largest difference), largest first.
 class Channel {
  public:
-  Channel(double tolerance, std::size_t top) : tolerance_(tolerance), top_(top) {}
+  // element names a frame's values ("shape", "vertex"), nullptr when a frame has one value;
+  // shape_names (weights) names each shape, and its places keep both values.
+  Channel(double tolerance, std::size_t top, const char* element = nullptr,
+          const std::vector<std::string>* shape_names = nullptr)
+      : tolerance_(tolerance), top_(top), element_(element), shape_names_(shape_names) {}
 
   void add(int64_t element, double difference, double a = 0.0, double b = 0.0) {
-    ++samples_;
+    ++values_;
     sum_ += difference;
     sum_squares_ += difference * difference;
-    if (difference > tolerance_) ++samples_beyond_;
+    if (difference > tolerance_) ++values_beyond_;
     if (difference > frame_worst_.difference) frame_worst_ = {0, element, difference, a, b};
   }
   // Closes the frame whose values add() received.
   void end_frame(int64_t frame_no) {
     ++frames_;
-    const Place worst{frame_no, frame_worst_.element, frame_worst_.difference, frame_worst_.a, frame_worst_.b};
-    frame_worst_ = {};
+    Place worst = std::exchange(frame_worst_, Place{});
+    worst.frame_no = frame_no;
     if (worst.difference > tolerance_) ++frames_beyond_;
     if (worst.difference <= 0.0) return;
     if (!largest_ || worst.difference > largest_->difference) largest_ = worst;
-    if (worst_.size() == top_ && (top_ == 0 || worst.difference <= worst_.back().difference)) return;
-    const auto at = std::upper_bound(worst_.begin(), worst_.end(), worst.difference,
+    if (top_ == 0 || (worst_frames_.size() == top_ && worst.difference <= worst_frames_.back().difference)) return;
+    const auto at = std::upper_bound(worst_frames_.begin(), worst_frames_.end(), worst.difference,
                                      [](double d, const Place& p) { return d > p.difference; });
-    worst_.insert(at, worst);
-    if (worst_.size() > top_) worst_.pop_back();
+    worst_frames_.insert(at, worst);
+    if (worst_frames_.size() > top_) worst_frames_.pop_back();
   }
 
   double tolerance() const noexcept { return tolerance_; }
+  const char* element() const noexcept { return element_; }
+  const std::vector<std::string>* shape_names() const noexcept { return shape_names_; }
   std::size_t frames() const noexcept { return frames_; }
   std::size_t frames_beyond() const noexcept { return frames_beyond_; }
-  std::size_t samples_beyond() const noexcept { return samples_beyond_; }
+  std::size_t values_beyond() const noexcept { return values_beyond_; }
   const std::optional<Place>& largest() const noexcept { return largest_; }  // none when all equal
-  const std::vector<Place>& worst() const noexcept { return worst_; }
+  const std::vector<Place>& worst_frames() const noexcept { return worst_frames_; }
   double max() const noexcept { return largest_ ? largest_->difference : 0.0; }
-  double mean() const noexcept { return samples_ ? sum_ / double(samples_) : 0.0; }
-  double rms() const noexcept { return samples_ ? std::sqrt(sum_squares_ / double(samples_)) : 0.0; }
+  double mean() const noexcept { return values_ ? sum_ / double(values_) : 0.0; }
+  double rms() const noexcept { return values_ ? std::sqrt(sum_squares_ / double(values_)) : 0.0; }
 
  private:
   double tolerance_;
   std::size_t top_;
-  std::size_t samples_ = 0, samples_beyond_ = 0, frames_ = 0, frames_beyond_ = 0;
+  const char* element_;
+  const std::vector<std::string>* shape_names_;
+  std::size_t values_ = 0, values_beyond_ = 0, frames_ = 0, frames_beyond_ = 0;
   double sum_ = 0.0, sum_squares_ = 0.0;
-  Place frame_worst_;
+  Place frame_worst_;  // of the frame add() is receiving
   std::optional<Place> largest_;
-  std::vector<Place> worst_;
+  std::vector<Place> worst_frames_;
 };
 
 // "qp_iteration_cap" for a known SolvedFlags bit, "bit 7" beyond them.
@@ -180,8 +188,7 @@ struct MissingFrames {
   }
 };
 
-// What the two HEADs' text fields have in common: nothing when equal, else a unified diff
-// of their lines.
+// How one text field of the two HEADs differs: not at all, or as a unified diff of lines.
 struct TextDifference {
   bool differ = false;
   std::string unified;
@@ -278,11 +285,11 @@ struct Comparison {
   TextDifference solver_settings, calibration;
   std::vector<std::string> beyond;  // what breaks the tolerances, in table order
 
-  explicit Comparison(const DiffOptions& o)
-      : weights(o.tolerance_weight, o.top),
+  Comparison(const DiffOptions& o, const std::vector<std::string>& shape_names)
+      : weights(o.tolerance_weight, o.top, "shape", &shape_names),
         head_rotation(o.tolerance_degrees, o.top),
         head_translation(o.tolerance_mm, o.top),
-        vertices(o.tolerance_mm, o.top) {}
+        vertices(o.tolerance_mm, o.top, "vertex") {}
 };
 
 void compare_frame(const Side& a, const SolvedFrame& fa, const Side& b, const SolvedFrame& fb, const DiffOptions& o,
@@ -334,7 +341,7 @@ std::size_t count_common(const FrameNumbers& a, const FrameNumbers& b) {
 
 Comparison compare(const Side& a, const Side& b, const DiffOptions& o) {
   check_comparable(a, b);
-  Comparison c(o);
+  Comparison c(o, a.reader.header().shape_names);
   const std::size_t common = count_common(a.frames, b.frames);
   if (common == 0) {
     throw Error(fmt::format("{} and {} have no frame number in common ({}..{} and {}..{})", a.file, b.file,
@@ -386,13 +393,11 @@ nlohmann::json side_json(const Side& s) {
           {"truncated", s.reader.truncated()}};
 }
 
-// element_key names the element index ("shape", "vertex"), nullptr for a per-frame
-// channel; shape_names (weights only) adds each place's shape name and both values.
-nlohmann::json place_json(const Place& p, const char* element_key, const std::vector<std::string>* shape_names) {
+nlohmann::json place_json(const Channel& c, const Place& p) {
   nlohmann::json j = {{"frame", p.frame_no}};
-  if (element_key) j[element_key] = p.element;
-  if (shape_names) {
-    j["shape_name"] = (*shape_names)[std::size_t(p.element)];
+  if (c.element()) j[c.element()] = p.element;
+  if (c.shape_names()) {
+    j["shape_name"] = (*c.shape_names())[std::size_t(p.element)];
     j["a"] = p.a;
     j["b"] = p.b;
   }
@@ -400,18 +405,17 @@ nlohmann::json place_json(const Place& p, const char* element_key, const std::ve
   return j;
 }
 
-nlohmann::json channel_json(const Channel& c, const char* element_key,
-                            const std::vector<std::string>* shape_names = nullptr) {
+nlohmann::json channel_json(const Channel& c) {
   nlohmann::json worst = nlohmann::json::array();
-  for (const Place& p : c.worst()) worst.push_back(place_json(p, element_key, shape_names));
+  for (const Place& p : c.worst_frames()) worst.push_back(place_json(c, p));
   nlohmann::json j = {{"tolerance", c.tolerance()},
                       {"frames", c.frames()},
                       {"max", c.max()},
-                      {"largest", c.largest() ? place_json(*c.largest(), element_key, shape_names) : nullptr},
+                      {"largest", c.largest() ? place_json(c, *c.largest()) : nullptr},
                       {"mean", c.mean()},
                       {"rms", c.rms()},
                       {"frames_beyond", c.frames_beyond()}};
-  if (element_key) j["values_beyond"] = c.samples_beyond();
+  if (c.element()) j["values_beyond"] = c.values_beyond();
   j["worst"] = worst;
   return j;
 }
@@ -438,7 +442,7 @@ nlohmann::json flags_json(const FlagDifferences& f) {
 nlohmann::json text_json(const TextDifference& t) { return {{"differ", t.differ}, {"diff", t.unified}}; }
 
 nlohmann::json comparison_json(const Side& a, const Side& b, const Comparison& c) {
-  nlohmann::json vertices = channel_json(c.vertices, "vertex");
+  nlohmann::json vertices = channel_json(c.vertices);
   vertices["frames_with_vertices_only_in_a"] = c.vertex_frames_only_a;
   vertices["frames_with_vertices_only_in_b"] = c.vertex_frames_only_b;
   return {
@@ -446,9 +450,9 @@ nlohmann::json comparison_json(const Side& a, const Side& b, const Comparison& c
       {"b", side_json(b)},
       {"frames",
        {{"compared", c.frames_compared}, {"only_in_a", missing_json(c.only_a)}, {"only_in_b", missing_json(c.only_b)}}},
-      {"weights", channel_json(c.weights, "shape", &a.reader.header().shape_names)},
-      {"head_rotation_degrees", channel_json(c.head_rotation, nullptr)},
-      {"head_translation_mm", channel_json(c.head_translation, nullptr)},
+      {"weights", channel_json(c.weights)},
+      {"head_rotation_degrees", channel_json(c.head_rotation)},
+      {"head_translation_mm", channel_json(c.head_translation)},
       {"vertices_mm", vertices},
       {"flags", flags_json(c.flags)},
       {"solver_settings", text_json(c.solver_settings)},
@@ -475,31 +479,30 @@ void print_side(const char* letter, const Side& s) {
 
 constexpr const char* kRowFormat = "{:<23}{:<14}{:<36}{:<11}{:<11}{:<15}{}\n";
 
-void print_row(const char* name, const Channel& c, const std::vector<std::string>* shape_names, const char* element) {
-  std::string where = "-";
-  if (const auto& p = c.largest()) {
-    where = fmt::format("frame {}", p->frame_no);
-    if (shape_names)
-      where += fmt::format(", shape {} {}", p->element, (*shape_names)[std::size_t(p->element)]);
-    else if (element)
-      where += fmt::format(", {} {}", element, p->element);
-  }
-  fmt::print(kRowFormat, name, fmt::format("{:.6g}", c.max()), where, fmt::format("{:.3g}", c.mean()),
-             fmt::format("{:.3g}", c.rms()), c.frames_beyond(), fmt::format("{:g}", c.tolerance()));
+// "frame 7, shape 3 browInnerUp_L", "frame 3, vertex 17", "frame 12".
+std::string where(const Channel& c, const Place& p) {
+  std::string text = fmt::format("frame {}", p.frame_no);
+  if (c.shape_names())
+    return text + fmt::format(", shape {} {}", p.element, (*c.shape_names())[std::size_t(p.element)]);
+  if (c.element()) return text + fmt::format(", {} {}", c.element(), p.element);
+  return text;
 }
 
-void print_worst(const char* title, const Channel& c, const std::vector<std::string>* shape_names,
-                 const char* element) {
-  if (c.worst().empty()) return;
+void print_row(const char* name, const Channel& c) {
+  fmt::print(kRowFormat, name, fmt::format("{:.6g}", c.max()), c.largest() ? where(c, *c.largest()) : "-",
+             fmt::format("{:.3g}", c.mean()), fmt::format("{:.3g}", c.rms()), c.frames_beyond(),
+             fmt::format("{:g}", c.tolerance()));
+}
+
+void print_worst(const char* title, const Channel& c) {
+  if (c.worst_frames().empty()) return;
   fmt::print("\nworst {}:\n", title);
-  for (const Place& p : c.worst()) {
-    if (shape_names) {
-      fmt::print("  frame {:<10} shape {:<4} {:<24} A {:<12.9g} B {:<12.9g} {:.6g}\n", p.frame_no, p.element,
-                 (*shape_names)[std::size_t(p.element)], p.a, p.b, p.difference);
-    } else if (element) {
-      fmt::print("  frame {:<10} {} {:<8} {:.6g}\n", p.frame_no, element, p.element, p.difference);
+  for (const Place& p : c.worst_frames()) {
+    const std::string difference = fmt::format("{:.6g}", p.difference);
+    if (c.shape_names()) {
+      fmt::print("  {:<40} {:<12} A {:.9g}, B {:.9g}\n", where(c, p), difference, p.a, p.b);
     } else {
-      fmt::print("  frame {:<10} {:.6g}\n", p.frame_no, p.difference);
+      fmt::print("  {:<40} {}\n", where(c, p), difference);
     }
   }
 }
@@ -510,17 +513,16 @@ void print_text_difference(const char* name, const TextDifference& t) {
 }
 
 void print_comparison(const Side& a, const Side& b, const Comparison& c) {
-  const std::vector<std::string>& shapes = a.reader.header().shape_names;
   print_side("A", a);
   print_side("B", b);
   fmt::print("frames: {} compared, only in A: {}, only in B: {}\n\n", c.frames_compared, frame_list(c.only_a),
              frame_list(c.only_b));
   fmt::print(kRowFormat, "channel", "largest", "where", "mean", "rms", "frames beyond", "tolerance");
-  print_row("weights", c.weights, &shapes, nullptr);
-  print_row("head rotation (deg)", c.head_rotation, nullptr, nullptr);
-  print_row("head translation (mm)", c.head_translation, nullptr, nullptr);
+  print_row("weights", c.weights);
+  print_row("head rotation (deg)", c.head_rotation);
+  print_row("head translation (mm)", c.head_translation);
   if (c.vertices.frames() > 0) {
-    print_row("vertices (mm)", c.vertices, nullptr, "vertex");
+    print_row("vertices (mm)", c.vertices);
   } else {
     fmt::print("{:<23}not compared: not in both files\n", "vertices (mm)");
   }
@@ -531,10 +533,10 @@ void print_comparison(const Side& a, const Side& b, const Comparison& c) {
   fmt::print("{:<23}{}\n", "flags",
              c.flags.frames_differ ? fmt::format("{} frames differ", c.flags.frames_differ) : std::string("same"));
 
-  print_worst("weights", c.weights, &shapes, nullptr);
-  print_worst("head rotations (deg)", c.head_rotation, nullptr, nullptr);
-  print_worst("head translations (mm)", c.head_translation, nullptr, nullptr);
-  print_worst("vertices (mm)", c.vertices, nullptr, "vertex");
+  print_worst("weights", c.weights);
+  print_worst("head rotations (deg)", c.head_rotation);
+  print_worst("head translations (mm)", c.head_translation);
+  print_worst("vertices (mm)", c.vertices);
   if (!c.flags.first.empty()) {
     fmt::print("\nfirst frames whose flags differ:\n");
     for (const auto& d : c.flags.first) {
