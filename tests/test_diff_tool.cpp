@@ -344,6 +344,25 @@ TEST_CASE("facecap diff: vertices in one file only are not compared and say so",
   CHECK(table.out.find("frames with vertices in one file only: A 12, B 0") != std::string::npos);
 }
 
+TEST_CASE("facecap diff: a recording cut short compares up to its last whole frame, with a warning", "[tools][diff]") {
+  const auto dir = test::scratch_dir("diff-cut");
+  const auto a = write_solves(dir, "a.fcrec", diff_header());
+  std::vector<char> bytes = read_file_bytes(a);
+  bytes.resize(bytes.size() / 2);  // a recorder killed mid-take
+  write_file_atomically(dir / "cut.fcrec", bytes);
+  const Diff d = run_diff(dir, a, dir / "cut.fcrec", {"--allow-missing"});
+  INFO(d.run.err);
+  REQUIRE(d.run.exit_code == 0);
+  CHECK(d.j["b"]["truncated"] == true);
+  CHECK(d.run.err.find("facecap: warning: " + (dir / "cut.fcrec").string()) != std::string::npos);
+  const int64_t kept = d.j["b"]["solved_frames"].get<int64_t>();
+  CHECK(kept > 0);
+  CHECK(kept < kFrames);
+  CHECK(d.j["frames"]["compared"] == kept);
+  CHECK(d.j["frames"]["only_in_a"]["count"] == kFrames - kept);
+  CHECK(d.j["frames"]["only_in_a"]["first"][0] == kept + 1);
+}
+
 TEST_CASE("facecap diff refuses different rigs and shape lists with their names (exit 2)", "[tools][diff]") {
   const auto dir = test::scratch_dir("diff-rigs");
   RecordingHeader other_rig = diff_header();
