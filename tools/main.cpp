@@ -27,11 +27,14 @@ int main(int argc, char** argv) {
   facecap::tools::add_subscribe_command(app, exit_code);
   facecap::tools::add_daemon_demo_command(app, exit_code);
   facecap::tools::add_loopcheck_command(app, exit_code);
+  facecap::tools::add_diff_command(app, exit_code);
 
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    const int status = app.exit(e);
+    // diff answers as diff(1) does: 1 means "they differ", so its usage errors are 2.
+    return status != 0 && app.get_subcommand("diff")->parsed() ? 2 : status;
   } catch (const facecap::Error& e) {
     std::fprintf(stderr, "facecap: error: %s\n", e.what());
     return 1;
