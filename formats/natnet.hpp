@@ -51,24 +51,25 @@ enum class MessageId : uint16_t {
   kUnrecognizedRequest = 100,  // decimal, as NatNetTypes.h and real Motive traffic have it
 };
 
-// Names as in the SDK's NatNetTypes.h.
+// Names as in the SDK's NatNetTypes.h. (Rows name their type: clang 14, which builds the
+// fuzz targets, cannot deduce it for aggregates.)
 inline constexpr EnumTable kMessageIds{std::array{
-    EnumEntry{MessageId::kConnect, "NAT_CONNECT", "client asks a server for its SERVERINFO"},
-    EnumEntry{MessageId::kServerInfo, "NAT_SERVERINFO", "server name, versions, clock rate, data port, multicast group"},
-    EnumEntry{MessageId::kRequest, "NAT_REQUEST", "text command to the server (\"FrameRate\", \"Bitstream,3.1\")"},
-    EnumEntry{MessageId::kResponse, "NAT_RESPONSE", "reply to a NAT_REQUEST: a 4-byte value or text"},
-    EnumEntry{MessageId::kRequestModelDef, "NAT_REQUEST_MODELDEF", "client asks for the model definitions"},
-    EnumEntry{MessageId::kModelDef, "NAT_MODELDEF", "marker sets, rigid bodies, skeletons, force plates, devices, cameras, assets"},
-    EnumEntry{MessageId::kRequestFrameOfData, "NAT_REQUEST_FRAMEOFDATA", "client asks for the current frame"},
-    EnumEntry{MessageId::kFrameOfData, "NAT_FRAMEOFDATA", "one frame of motion-capture data"},
-    EnumEntry{MessageId::kMessageString, "NAT_MESSAGESTRING", "text message"},
-    EnumEntry{MessageId::kDisconnect, "NAT_DISCONNECT", "client leaves"},
-    EnumEntry{MessageId::kKeepAlive, "NAT_KEEPALIVE", "unicast client is still listening"},
-    EnumEntry{MessageId::kDisconnectByTimeout, "NAT_DISCONNECTBYTIMEOUT", "server dropped a silent client"},
-    EnumEntry{MessageId::kEchoRequest, "NAT_ECHOREQUEST", "clock synchronisation: client time"},
-    EnumEntry{MessageId::kEchoResponse, "NAT_ECHORESPONSE", "clock synchronisation: client time echoed, server time"},
-    EnumEntry{MessageId::kDiscovery, "NAT_DISCOVERY", "broadcast search for servers"},
-    EnumEntry{MessageId::kUnrecognizedRequest, "NAT_UNRECOGNIZED_REQUEST", "server did not understand a request"},
+    EnumEntry<MessageId>{MessageId::kConnect, "NAT_CONNECT", "client asks a server for its SERVERINFO"},
+    EnumEntry<MessageId>{MessageId::kServerInfo, "NAT_SERVERINFO", "server name, versions, clock rate, data port, multicast group"},
+    EnumEntry<MessageId>{MessageId::kRequest, "NAT_REQUEST", "text command to the server (\"FrameRate\", \"Bitstream,3.1\")"},
+    EnumEntry<MessageId>{MessageId::kResponse, "NAT_RESPONSE", "reply to a NAT_REQUEST: a 4-byte value or text"},
+    EnumEntry<MessageId>{MessageId::kRequestModelDef, "NAT_REQUEST_MODELDEF", "client asks for the model definitions"},
+    EnumEntry<MessageId>{MessageId::kModelDef, "NAT_MODELDEF", "marker sets, rigid bodies, skeletons, force plates, devices, cameras, assets"},
+    EnumEntry<MessageId>{MessageId::kRequestFrameOfData, "NAT_REQUEST_FRAMEOFDATA", "client asks for the current frame"},
+    EnumEntry<MessageId>{MessageId::kFrameOfData, "NAT_FRAMEOFDATA", "one frame of motion-capture data"},
+    EnumEntry<MessageId>{MessageId::kMessageString, "NAT_MESSAGESTRING", "text message"},
+    EnumEntry<MessageId>{MessageId::kDisconnect, "NAT_DISCONNECT", "client leaves"},
+    EnumEntry<MessageId>{MessageId::kKeepAlive, "NAT_KEEPALIVE", "unicast client is still listening"},
+    EnumEntry<MessageId>{MessageId::kDisconnectByTimeout, "NAT_DISCONNECTBYTIMEOUT", "server dropped a silent client"},
+    EnumEntry<MessageId>{MessageId::kEchoRequest, "NAT_ECHOREQUEST", "clock synchronisation: client time"},
+    EnumEntry<MessageId>{MessageId::kEchoResponse, "NAT_ECHORESPONSE", "clock synchronisation: client time echoed, server time"},
+    EnumEntry<MessageId>{MessageId::kDiscovery, "NAT_DISCOVERY", "broadcast search for servers"},
+    EnumEntry<MessageId>{MessageId::kUnrecognizedRequest, "NAT_UNRECOGNIZED_REQUEST", "server did not understand a request"},
 }};
 
 // major.minor.build.revision, one byte each as on the wire.
@@ -113,31 +114,35 @@ struct Sender {
   bool operator==(const Sender&) const = default;
 };
 
-// NAT_CONNECT and NAT_DISCOVERY. 4.x clients append options; the SDK's Python client pads
-// its CONNECT further (kept in trailing_bytes so the packet re-encodes as received).
+// What a 4.x client appends to its NAT_CONNECT.
+struct ConnectOptions {
+  bool subscribed_data_only = false;
+  Version bitstream;  // 0.0.0.0: the server's newest
+  bool operator==(const ConnectOptions&) const = default;
+};
+
+// NAT_CONNECT and NAT_DISCOVERY. The SDK's Python client pads its CONNECT beyond the
+// options (kept in trailing_bytes so the packet re-encodes as received).
 struct Connect {
-  struct Options {
-    bool subscribed_data_only = false;
-    Version bitstream;  // 0.0.0.0: the server's newest
-    bool operator==(const Options&) const = default;
-  };
   Sender sender;
-  std::optional<Options> options;
+  std::optional<ConnectOptions> options;
   std::string trailing_bytes;
   bool operator==(const Connect&) const = default;
 };
 
-// NAT_SERVERINFO. The connection part exists from NatNet 3.0.
+// The part of NAT_SERVERINFO that exists from NatNet 3.0.
+struct ServerConnection {
+  uint64_t high_res_clock_hz = 0;  // ticks per second of the frames' camera and transmit stamps
+  uint16_t data_port = kDataPort;
+  bool multicast = false;
+  std::array<uint8_t, 4> multicast_group{};
+  bool operator==(const ServerConnection&) const = default;
+};
+
+// NAT_SERVERINFO.
 struct ServerInfo {
-  struct Connection {
-    uint64_t high_res_clock_hz = 0;  // ticks per second of the frames' camera and transmit stamps
-    uint16_t data_port = kDataPort;
-    bool multicast = false;
-    std::array<uint8_t, 4> multicast_group{};
-    bool operator==(const Connection&) const = default;
-  };
   Sender sender;
-  std::optional<Connection> connection;
+  std::optional<ServerConnection> connection;
   bool operator==(const ServerInfo&) const = default;
 };
 
@@ -347,7 +352,7 @@ struct FrameOfData {
   uint32_t timecode = 0;  // SMPTE: hours << 24 | minutes << 16 | seconds << 8 | frames
   uint32_t timecode_subframe = 0;
   double timestamp_s = 0;  // server time since Motive started
-  // High-resolution clock ticks (ServerInfo::Connection::high_res_clock_hz per second).
+  // High-resolution clock ticks (ServerConnection::high_res_clock_hz per second).
   uint64_t camera_mid_exposure = 0;
   uint64_t camera_data_received = 0;
   uint64_t transmit = 0;

@@ -433,10 +433,10 @@ TEST_CASE("NatNet fields a bitstream lacks are not written", "[natnet]") {
 TEST_CASE("NatNet session messages round-trip and the writer's packets are what the SDK sends", "[natnet]") {
   ServerInfo info;
   info.sender = {NameField::from_text("facecap"), {0, 1, 0, 0}, {4, 1, 0, 0}};
-  info.connection = ServerInfo::Connection{1'000'000'000, 1511, true, kDefaultMulticastGroup};
+  info.connection = ServerConnection{1'000'000'000, 1511, true, kDefaultMulticastGroup};
   Connect connect;
   connect.sender = {NameField::from_text("Ping"), {}, {}};
-  connect.options = Connect::Options{false, {4, 2, 0, 0}};
+  connect.options = ConnectOptions{false, {4, 2, 0, 0}};
   connect.trailing_bytes = std::string(2, '\0');  // as NatNetClient.py 4.3 sends it
   const std::vector<Message> messages{
       {MessageId::kServerInfo, info},

@@ -107,11 +107,11 @@ TEST_CASE("A 4.x session's bitstream comes from the client's request and follows
   int64_t t = 1'000'000'000;
   Connect connect;
   connect.sender.name = NameField::from_text("facecap test");
-  connect.options = Connect::Options{false, kBitstream41};
+  connect.options = ConnectOptions{false, kBitstream41};
   add(records, t, {MessageId::kConnect, connect}, kBitstream41, kClient, kClientPort, kServer, kCommandPort);
   ServerInfo info;
   info.sender = {NameField::from_text("Motive"), {3, 1, 0, 0}, {4, 2, 0, 0}};  // the server could do 4.2
-  info.connection = ServerInfo::Connection{10'000'000, kDataPort, false, {}};
+  info.connection = ServerConnection{10'000'000, kDataPort, false, {}};
   add(records, t, {MessageId::kServerInfo, info}, kBitstream41, kServer, kCommandPort, kClient, kClientPort);
   // Model definitions over an MTU: three IP fragments.
   ModelDefinitions models;

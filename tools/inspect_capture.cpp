@@ -42,7 +42,7 @@ nlohmann::json frame_json(const FrameOfData& frame) {
           {"marker_sets", sets}};
 }
 
-std::string group_address(const ServerInfo::Connection& c) {
+std::string group_address(const ServerConnection& c) {
   return fmt::format("{}.{}.{}.{}", c.multicast_group[0], c.multicast_group[1], c.multicast_group[2],
                      c.multicast_group[3]);
 }
