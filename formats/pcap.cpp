@@ -364,13 +364,20 @@ bool UdpCapture::next(UdpDatagram& out) {
       throw file_error(s.name, fmt::format("capture record {} is damaged: {}", s.counts.records + 1, pcap_geterr(s.pcap)));
     }
     const std::size_t record = s.counts.records++;
+    // pcapng stamps reach far beyond int64 nanoseconds (year 2262).
+    int64_t time_ns = 0;
+    if (__builtin_mul_overflow(int64_t(header->ts.tv_sec), int64_t(1'000'000'000), &time_ns) ||
+        __builtin_add_overflow(time_ns, int64_t(header->ts.tv_usec), &time_ns)) {
+      ++s.counts.malformed;
+      continue;
+    }
     out = UdpDatagram{};
     switch (s.decode(std::span(data, header->caplen), header->caplen < header->len, out)) {
       case Outcome::kDatagram:
         ++s.counts.udp_records;
         ++s.counts.datagrams;
         out.record = record;
-        out.capture_time_ns = int64_t(header->ts.tv_sec) * 1'000'000'000 + int64_t(header->ts.tv_usec);
+        out.capture_time_ns = time_ns;
         return true;
       case Outcome::kFragmentHeld: break;
       case Outcome::kNotIp: ++s.counts.not_ip; break;

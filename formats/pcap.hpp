@@ -44,7 +44,7 @@ struct CaptureCounts {
   std::size_t not_ip = 0;                // link-layer protocol other than IPv4/IPv6 (ARP, LLDP, ...)
   std::size_t not_udp = 0;               // IP protocol other than UDP (TCP, ICMP, ...)
   std::size_t truncated = 0;             // the capture's snap length cut the datagram
-  std::size_t malformed = 0;             // headers that contradict themselves or the bytes captured
+  std::size_t malformed = 0;             // headers contradicting themselves or the bytes captured, or a time past 2262
   std::size_t unfinished_fragments = 0;  // IP fragments of datagrams that never completed
   std::size_t datagrams = 0;             // UDP datagrams yielded
   std::size_t reassembled = 0;           // of which were put together from IP fragments

@@ -54,6 +54,40 @@ inline std::vector<char> pcap_file(uint32_t link_type, const std::vector<PcapRec
   return std::vector<char>(out.begin(), out.end());
 }
 
+// A little-endian pcapng file: one section, one interface of `link_type` at the default
+// microsecond resolution, one enhanced packet block per (microseconds since 1970, packet).
+inline std::vector<char> pcapng_file(uint16_t link_type, const std::vector<std::pair<uint64_t, Bytes>>& records) {
+  Bytes out;
+  const auto block = [&](uint32_t type, const Bytes& body) {
+    put_le32(out, type);
+    put_le32(out, uint32_t(12 + body.size()));
+    out.insert(out.end(), body.begin(), body.end());
+    put_le32(out, uint32_t(12 + body.size()));
+  };
+  Bytes section;
+  put_le32(section, 0x1a2b3c4d);  // byte-order magic
+  put_le32(section, 1);           // version 1.0
+  put_le32(section, 0xffffffff);  // section length unknown (64 bits)
+  put_le32(section, 0xffffffff);
+  block(0x0a0d0d0a, section);
+  Bytes interface;
+  put_le32(interface, link_type);  // link type (16 bits) and reserved (16)
+  put_le32(interface, 65535);      // snap length
+  block(1, interface);
+  for (const auto& [micros, bytes] : records) {
+    Bytes packet;
+    put_le32(packet, 0);  // interface
+    put_le32(packet, uint32_t(micros >> 32));
+    put_le32(packet, uint32_t(micros));
+    put_le32(packet, uint32_t(bytes.size()));  // captured
+    put_le32(packet, uint32_t(bytes.size()));  // on the wire
+    packet.insert(packet.end(), bytes.begin(), bytes.end());
+    packet.resize((packet.size() + 3) / 4 * 4, 0);
+    block(6, packet);
+  }
+  return std::vector<char>(out.begin(), out.end());
+}
+
 inline Bytes udp_segment(uint16_t source_port, uint16_t destination_port, const Bytes& payload) {
   Bytes b;
   put_be16(b, source_port);

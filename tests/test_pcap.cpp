@@ -183,6 +183,20 @@ TEST_CASE("Records that are not whole UDP datagrams are skipped and counted by r
   CHECK(read.counts.udp_records == 1);
 }
 
+TEST_CASE("pcapng captures read like pcap ones; stamps past int64 nanoseconds are refused", "[pcap]") {
+  const Bytes ip = ipv4_packet(kServer, kGroup, 17, udp_segment(1511, 1511, payload_of(64, 2)));
+  // 12768243091 s after 1970 (year 2374): a valid pcapng stamp, past 2^63 ns.
+  const auto file = pcapng_file(kEthernet, {{uint64_t(kTime) / 1000, ethernet_frame(0x0800, ip)},
+                                            {uint64_t(12768243091) * 1'000'000, ethernet_frame(0x0800, ip)}});
+  UdpCapture capture(file, "far.pcapng");
+  CHECK(capture.file_format() == "pcapng");
+  UdpDatagram d;
+  REQUIRE(capture.next(d));
+  CHECK(d.capture_time_ns == kTime / 1000 * 1000);  // microsecond resolution
+  CHECK_FALSE(capture.next(d));
+  CHECK(capture.counts().malformed == 1);
+}
+
 TEST_CASE("Fragment reassembly stays bounded and refuses contradictions", "[pcap]") {
   std::vector<PcapRecord> records;
   // 70 datagrams each missing its last fragment: the 64-datagram table gives way.
