@@ -166,9 +166,6 @@ void body_layout(IO& io, Body& body, Version bitstream) {
     io.value(body.server_time, "server time");
   } else {
     static_assert(std::is_same_v<T, ModelDefinitions> || std::is_same_v<T, FrameOfData>);
-    if (!is_supported_bitstream(bitstream)) {
-      throw Error(fmt::format("NatNet bitstream {} is not supported (3.x and 4.x are)", bitstream.major_minor()));
-    }
     const Layout layout(bitstream);
     if constexpr (std::is_same_v<T, FrameOfData>) {
       if constexpr (IO::kReading) detail::read_frame_of_data(io.reader(), layout, body);
@@ -177,6 +174,17 @@ void body_layout(IO& io, Body& body, Version bitstream) {
       if constexpr (IO::kReading) detail::read_model_definitions(io.reader(), layout, body);
       else detail::write_model_definitions(io.writer(), layout, body);
     }
+  }
+}
+
+bool layout_depends_on_bitstream(MessageId id) noexcept {
+  return id == MessageId::kFrameOfData || id == MessageId::kModelDef;
+}
+
+void require_supported(MessageId id, Version bitstream) {
+  if (layout_depends_on_bitstream(id) && !is_supported_bitstream(bitstream)) {
+    throw Error(fmt::format("NatNet {}: bitstream {} is not supported (3.x and 4.x are)", kMessageIds.name(id),
+                            bitstream.major_minor()));
   }
 }
 
@@ -202,17 +210,21 @@ Message parse_message(std::span<const char> datagram, Version bitstream, const s
     header.fail_at(2, fmt::format("{} header declares {} payload bytes, the datagram holds {}",
                                   kMessageIds.name(message.id), payload_bytes, header.remaining()));
   }
+  require_supported(message.id, bitstream);
   ByteReader in(datagram.first(kHeaderBytes + payload_bytes), name);
   in.seek(kHeaderBytes);
   Reading io(in);
   message.body = blank_body(message.id);
-  std::visit([&](auto& body) { body_layout(io, body, bitstream); }, message.body);
-  if (in.remaining() != 0) {
-    const bool layout_depends_on_version = message.id == MessageId::kFrameOfData || message.id == MessageId::kModelDef;
-    in.fail(fmt::format("{} bytes left in the {} payload after its last field{}", in.remaining(),
-                        kMessageIds.name(message.id),
-                        layout_depends_on_version ? fmt::format(" (is the bitstream really {}?)", bitstream.major_minor())
-                                                  : std::string()));
+  try {
+    std::visit([&](auto& body) { body_layout(io, body, bitstream); }, message.body);
+    if (in.remaining() != 0) {
+      in.fail(fmt::format("{} bytes left in the {} payload after its last field", in.remaining(),
+                          kMessageIds.name(message.id)));
+    }
+  } catch (const Error& e) {
+    if (!layout_depends_on_bitstream(message.id)) throw;
+    // Most such errors mean the wrong layout: say which one was used.
+    throw Error(fmt::format("{} (read as bitstream {})", e.message(), bitstream.major_minor()), e.where());
   }
   return message;
 }
@@ -221,6 +233,7 @@ std::vector<char> encode_message(const Message& message, Version bitstream) {
   if (message.body.index() != body_index(message.id)) {
     throw Error(fmt::format("NatNet {} cannot carry this kind of body", kMessageIds.name(message.id)));
   }
+  require_supported(message.id, bitstream);
   std::vector<char> out;
   ByteWriter writer(out);
   writer.u16(uint16_t(message.id));
