@@ -61,7 +61,9 @@ std::optional<float> RawPayload::as_float() const noexcept {
   return value;
 }
 
-std::string_view RawPayload::as_text() const noexcept { return std::string_view(bytes.data(), strnlen(bytes.data(), bytes.size())); }
+std::string_view RawPayload::as_text() const noexcept {
+  return std::string_view(bytes.data(), strnlen(bytes.data(), bytes.size()));
+}
 
 std::string_view description_kind(const ModelDescription& description) noexcept {
   constexpr std::array<std::string_view, std::variant_size_v<ModelDescription>> kinds{
@@ -70,12 +72,11 @@ std::string_view description_kind(const ModelDescription& description) noexcept 
 }
 
 std::string_view description_name(const ModelDescription& description) noexcept {
+  if (const auto* plate = std::get_if<ForcePlateDescription>(&description)) return plate->serial_number;
   return std::visit(
       [](const auto& d) -> std::string_view {
-        using T = std::decay_t<decltype(d)>;
-        if constexpr (std::is_same_v<T, ForcePlateDescription>) return d.serial_number;
-        else if constexpr (std::is_same_v<T, UnknownDescription>) return {};
-        else return d.name;
+        if constexpr (requires { d.name; }) return d.name;
+        return {};
       },
       description);
 }
@@ -168,11 +169,15 @@ void body_layout(IO& io, Body& body, Version bitstream) {
     static_assert(std::is_same_v<T, ModelDefinitions> || std::is_same_v<T, FrameOfData>);
     const Layout layout(bitstream);
     if constexpr (std::is_same_v<T, FrameOfData>) {
-      if constexpr (IO::kReading) detail::read_frame_of_data(io.reader(), layout, body);
-      else detail::write_frame_of_data(io.writer(), layout, body);
+      if constexpr (IO::kReading)
+        detail::read_frame_of_data(io.reader(), layout, body);
+      else
+        detail::write_frame_of_data(io.writer(), layout, body);
     } else {
-      if constexpr (IO::kReading) detail::read_model_definitions(io.reader(), layout, body);
-      else detail::write_model_definitions(io.writer(), layout, body);
+      if constexpr (IO::kReading)
+        detail::read_model_definitions(io.reader(), layout, body);
+      else
+        detail::write_model_definitions(io.writer(), layout, body);
     }
   }
 }

@@ -55,28 +55,34 @@ enum class MessageId : uint16_t {
 // fuzz targets, cannot deduce it for aggregates.)
 inline constexpr EnumTable kMessageIds{std::array{
     EnumEntry<MessageId>{MessageId::kConnect, "NAT_CONNECT", "client asks a server for its SERVERINFO"},
-    EnumEntry<MessageId>{MessageId::kServerInfo, "NAT_SERVERINFO", "server name, versions, clock rate, data port, multicast group"},
-    EnumEntry<MessageId>{MessageId::kRequest, "NAT_REQUEST", "text command to the server (\"FrameRate\", \"Bitstream,3.1\")"},
+    EnumEntry<MessageId>{MessageId::kServerInfo, "NAT_SERVERINFO",
+                         "server name, versions, clock rate, data port, multicast group"},
+    EnumEntry<MessageId>{MessageId::kRequest, "NAT_REQUEST",
+                         "text command to the server (\"FrameRate\", \"Bitstream,3.1\")"},
     EnumEntry<MessageId>{MessageId::kResponse, "NAT_RESPONSE", "reply to a NAT_REQUEST: a 4-byte value or text"},
     EnumEntry<MessageId>{MessageId::kRequestModelDef, "NAT_REQUEST_MODELDEF", "client asks for the model definitions"},
-    EnumEntry<MessageId>{MessageId::kModelDef, "NAT_MODELDEF", "marker sets, rigid bodies, skeletons, force plates, devices, cameras, assets"},
-    EnumEntry<MessageId>{MessageId::kRequestFrameOfData, "NAT_REQUEST_FRAMEOFDATA", "client asks for the current frame"},
+    EnumEntry<MessageId>{MessageId::kModelDef, "NAT_MODELDEF",
+                         "marker sets, rigid bodies, skeletons, force plates, devices, cameras, assets"},
+    EnumEntry<MessageId>{MessageId::kRequestFrameOfData, "NAT_REQUEST_FRAMEOFDATA",
+                         "client asks for the current frame"},
     EnumEntry<MessageId>{MessageId::kFrameOfData, "NAT_FRAMEOFDATA", "one frame of motion-capture data"},
     EnumEntry<MessageId>{MessageId::kMessageString, "NAT_MESSAGESTRING", "text message"},
     EnumEntry<MessageId>{MessageId::kDisconnect, "NAT_DISCONNECT", "client leaves"},
     EnumEntry<MessageId>{MessageId::kKeepAlive, "NAT_KEEPALIVE", "unicast client is still listening"},
     EnumEntry<MessageId>{MessageId::kDisconnectByTimeout, "NAT_DISCONNECTBYTIMEOUT", "server dropped a silent client"},
     EnumEntry<MessageId>{MessageId::kEchoRequest, "NAT_ECHOREQUEST", "clock synchronisation: client time"},
-    EnumEntry<MessageId>{MessageId::kEchoResponse, "NAT_ECHORESPONSE", "clock synchronisation: client time echoed, server time"},
+    EnumEntry<MessageId>{MessageId::kEchoResponse, "NAT_ECHORESPONSE",
+                         "clock synchronisation: client time echoed, server time"},
     EnumEntry<MessageId>{MessageId::kDiscovery, "NAT_DISCOVERY", "broadcast search for servers"},
-    EnumEntry<MessageId>{MessageId::kUnrecognizedRequest, "NAT_UNRECOGNIZED_REQUEST", "server did not understand a request"},
+    EnumEntry<MessageId>{MessageId::kUnrecognizedRequest, "NAT_UNRECOGNIZED_REQUEST",
+                         "server did not understand a request"},
 }};
 
 // major.minor.build.revision, one byte each as on the wire.
 struct Version {
   uint8_t major = 0, minor = 0, build = 0, revision = 0;
   friend constexpr auto operator<=>(const Version&, const Version&) = default;
-  std::string to_string() const;  // "2.1.0.0"
+  std::string to_string() const;    // "2.1.0.0"
   std::string major_minor() const;  // "3.0"
 };
 inline constexpr Version kBitstream30{3, 0};
@@ -195,8 +201,8 @@ struct RigidBodyDescription {
   std::string name;
   int32_t id = 0;
   int32_t parent_id = -1;
-  Position offset{};                   // from the parent
-  Quaternion rotation{0, 0, 0, 1};     // from the parent; bitstream 4.2+
+  Position offset{};                // from the parent
+  Quaternion rotation{0, 0, 0, 1};  // from the parent; bitstream 4.2+
   std::vector<RigidBodyMarkerDescription> markers;
   bool operator==(const RigidBodyDescription&) const = default;
 };
@@ -214,7 +220,7 @@ struct ForcePlateDescription {
   float width = 0, length = 0;
   Position origin{};
   std::array<float, 144> calibration{};  // 12 x 12, row-major
-  std::array<float, 12> corners{};        // 4 corners x (x y z)
+  std::array<float, 12> corners{};       // 4 corners x (x y z)
   int32_t plate_type = 0;
   int32_t channel_data_type = 0;
   std::vector<std::string> channel_names;
@@ -265,9 +271,9 @@ struct UnknownDescription {
 };
 
 // The variant's index is the wire's description type (0..6) for all but UnknownDescription.
-using ModelDescription = std::variant<MarkerSetDescription, RigidBodyDescription, SkeletonDescription,
-                                      ForcePlateDescription, DeviceDescription, CameraDescription, AssetDescription,
-                                      UnknownDescription>;
+using ModelDescription =
+    std::variant<MarkerSetDescription, RigidBodyDescription, SkeletonDescription, ForcePlateDescription,
+                 DeviceDescription, CameraDescription, AssetDescription, UnknownDescription>;
 // "marker set", "rigid body", ..., "unknown".
 std::string_view description_kind(const ModelDescription& description) noexcept;
 // The name a description carries (force plates: their serial number), "" for unknown ones.

@@ -32,9 +32,12 @@ struct CaptureOptions {
 
 enum class BitstreamSource : uint8_t { kOption, kServerInfo, kClientRequest };
 inline constexpr EnumTable kBitstreamSources{std::array{
-    EnumEntry<BitstreamSource>{BitstreamSource::kOption, "option", "no session start in the capture: the default or --natnet-version"},
-    EnumEntry<BitstreamSource>{BitstreamSource::kServerInfo, "server info", "the NatNet version in the server's NAT_SERVERINFO"},
-    EnumEntry<BitstreamSource>{BitstreamSource::kClientRequest, "client request", "the bitstream a client's NAT_CONNECT asked for"},
+    EnumEntry<BitstreamSource>{BitstreamSource::kOption, "option",
+                               "no session start in the capture: the default or --natnet-version"},
+    EnumEntry<BitstreamSource>{BitstreamSource::kServerInfo, "server info",
+                               "the NatNet version in the server's NAT_SERVERINFO"},
+    EnumEntry<BitstreamSource>{BitstreamSource::kClientRequest, "client request",
+                               "the bitstream a client's NAT_CONNECT asked for"},
 }};
 
 struct NatNetCapture {

@@ -8,13 +8,13 @@ namespace {
 
 // Smallest encoded size of each item, to bound counts before allocating.
 constexpr std::size_t kPositionBytes = 12;
-constexpr std::size_t kMarkerSetBytes = 1 + 4;          // empty name, no markers
+constexpr std::size_t kMarkerSetBytes = 1 + 4;  // empty name, no markers
 constexpr std::size_t kRigidBodyBytes = 4 + 12 + 16 + 4 + 2;
 constexpr std::size_t kSkeletonBytes = 4 + 4;
 constexpr std::size_t kAssetBytes = 4 + 4 + 4;
 constexpr std::size_t kLabelledMarkerBytes = 4 + 12 + 4 + 2 + 4;
-constexpr std::size_t kAnalogBytes = 4 + 4;             // id, no channels
-constexpr std::size_t kChannelBytes = 4;                // no samples
+constexpr std::size_t kAnalogBytes = 4 + 4;  // id, no channels
+constexpr std::size_t kChannelBytes = 4;     // no samples
 constexpr std::size_t kSampleBytes = 4;
 
 template <typename IO, typename RigidBody>

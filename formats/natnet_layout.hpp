@@ -49,10 +49,6 @@ class Reading {
       v = in_.f32(what);
     } else if constexpr (std::is_same_v<T, double>) {
       v = in_.f64(what);
-    } else if constexpr (std::is_enum_v<T>) {
-      std::underlying_type_t<T> raw;
-      value(raw, what);
-      v = T(raw);
     } else {
       static_assert(std::is_integral_v<T>);
       if constexpr (sizeof(T) == 1) v = T(in_.u8(what));
@@ -89,8 +85,8 @@ class Reading {
     const int32_t n = in_.i32(what);
     if (n < 0) in_.fail_at(at, fmt::format("{} count {} is negative", what, n));
     if (uint64_t(n) * min_item_bytes > in_.remaining()) {
-      in_.fail_at(at, fmt::format("{} count {} needs at least {} bytes, {} left", what, n,
-                                  uint64_t(n) * min_item_bytes, in_.remaining()));
+      in_.fail_at(at, fmt::format("{} count {} needs at least {} bytes, {} left", what, n, uint64_t(n) * min_item_bytes,
+                                  in_.remaining()));
     }
     items.clear();
     items.resize(std::size_t(n));
@@ -135,8 +131,6 @@ class Writing {
       out_.f32(v);
     } else if constexpr (std::is_same_v<T, double>) {
       out_.f64(v);
-    } else if constexpr (std::is_enum_v<T>) {
-      value(std::underlying_type_t<T>(v), {});
     } else {
       static_assert(std::is_integral_v<T>);
       if constexpr (sizeof(T) == 1) out_.u8(uint8_t(v));
@@ -152,20 +146,20 @@ class Writing {
 
   void cstring(const std::string& s, std::string_view what) {
     if (s.find('\0') != std::string::npos) {
-      throw Error(fmt::format("NatNet {} '{}' contains a NUL byte and cannot be sent", what, s.substr(0, s.find('\0'))));
+      throw Error(
+          fmt::format("NatNet {} '{}' contains a NUL byte and cannot be sent", what, s.substr(0, s.find('\0'))));
     }
     out_.bytes(s);
     out_.u8(0);
   }
 
-  void bytes(const std::string& s, std::size_t count, std::string_view what) {
-    if (s.size() != count) throw Error(fmt::format("NatNet {}: {} bytes given, the layout holds {}", what, s.size(), count));
-    out_.bytes(s);
-  }
+  // `count` is the reader's business: the writer writes `s` whole.
+  void bytes(const std::string& s, std::size_t, std::string_view) { out_.bytes(s); }
 
   template <typename T>
   void count(const std::vector<T>& items, std::size_t, std::string_view what) {
-    if (items.size() > std::size_t(INT32_MAX)) throw Error(fmt::format("NatNet {} count {} exceeds 2^31", what, items.size()));
+    if (items.size() > std::size_t(INT32_MAX))
+      throw Error(fmt::format("NatNet {} count {} exceeds 2^31", what, items.size()));
     out_.i32(int32_t(items.size()));
   }
 

@@ -133,7 +133,7 @@ void model_layout(IO& io, Model& model, const Layout& layout) {
     int32_t size = int32_t(unknown.bytes.size());
     io.value(size, "description size");
     if constexpr (IO::kReading) {
-      if (size < 0) io.reader().fail(fmt::format("description size {} is negative", size));
+      if (size < 0) io.reader().fail_at(io.reader().offset() - 4, fmt::format("description size {} is negative", size));
     }
     io.bytes(unknown.bytes, std::size_t(size), "unknown description");
     return;

@@ -111,9 +111,10 @@ class Reassembler {
     p.highest_end = std::max(p.highest_end, uint32_t(end));
     if (p.bytes.size() < end) p.bytes.resize(end);
     std::copy(data.begin(), data.end(), p.bytes.begin() + offset);
-    p.ranges.emplace_back(offset, uint32_t(end));
+    add_range(p.ranges, offset, uint32_t(end));
     ++p.records;
-    if (!p.total || !covered(p)) return added;
+    const bool complete = p.total && p.ranges.size() == 1 && p.ranges[0].first == 0 && p.ranges[0].second == *p.total;
+    if (!complete) return added;
     completed.assign(p.bytes.begin(), p.bytes.begin() + *p.total);
     added.outcome = Outcome::kDatagram;
     added.records = p.records;
@@ -133,20 +134,25 @@ class Reassembler {
   struct Pending {
     FragmentKey key;
     std::vector<char> bytes;
-    std::vector<std::pair<uint32_t, uint32_t>> ranges;  // [begin, end) received
+    std::vector<std::pair<uint32_t, uint32_t>> ranges;  // [begin, end) received, sorted, disjoint
     std::optional<uint32_t> total;                      // known once the last fragment came
     uint32_t highest_end = 0;
     std::size_t records = 0;
   };
 
-  static bool covered(Pending& p) {
-    std::sort(p.ranges.begin(), p.ranges.end());
-    uint32_t reached = 0;
-    for (const auto& [begin, end] : p.ranges) {
-      if (begin > reached) return false;
-      reached = std::max(reached, end);
+  // Inserts [begin, end) into sorted, disjoint ranges, merging what touches: at most one
+  // range per gap, so a flood of fragments stays cheap.
+  static void add_range(std::vector<std::pair<uint32_t, uint32_t>>& ranges, uint32_t begin, uint32_t end) {
+    auto first = std::lower_bound(ranges.begin(), ranges.end(), begin,
+                                  [](const auto& range, uint32_t at) { return range.second < at; });
+    auto last = first;
+    while (last != ranges.end() && last->first <= end) {
+      begin = std::min(begin, last->first);
+      end = std::max(end, last->second);
+      ++last;
     }
-    return reached >= *p.total;
+    first = ranges.erase(first, last);
+    ranges.insert(first, {begin, end});
   }
 
   std::vector<Pending> pending_;
@@ -233,7 +239,7 @@ struct UdpCapture::State {
     if (ip_version == 4) return ipv4(b, at, cut, out);
     if (ip_version == 6) return ipv6(b, at, cut, out);
     return link_type == DLT_RAW || link_type == DLT_IPV4 || link_type == DLT_IPV6 ? Outcome::kMalformed
-                                                                                   : Outcome::kNotIp;
+                                                                                  : Outcome::kNotIp;
   }
 
   Outcome ipv4(std::span<const uint8_t> b, std::size_t at, bool cut, UdpDatagram& out) {
@@ -269,8 +275,8 @@ struct UdpCapture::State {
     while (true) {
       switch (next) {
         case 17: return udp(b.subspan(p, end - p), cut, out);
-        case 0:    // hop-by-hop options
-        case 43:   // routing
+        case 0:     // hop-by-hop options
+        case 43:    // routing
         case 60: {  // destination options
           if (end < p + 2) return Outcome::kMalformed;
           const std::size_t length = (std::size_t(b[p + 1]) + 1) * 8;
@@ -361,7 +367,8 @@ bool UdpCapture::next(UdpDatagram& out) {
       return false;
     }
     if (status != 1) {
-      throw file_error(s.name, fmt::format("capture record {} is damaged: {}", s.counts.records + 1, pcap_geterr(s.pcap)));
+      throw file_error(s.name,
+                       fmt::format("capture record {} is damaged: {}", s.counts.records + 1, pcap_geterr(s.pcap)));
     }
     const std::size_t record = s.counts.records++;
     // pcapng stamps reach far beyond int64 nanoseconds (year 2262).

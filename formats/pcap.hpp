@@ -23,7 +23,7 @@ struct IpAddress {
   uint8_t version = 4;              // 4 or 6
   std::array<uint8_t, 16> bytes{};  // IPv4 uses the first 4
   static IpAddress v4(uint8_t a, uint8_t b, uint8_t c, uint8_t d) noexcept;
-  std::string to_string() const;    // "239.255.42.99", "fe80::1"
+  std::string to_string() const;  // "239.255.42.99", "fe80::1"
   bool operator==(const IpAddress&) const = default;
 };
 

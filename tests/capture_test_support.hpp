@@ -120,8 +120,9 @@ inline std::vector<Bytes> ipv4_fragments(std::array<uint8_t, 4> source, std::arr
   for (std::size_t at = 0; at < segment.size(); at += chunk) {
     const std::size_t n = std::min(chunk, segment.size() - at);
     const bool more = at + n < segment.size();
-    out.push_back(ipv4_packet(source, destination, 17, Bytes(segment.begin() + long(at), segment.begin() + long(at + n)),
-                              id, uint16_t((more ? 0x2000 : 0) | (at / 8))));
+    out.push_back(ipv4_packet(source, destination, 17,
+                              Bytes(segment.begin() + long(at), segment.begin() + long(at + n)), id,
+                              uint16_t((more ? 0x2000 : 0) | (at / 8))));
   }
   return out;
 }

@@ -136,7 +136,8 @@ TEST_CASE("facecap inspect on shared data: Eb015pi JSON and --time", "[tools][sh
   CHECK(j["read_ms"]["min"].get<double>() > 0.0);
 }
 
-TEST_CASE("facecap inspect decodes a NatNet capture: all 518 frames with markers, bodies and sets", "[tools][natnet][shared]") {
+TEST_CASE("facecap inspect decodes a NatNet capture: all 518 frames with markers, bodies and sets",
+          "[tools][natnet][shared]") {
   // Expected values from the UDP payloads tshark shows (`tshark -r traffic.pcapng -Y
   // udp.dstport==1511 -T fields -e data.data`) decoded with Python's struct module
   // ('<i' counts, '<i7ffh' rigid bodies, '<i4fhf' labelled markers), run once by hand.
@@ -198,22 +199,22 @@ TEST_CASE("facecap inspect decodes a NatNet capture: all 518 frames with markers
 TEST_CASE("facecap inspect on a capture without a session start uses --natnet-version", "[tools][natnet]") {
   // Two 4.1 frames sent to the data port and nothing else: without --natnet-version they
   // are read as 3.0 and refused, with the record and byte named.
-  const auto dir = facecap::test::scratch_dir("tool-inspect-natnet-option");
-  std::vector<facecap::test::PcapRecord> records;
+  namespace natnet = formats::natnet;
+  using namespace facecap::test;
+  const auto dir = scratch_dir("tool-inspect-natnet-option");
+  std::vector<PcapRecord> records;
   for (int32_t n = 1; n <= 2; ++n) {
-    formats::natnet::FrameOfData frame;
+    natnet::FrameOfData frame;
     frame.frame_number = n;
     frame.timestamp_s = n / 100.0;
     frame.labelled_markers = {{7, {1.f, 2.f, 3.f}, 0.01f, 0x01, 0.f}};
-    const auto packet = formats::natnet::encode_message({formats::natnet::MessageId::kFrameOfData, frame},
-                                                        formats::natnet::kBitstream41);
-    records.push_back({n * 10'000'000, facecap::test::ethernet_frame(
-                                           0x0800, facecap::test::ipv4_packet({10, 0, 0, 1}, {239, 255, 42, 99}, 17,
-                                                                              facecap::test::udp_segment(
-                                                                                  1511, 1511, facecap::test::bytes_of(packet))))});
+    const auto packet = bytes_of(natnet::encode_message({natnet::MessageId::kFrameOfData, frame}, natnet::kBitstream41));
+    const auto ip = ipv4_packet({10, 0, 0, 1}, {239, 255, 42, 99}, 17, udp_segment(1511, 1511, packet));
+    records.push_back({n * 10'000'000, ethernet_frame(0x0800, ip)});
   }
-  write_file_atomically(dir / "frames.pcap", facecap::test::pcap_file(1, records));
-  const Run as41 = run_facecap(dir, {"inspect", (dir / "frames.pcap").string(), "--json", "--frames", "--natnet-version", "4.1"});
+  const auto capture = (dir / "frames.pcap").string();
+  write_file_atomically(capture, pcap_file(1, records));
+  const Run as41 = run_facecap(dir, {"inspect", capture, "--json", "--frames", "--natnet-version", "4.1"});
   INFO(as41.err);
   REQUIRE(as41.exit_code == 0);
   const auto j = nlohmann::json::parse(as41.out);
@@ -222,7 +223,7 @@ TEST_CASE("facecap inspect on a capture without a session start uses --natnet-ve
   CHECK(j["rate_hz"].get<double>() == Approx(100.0));
   CHECK(j["frame_list"][1]["labelled_markers"][0]["occluded"] == true);
 
-  const Run as30 = run_facecap(dir, {"inspect", (dir / "frames.pcap").string()});
+  const Run as30 = run_facecap(dir, {"inspect", capture});
   REQUIRE(as30.exit_code == 0);
   CHECK(as30.out.find("natnet    bitstream 3.0 (from option)") != std::string::npos);
   CHECK(as30.out.find("2 not NatNet") != std::string::npos);

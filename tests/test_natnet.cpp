@@ -3,8 +3,8 @@
 // bitstream; truncated, oversize and mutated packets refused with an Error.
 #include <random>
 
-#include <catch2/catch.hpp>
 #include <fmt/format.h>
+#include <catch2/catch.hpp>
 
 #include "core/error.hpp"
 #include "core/io.hpp"
@@ -18,7 +18,8 @@ namespace {
 
 std::vector<char> from_hex(std::string_view hex) {
   std::vector<char> out;
-  for (std::size_t i = 0; i + 1 < hex.size(); i += 2) out.push_back(char(std::stoi(std::string(hex.substr(i, 2)), nullptr, 16)));
+  for (std::size_t i = 0; i + 1 < hex.size(); i += 2)
+    out.push_back(char(std::stoi(std::string(hex.substr(i, 2)), nullptr, 16)));
   return out;
 }
 
@@ -70,11 +71,14 @@ FrameOfData rich_frame(Version bitstream) {
                     {2, {0.f, 0.f, 0.f}, {0.f, 0.f, 0.f, 1.f}, 0.f, 0}};
   f.skeletons = {{4, {{4 << 16 | 1, {1.f, 1.f, 1.f}, {0.f, 0.f, 0.f, 1.f}, 0.001f, 1}}}, {5, {}}};
   if (bitstream >= kBitstream41) {
-    f.assets = {{9, {{10, {0.f, 1.f, 0.f}, {0.f, 0.f, 0.f, 1.f}, 0.002f, 1}}, {{11, {0.3f, 0.2f, 0.1f}, 0.012f, 0x04, 0.0003f}}}};
+    f.assets = {{9,
+                 {{10, {0.f, 1.f, 0.f}, {0.f, 0.f, 0.f, 1.f}, 0.002f, 1}},
+                 {{11, {0.3f, 0.2f, 0.1f}, 0.012f, 0x04, 0.0003f}}}};
     f.precision_timestamp_s = 1700000000;
     f.precision_timestamp_frac = 42;
   }
-  f.labelled_markers = {{1 << 16 | 3, {0.1f, 1.6f, -0.8f}, 0.02f, 0x0b, 0.0002f}, {50007, {2.f, 0.f, 1.f}, 0.015f, 0x12, 0.f}};
+  f.labelled_markers = {{1 << 16 | 3, {0.1f, 1.6f, -0.8f}, 0.02f, 0x0b, 0.0002f},
+                        {50007, {2.f, 0.f, 1.f}, 0.015f, 0x12, 0.f}};
   f.force_plates = {{1, {{1.f, 2.f}, {3.f, 4.f}, {}}}};
   f.devices = {{2, {{0.5f, 0.25f, 0.125f}}}, {3, {}}};
   f.timecode = 0x0102031e;
@@ -90,19 +94,26 @@ FrameOfData rich_frame(Version bitstream) {
 // Model definitions of every kind, with only what `bitstream` carries.
 ModelDefinitions rich_models(Version bitstream) {
   const bool names = bitstream >= kBitstream40;
-  RigidBodyDescription head{"Head", 3, -1, {0.f, 0.1f, 0.f}, {0, 0, 0, 1},
-                            {{{0.01f, 0.02f, 0.03f}, 0, names ? "Head_1" : ""}, {{-0.01f, 0.f, 0.05f}, 7, names ? "Head_2" : ""}}};
+  RigidBodyDescription head{
+      "Head",
+      3,
+      -1,
+      {0.f, 0.1f, 0.f},
+      {0, 0, 0, 1},
+      {{{0.01f, 0.02f, 0.03f}, 0, names ? "Head_1" : ""}, {{-0.01f, 0.f, 0.05f}, 7, names ? "Head_2" : ""}}};
   if (bitstream >= kBitstream42) head.rotation = {0.f, 0.3826834f, 0.f, 0.9238795f};
   ForcePlateDescription plate{1, "FP-001", 0.6f, 0.4f, {0.f, 0.f, 0.f}, {}, {}, 2, 1, {"Fx", "Fy", "Fz"}};
   for (std::size_t i = 0; i < plate.calibration.size(); ++i) plate.calibration[i] = float(i) * 0.25f;
   for (std::size_t i = 0; i < plate.corners.size(); ++i) plate.corners[i] = float(i) - 6.f;
   ModelDefinitions defs;
-  defs.models = {MarkerSetDescription{"Face", {"Brow", "Chin", "Nose"}},
-                 head,
-                 SkeletonDescription{"Actor", 1, {head, RigidBodyDescription{"Hips", 1 << 16 | 2, -1, {0.f, 1.f, 0.f}, {0, 0, 0, 1}, {}}}},
-                 plate,
-                 DeviceDescription{2, "NIDAQ", "SN42", 1, 1, {"ai0", "ai1"}},
-                 CameraDescription{"Cam 1", {1.f, 2.5f, -1.f}, {0.f, 0.7071068f, 0.f, 0.7071068f}}};
+  defs.models = {
+      MarkerSetDescription{"Face", {"Brow", "Chin", "Nose"}},
+      head,
+      SkeletonDescription{
+          "Actor", 1, {head, RigidBodyDescription{"Hips", 1 << 16 | 2, -1, {0.f, 1.f, 0.f}, {0, 0, 0, 1}, {}}}},
+      plate,
+      DeviceDescription{2, "NIDAQ", "SN42", 1, 1, {"ai0", "ai1"}},
+      CameraDescription{"Cam 1", {1.f, 2.5f, -1.f}, {0.f, 0.7071068f, 0.f, 0.7071068f}}};
   if (bitstream >= kBitstream41) {
     defs.models.push_back(AssetDescription{"Trained", 1, 5, {head}, {{"Tip", 7, {0.1f, 0.2f, 0.3f}, 0.012f, 0}}});
     defs.models.push_back(UnknownDescription{42, "\x01\x02\x03"});
@@ -186,7 +197,8 @@ TEST_CASE("NatNet frames from Motive 2.1 decode to their bytes' values", "[natne
   // labelled markers, '<IIdQQQhi' suffix) of the two frame files, run once by hand; the
   // floats are Python's repr of each float32, so they compare exactly.
   FACECAP_REQUIRE_SHARED_DATA(dir, "natnet");
-  const auto frame = body_as<FrameOfData>(parse_message(read_file_bytes(dir / "mocapframe_packet_v3.bin"), kBitstream30, "frame"));
+  const auto frame =
+      body_as<FrameOfData>(parse_message(read_file_bytes(dir / "mocapframe_packet_v3.bin"), kBitstream30, "frame"));
   CHECK(frame.frame_number == 162734);
   CHECK(frame.marker_sets.empty());
   REQUIRE(frame.other_markers.size() == 5);
@@ -195,7 +207,8 @@ TEST_CASE("NatNet frames from Motive 2.1 decode to their bytes' values", "[natne
   const RigidBodyData& body = frame.rigid_bodies[0];
   CHECK(body.id == 2);
   CHECK(body.position == Position{0.17444664239883423f, 1.4471313953399658f, -0.7343040108680725f});
-  CHECK(body.rotation == Quaternion{-0.05459423363208771f, 0.509948194026947f, 0.04370357096195221f, -0.8573576807975769f});
+  CHECK(body.rotation ==
+        Quaternion{-0.05459423363208771f, 0.509948194026947f, 0.04370357096195221f, -0.8573576807975769f});
   CHECK(body.mean_error == 0.0005152203375473619f);
   CHECK(body.tracking_valid());
   CHECK(frame.skeletons.empty());
@@ -227,14 +240,15 @@ TEST_CASE("NatNet frames from Motive 2.1 decode to their bytes' values", "[natne
   CHECK(frame.transmit == 1416497748722);
   CHECK(frame.params == 0);
 
-  const auto occluded =
-      body_as<FrameOfData>(parse_message(read_file_bytes(dir / "mocapframe_packet_occluded_v3.bin"), kBitstream30, "occluded"));
+  const auto occluded = body_as<FrameOfData>(
+      parse_message(read_file_bytes(dir / "mocapframe_packet_occluded_v3.bin"), kBitstream30, "occluded"));
   CHECK(occluded.frame_number == 269007);
   REQUIRE(occluded.marker_sets.size() == 2);
   CHECK(occluded.marker_sets[0].name == "FakeTree");
   CHECK(occluded.marker_sets[1].name == "all");
   REQUIRE(occluded.marker_sets[0].markers.size() == 5);
-  CHECK(occluded.marker_sets[0].markers[1] == Position{-0.13990189135074615f, 0.4736242890357971f, 0.4416866898536682f});
+  CHECK(occluded.marker_sets[0].markers[1] ==
+        Position{-0.13990189135074615f, 0.4736242890357971f, 0.4416866898536682f});
   REQUIRE(occluded.rigid_bodies.size() == 1);
   CHECK(occluded.rigid_bodies[0].id == 7);
   REQUIRE(occluded.labelled_markers.size() == 4);
@@ -249,9 +263,10 @@ TEST_CASE("NatNet frames from Motive 2.1 decode to their bytes' values", "[natne
 
 TEST_CASE("Every real Motive 2.1 packet re-encodes byte for byte at bitstream 3.0", "[natnet][shared]") {
   FACECAP_REQUIRE_SHARED_DATA(dir, "natnet");
-  for (const char* file : {"connect_packet_v3.bin", "discovery_packet_v3.bin", "echorequest_packet_v3.bin",
-                           "echoresponse_packet_v3.bin", "mocapframe_packet_occluded_v3.bin", "mocapframe_packet_v3.bin",
-                           "modeldef_packet_v3.bin", "requestmodeldef_packet_v3.bin", "serverinfo_packet_v3.bin"}) {
+  for (const char* file :
+       {"connect_packet_v3.bin", "discovery_packet_v3.bin", "echorequest_packet_v3.bin", "echoresponse_packet_v3.bin",
+        "mocapframe_packet_occluded_v3.bin", "mocapframe_packet_v3.bin", "modeldef_packet_v3.bin",
+        "requestmodeldef_packet_v3.bin", "serverinfo_packet_v3.bin"}) {
     INFO(file);
     const auto bytes = read_file_bytes(dir / file);
     CHECK(encode_message(parse_message(bytes, kBitstream30, file), kBitstream30) == bytes);
@@ -458,7 +473,9 @@ TEST_CASE("NatNet session messages round-trip and the writer's packets are what 
   CHECK(encode_message(messages[1], kBitstream41).size() == kHeaderBytes + 271);  // NatNetClient.py's 271
   CHECK(encode_message(messages[2], kBitstream41) == std::vector<char>{10, 0, 0, 0});
   const auto request = encode_message(messages[3], kBitstream41);
-  CHECK(std::string(request.begin(), request.end()) == std::string("\x02\x00\x0e\x00" "Bitstream,3.1\0", 18));
+  CHECK(std::string(request.begin(), request.end()) == std::string("\x02\x00\x0e\x00"
+                                                                   "Bitstream,3.1\0",
+                                                                   18));
   const auto& reply = std::get<RawPayload>(messages[4].body);
   CHECK(reply.as_float() == 120.0f);
   CHECK(reply.as_int32() == 0x42f00000);
@@ -472,32 +489,39 @@ TEST_CASE("NatNet packets that lie about their sizes are refused with the byte a
 
   // The labelled-marker count: frame number, two marker sets, one other marker, two rigid
   // bodies and two skeletons come first.
-  const std::size_t labelled_at = kHeaderBytes + 4 + (4 + (5 + 4 + 24) + (4 + 4)) + (4 + 12) + (4 + 2 * 38) +
-                                  (4 + (4 + 4 + 38) + (4 + 4));
+  const std::size_t labelled_at =
+      kHeaderBytes + 4 + (4 + (5 + 4 + 24) + (4 + 4)) + (4 + 12) + (4 + 2 * 38) + (4 + (4 + 4 + 38) + (4 + 4));
   int32_t count;
   std::memcpy(&count, bytes.data() + labelled_at, 4);
   REQUIRE(count == 2);
   for (const int32_t lie : {INT32_MAX, -1, 1000}) {
     auto bad = bytes;
     std::memcpy(bad.data() + labelled_at, &lie, 4);
-    CHECK_THROWS_WITH(parse_message(bad, kBitstream30, "lying.bin"),
-                      Catch::StartsWith(fmt::format("lying.bin @ byte {}: labelled marker count {}", labelled_at, lie)));
+    CHECK_THROWS_WITH(
+        parse_message(bad, kBitstream30, "lying.bin"),
+        Catch::StartsWith(fmt::format("lying.bin @ byte {}: labelled marker count {}", labelled_at, lie)));
   }
   // A header declaring more than the datagram holds.
   auto short_datagram = bytes;
   short_datagram.pop_back();
-  CHECK_THROWS_WITH(parse_message(short_datagram, kBitstream30, "short.bin"),
-                    Catch::Contains(fmt::format("NAT_FRAMEOFDATA header declares {} payload bytes, the datagram holds {}",
-                                                bytes.size() - 4, bytes.size() - 5)));
+  CHECK_THROWS_WITH(
+      parse_message(short_datagram, kBitstream30, "short.bin"),
+      Catch::Contains(fmt::format("NAT_FRAMEOFDATA header declares {} payload bytes, the datagram holds {}",
+                                  bytes.size() - 4, bytes.size() - 5)));
   // Bytes beyond the declared payload are not part of the message (NatNetClient.py sends
   // a NUL after its empty requests).
   auto padded = encode_message({MessageId::kRequestModelDef, RawPayload{}}, kBitstream30);
   padded.push_back('\0');
   CHECK(parse_message(padded, kBitstream30, "padded").id == MessageId::kRequestModelDef);
   // Bytes left inside the payload mean a wrong bitstream.
-  auto long_payload = with_consistent_size([&] { auto b = bytes; b.push_back(0); return b; }());
-  CHECK_THROWS_WITH(parse_message(long_payload, kBitstream30, "long.bin"),
-                    Catch::Contains("1 bytes left in the NAT_FRAMEOFDATA payload after its last field (read as bitstream 3.0)"));
+  auto long_payload = with_consistent_size([&] {
+    auto b = bytes;
+    b.push_back(0);
+    return b;
+  }());
+  CHECK_THROWS_WITH(
+      parse_message(long_payload, kBitstream30, "long.bin"),
+      Catch::Contains("1 bytes left in the NAT_FRAMEOFDATA payload after its last field (read as bitstream 3.0)"));
   CHECK_THROWS_WITH(parse_message(std::vector<char>{char(200), 0, 0, 0}, kBitstream30, "id.bin"),
                     Catch::Contains("id.bin @ byte 0: unknown NatNet message id 200"));
   CHECK_THROWS_WITH(parse_message(bytes, Version{2, 10}, "old.bin"),
@@ -533,7 +557,9 @@ TEST_CASE("Mutated NatNet packets parse or throw Error, never crash", "[natnet][
     const auto& [original, version] = originals[std::size_t(i) % originals.size()];
     auto mutant = original;
     for (int n = int(rng() % 6) + 1; n > 0; --n) mutant[4 + rng() % (mutant.size() - 4)] = char(rng());
-    if (rng() % 2) mutant = with_consistent_size(std::vector<char>(mutant.begin(), mutant.begin() + long(4 + rng() % (mutant.size() - 3))));
+    if (rng() % 2)
+      mutant = with_consistent_size(
+          std::vector<char>(mutant.begin(), mutant.begin() + long(4 + rng() % (mutant.size() - 3))));
     (parses(mutant, version) ? read : refused) += 1;
   }
   CHECK(read + refused == 3000);

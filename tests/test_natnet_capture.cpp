@@ -2,8 +2,8 @@
 // whose bitstream comes from a client request, a server's info, an option, or a switch.
 #include <map>
 
-#include <catch2/catch.hpp>
 #include <fmt/format.h>
+#include <catch2/catch.hpp>
 
 #include "formats/natnet_capture.hpp"
 #include "tests/capture_test_support.hpp"
@@ -54,7 +54,8 @@ std::vector<const FrameOfData*> frames_of(const NatNetCapture& capture) {
 
 }  // namespace
 
-TEST_CASE("The real Motive 2.1 session capture decodes to 550 NatNet messages at bitstream 3.0", "[natnet][pcap][shared]") {
+TEST_CASE("The real Motive 2.1 session capture decodes to 550 NatNet messages at bitstream 3.0",
+          "[natnet][pcap][shared]") {
   // Message kinds counted from the first two bytes of each UDP payload as tshark shows
   // them (`tshark -T fields -e data.data`), frame numbers and timestamps with Python's
   // struct module, run once by hand.
@@ -71,10 +72,17 @@ TEST_CASE("The real Motive 2.1 session capture decodes to 550 NatNet messages at
   CHECK(capture.server_info->sender.name.text() == "Motive");
   CHECK(capture.server_info->sender.app_version == Version{2, 1, 0, 0});
   const std::map<MessageId, std::size_t> expected{
-      {MessageId::kFrameOfData, 518}, {MessageId::kEchoRequest, 9},        {MessageId::kEchoResponse, 9},
-      {MessageId::kRequest, 4},       {MessageId::kResponse, 3},           {MessageId::kServerInfo, 2},
-      {MessageId::kConnect, 1},       {MessageId::kDiscovery, 1},          {MessageId::kRequestModelDef, 1},
-      {MessageId::kModelDef, 1},      {MessageId::kUnrecognizedRequest, 1},
+      {MessageId::kFrameOfData, 518},
+      {MessageId::kEchoRequest, 9},
+      {MessageId::kEchoResponse, 9},
+      {MessageId::kRequest, 4},
+      {MessageId::kResponse, 3},
+      {MessageId::kServerInfo, 2},
+      {MessageId::kConnect, 1},
+      {MessageId::kDiscovery, 1},
+      {MessageId::kRequestModelDef, 1},
+      {MessageId::kModelDef, 1},
+      {MessageId::kUnrecognizedRequest, 1},
   };
   CHECK(kinds(capture) == expected);
   const auto frames = frames_of(capture);
@@ -102,7 +110,8 @@ TEST_CASE("The real Motive 2.1 session capture decodes to 550 NatNet messages at
   CHECK(first_frame.capture_time_ns == 1'509'244'025'141'882'000);
 }
 
-TEST_CASE("A 4.x session's bitstream comes from the client's request and follows a Bitstream switch", "[natnet][pcap]") {
+TEST_CASE("A 4.x session's bitstream comes from the client's request and follows a Bitstream switch",
+          "[natnet][pcap]") {
   std::vector<PcapRecord> records;
   int64_t t = 1'000'000'000;
   Connect connect;
@@ -116,8 +125,8 @@ TEST_CASE("A 4.x session's bitstream comes from the client's request and follows
   // Model definitions over an MTU: three IP fragments.
   ModelDefinitions models;
   for (int i = 0; i < 40; ++i) {
-    models.models.push_back(RigidBodyDescription{fmt::format("body {}", i), i, -1, {}, {0, 0, 0, 1},
-                                                 {{{0.1f, 0.f, 0.f}, 0, "a"}, {{0.f, 0.1f, 0.f}, 0, "b"}}});
+    models.models.push_back(RigidBodyDescription{
+        fmt::format("body {}", i), i, -1, {}, {0, 0, 0, 1}, {{{0.1f, 0.f, 0.f}, 0, "a"}, {{0.f, 0.1f, 0.f}, 0, "b"}}});
   }
   add(records, t, {MessageId::kModelDef, models}, kBitstream41, kServer, kCommandPort, kClient, kClientPort);
   // 4.x unicast: frames to the client's command socket.
@@ -125,13 +134,15 @@ TEST_CASE("A 4.x session's bitstream comes from the client's request and follows
     add(records, t += 4'166'667, {MessageId::kFrameOfData, frame_numbered(n, kBitstream41)}, kBitstream41, kServer,
         kCommandPort, kClient, kClientPort);
   }
-  add(records, t, {MessageId::kRequest, Text{"Bitstream,3.0"}}, kBitstream41, kClient, kClientPort, kServer, kCommandPort);
+  add(records, t, {MessageId::kRequest, Text{"Bitstream,3.0"}}, kBitstream41, kClient, kClientPort, kServer,
+      kCommandPort);
   for (int32_t n = 4; n <= 5; ++n) {
     add(records, t += 4'166'667, {MessageId::kFrameOfData, frame_numbered(n, kBitstream30)}, kBitstream30, kServer,
         kCommandPort, kClient, kClientPort);
   }
   // Traffic on other ports is counted, not decoded.
-  records.push_back({t, ethernet_frame(0x0800, ipv4_packet(kServer, kClient, 17, udp_segment(53, 5353, Bytes(20, 0))))});
+  records.push_back(
+      {t, ethernet_frame(0x0800, ipv4_packet(kServer, kClient, 17, udp_segment(53, 5353, Bytes(20, 0))))});
 
   const auto file = pcap_file(1, records);
   const NatNetCapture capture = read_natnet_capture(file, "session.pcap");
@@ -161,7 +172,8 @@ TEST_CASE("A 4.x session's bitstream comes from the client's request and follows
   CHECK(frames_of(served).size() == 5);
 }
 
-TEST_CASE("Without a session start the option chooses the layout, and misreads are counted with their place", "[natnet][pcap]") {
+TEST_CASE("Without a session start the option chooses the layout, and misreads are counted with their place",
+          "[natnet][pcap]") {
   std::vector<PcapRecord> records;
   for (int32_t n = 1; n <= 4; ++n) {
     add(records, n * 1'000'000, {MessageId::kFrameOfData, frame_numbered(n, kBitstream41)}, kBitstream41, kServer,
@@ -182,7 +194,8 @@ TEST_CASE("Without a session start the option chooses the layout, and misreads a
 
   // Datagrams on other ports are tried only when asked.
   std::vector<PcapRecord> elsewhere;
-  add(elsewhere, 0, {MessageId::kFrameOfData, frame_numbered(1, kBitstream30)}, kBitstream30, kServer, 7000, kClient, 7001);
+  add(elsewhere, 0, {MessageId::kFrameOfData, frame_numbered(1, kBitstream30)}, kBitstream30, kServer, 7000, kClient,
+      7001);
   CHECK(read_natnet_capture(pcap_file(1, elsewhere), "x.pcap").other_ports == 1);
   options = {};
   options.any_port = true;

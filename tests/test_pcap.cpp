@@ -18,8 +18,8 @@ using namespace facecap::test;
 namespace {
 
 // libpcap's LINKTYPE_ values as stored in files (tcpdump.org/linktypes.html).
-constexpr uint32_t kEthernet = 1, kNull = 0, kLoop = 108, kRaw = 101, kSll = 113, kSll2 = 276, kIpv4 = 228,
-                   kIpv6 = 229, kIeee80211 = 105;
+constexpr uint32_t kEthernet = 1, kNull = 0, kLoop = 108, kRaw = 101, kSll = 113, kSll2 = 276, kIpv4 = 228, kIpv6 = 229,
+                   kIeee80211 = 105;
 
 constexpr std::array<uint8_t, 4> kServer{192, 168, 0, 106};
 constexpr std::array<uint8_t, 4> kGroup{239, 255, 42, 99};
@@ -75,7 +75,7 @@ TEST_CASE("UDP datagrams come out of every supported link type", "[pcap]") {
   put_be32(loop, 2);
   const std::vector<std::tuple<uint32_t, Bytes, std::string>> cases{
       {kEthernet, ethernet_frame(0x0800, ip), "EN10MB"},
-      {kEthernet, ethernet_frame(0x0800, ip, {0x0005, 0x0064}), "EN10MB"},  // two VLAN tags
+      {kEthernet, ethernet_frame(0x0800, ip, {0x0005, 0x0064}), "EN10MB"},     // two VLAN tags
       {kEthernet, concat(ethernet_frame(0x0800, ip), Bytes(6, 0)), "EN10MB"},  // Ethernet padding
       {kSll, concat(sll, ip), "LINUX_SLL"},
       {kSll2, concat(sll2, ip), "LINUX_SLL2"},
@@ -95,22 +95,26 @@ TEST_CASE("UDP datagrams come out of every supported link type", "[pcap]") {
   }
 }
 
-TEST_CASE("IPv4 fragments are reassembled in any order into one datagram", "[pcap]") {
+TEST_CASE("IPv4 fragments are reassembled in any order, repeated or overlapping, into one datagram", "[pcap]") {
   const Bytes payload = payload_of(4000, 9);  // a NatNet model definition can be this big
-  auto fragments = ipv4_fragments(kServer, kGroup, udp_segment(1511, 1511, payload), 77, 1480);
+  const Bytes segment = udp_segment(1511, 1511, payload);
+  const auto fragments = ipv4_fragments(kServer, kGroup, segment, 77, 1480);
   REQUIRE(fragments.size() == 3);
-  std::swap(fragments[0], fragments[2]);  // last first
-  std::vector<PcapRecord> records;
-  for (const auto& f : fragments) records.push_back({kTime, ethernet_frame(0x0800, f)});
+  // Bytes 1000..2000 again, overlapping the first two fragments.
+  const Bytes overlap =
+      ipv4_packet(kServer, kGroup, 17, Bytes(segment.begin() + 1000, segment.begin() + 2000), 77, 0x2000 | 1000 / 8);
   // Another datagram's lone first fragment, interleaved, never completes.
   const auto lonely = ipv4_fragments(kServer, kGroup, udp_segment(1510, 50000, payload_of(3000, 1)), 78, 1480);
-  records.insert(records.begin() + 1, {kTime - 5, ethernet_frame(0x0800, lonely[0])});
+  std::vector<PcapRecord> records;
+  for (const Bytes* ip : {&fragments[2], &lonely[0], &fragments[1], &fragments[1], &overlap, &fragments[0]}) {
+    records.push_back({kTime, ethernet_frame(0x0800, *ip)});
+  }
   const Read read = read_all(pcap_file(kEthernet, records));
   REQUIRE(read.datagrams.size() == 1);
   check_datagram(read.datagrams[0], payload);
-  CHECK(read.datagrams[0].record == 3);  // completed by the fourth record
-  CHECK(read.counts.records == 4);
-  CHECK(read.counts.udp_records == 3);
+  CHECK(read.datagrams[0].record == 5);  // completed by the sixth record
+  CHECK(read.counts.records == 6);
+  CHECK(read.counts.udp_records == 5);
   CHECK(read.counts.reassembled == 1);
   CHECK(read.counts.unfinished_fragments == 1);
 }
@@ -130,10 +134,12 @@ TEST_CASE("IPv6 datagrams, with extension headers and fragments, come out whole"
       // Whole, behind a hop-by-hop options header.
       {kTime, ethernet_frame(0x86dd, ipv6_packet(source, destination, 0, concat(with_next(hop_by_hop, 17), segment)))},
       // Fragmented in two (1232 is a multiple of 8), second fragment first.
-      {kTime, ethernet_frame(0x86dd, ipv6_packet(source, destination, 44,
-                                                  ipv6_fragment(9, 1232, false, Bytes(segment.begin() + 1232, segment.end()))))},
-      {kTime, ethernet_frame(0x86dd, ipv6_packet(source, destination, 44,
-                                                  ipv6_fragment(9, 0, true, Bytes(segment.begin(), segment.begin() + 1232))))},
+      {kTime, ethernet_frame(0x86dd,
+                             ipv6_packet(source, destination, 44,
+                                         ipv6_fragment(9, 1232, false, Bytes(segment.begin() + 1232, segment.end()))))},
+      {kTime,
+       ethernet_frame(0x86dd, ipv6_packet(source, destination, 44,
+                                          ipv6_fragment(9, 0, true, Bytes(segment.begin(), segment.begin() + 1232))))},
   };
   const Read read = read_all(pcap_file(kEthernet, records));
   REQUIRE(read.datagrams.size() == 2);
@@ -163,15 +169,15 @@ TEST_CASE("Records that are not whole UDP datagrams are skipped and counted by r
   const auto original = uint32_t(cut.size());
   cut.resize(100);  // what a snap length of 100 keeps
   const std::vector<PcapRecord> records{
-      {kTime, ethernet_frame(0x0806, Bytes(28, 0))},                                  // ARP
+      {kTime, ethernet_frame(0x0806, Bytes(28, 0))},                                   // ARP
       {kTime, ethernet_frame(0x0800, ipv4_packet(kServer, kGroup, 6, Bytes(40, 0)))},  // TCP
       {kTime, ethernet_frame(0x0800, ipv4_packet(kServer, kGroup, 1, Bytes(8, 0)))},   // ICMP
       {kTime, cut, original},
       {kTime, ethernet_frame(0x0800, bad_ihl)},
       {kTime, ethernet_frame(0x0800, bad_udp_length)},
       {kTime, ethernet_frame(0x0800, Bytes(ip.begin(), ip.begin() + 30))},  // shorter than its header says, not cut
-      {kTime, Bytes(10, 0)},                                                 // shorter than Ethernet
-      {kTime, ethernet_frame(0x0800, ip)},                                   // the one good datagram
+      {kTime, Bytes(10, 0)},                                                // shorter than Ethernet
+      {kTime, ethernet_frame(0x0800, ip)},                                  // the one good datagram
   };
   const Read read = read_all(pcap_file(kEthernet, records));
   CHECK(read.datagrams.size() == 1);
@@ -217,7 +223,8 @@ TEST_CASE("Captures libpcap cannot read, or of unsupported link types, are refus
   CHECK_THROWS_WITH(UdpCapture(pcap_file(kIeee80211, {}), "wifi.pcap"),
                     Catch::Contains("wifi.pcap") && Catch::Contains("link type 105 (IEEE802_11) is not supported"));
   const std::vector<char> noise(100, 'x');
-  CHECK_THROWS_WITH(UdpCapture(noise, "noise.pcap"), Catch::Contains("noise.pcap: not a readable pcap or pcapng capture"));
+  CHECK_THROWS_WITH(UdpCapture(noise, "noise.pcap"),
+                    Catch::Contains("noise.pcap: not a readable pcap or pcapng capture"));
   CHECK_THROWS_AS(UdpCapture(std::vector<char>{}, "empty.pcap"), Error);
   CHECK_THROWS_WITH(UdpCapture(std::filesystem::path("/nonexistent/x.pcap")), Catch::Contains("/nonexistent/x.pcap"));
   // A record cut off by the end of the file: an Error naming the record, after the good ones.

@@ -186,7 +186,9 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
       "inspect", "Show what a C3D, TRC, Live Link Face CSV, .fcrec recording or pcap/pcapng NatNet capture holds");
   cmd->add_option("file", opts->file, "The file to inspect")->required()->check(CLI::ExistingFile);
-  cmd->add_flag("--json", opts->json, "Print JSON: format, frames, rate_hz, markers, labels, units, gaps, first_frame");
+  cmd->add_flag("--json", opts->json,
+                "Print JSON: format, frames, rate_hz, markers, labels, units, gaps, first_frame (captures: frames, "
+                "natnet_version, rate_hz)");
   cmd->add_flag("--time", opts->time, "Also measure how long reading the file takes");
   cmd->add_option("--repeat", opts->repeat, "Reads timed by --time")
       ->check(CLI::Range(1, 10000))
@@ -196,12 +198,15 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
                   "Captures: the NatNet bitstream when the capture holds no session start [default: 3.0, Motive 2.x]")
       ->check([](const std::string& text) -> std::string {
         const auto version = formats::natnet::parse_version(text);
-        return version && formats::natnet::is_supported_bitstream(*version) ? "" : "a NatNet bitstream 3.x or 4.x, like 3.0 or 4.1";
+        if (version && formats::natnet::is_supported_bitstream(*version)) return "";
+        return "a NatNet bitstream 3.x or 4.x, like 3.0 or 4.1";
       });
   cmd->callback([opts, &exit_code] {
     const std::filesystem::path path(opts->file);
     formats::natnet::CaptureOptions capture_options;
-    if (!opts->natnet_version.empty()) capture_options.default_bitstream = *formats::natnet::parse_version(opts->natnet_version);
+    if (!opts->natnet_version.empty()) {
+      capture_options.default_bitstream = *formats::natnet::parse_version(opts->natnet_version);
+    }
     const LoadedFile loaded = load(path, capture_options);
     if (!loaded.capture && (opts->frames || !opts->natnet_version.empty())) {
       throw file_error(path.string(), "--frames and --natnet-version apply to pcap/pcapng captures only");

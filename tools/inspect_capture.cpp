@@ -93,8 +93,9 @@ void print_capture(const std::filesystem::path& path, const NatNetCapture& captu
   fmt::print("messages  {}\n", capture.messages.size());
   for (const auto& [id, count] : kinds) fmt::print("  {:<26} {}\n", kMessageIds.name(id), count);
   fmt::print("frames    {}", kinds[MessageId::kFrameOfData]);
-  if (first) fmt::print(" (numbers {}..{}, {} labelled markers in the first)", first->frame_number, last->frame_number,
-                        first->labelled_markers.size());
+  if (first)
+    fmt::print(" (numbers {}..{}, {} labelled markers in the first)", first->frame_number, last->frame_number,
+               first->labelled_markers.size());
   fmt::print("\nrate_hz   {:.3f}\n", frame_rate_hz(capture));
   if (models) {
     fmt::print("models    {}\n", models->models.size());
@@ -103,10 +104,11 @@ void print_capture(const std::filesystem::path& path, const NatNetCapture& captu
     }
   }
   const auto& r = capture.records;
-  fmt::print("skipped   {} records (not IP {}, not UDP {}, truncated {}, malformed {}, unfinished fragments {}), "
-             "{} datagrams on other ports, {} not NatNet\n",
-             r.skipped(), r.not_ip, r.not_udp, r.truncated, r.malformed, r.unfinished_fragments, capture.other_ports,
-             capture.undecodable);
+  fmt::print(
+      "skipped   {} records (not IP {}, not UDP {}, truncated {}, malformed {}, unfinished fragments {}), "
+      "{} datagrams on other ports, {} not NatNet\n",
+      r.skipped(), r.not_ip, r.not_udp, r.truncated, r.malformed, r.unfinished_fragments, capture.other_ports,
+      capture.undecodable);
   for (const std::string& e : capture.errors) fmt::print("error     {}\n", e);
   if (capture.undecodable > capture.errors.size()) {
     fmt::print("error     ... and {} more\n", capture.undecodable - capture.errors.size());
