@@ -3,6 +3,7 @@
 // natnet.hpp. Which layout the frames have comes from the session in the capture: a
 // client's CONNECT asking for a bitstream, else the server's SERVERINFO, else the option
 // (3.0, what Motive 2.x streams); a "Bitstream,M.m" NAT_REQUEST switches it from there on.
+// For tools and replays: it reads the whole capture into memory; not real-time safe.
 #include <cstdint>
 #include <filesystem>
 #include <optional>
