@@ -15,7 +15,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libsuitesparse-dev libqhull-dev libnanoflann-dev
   libtomlplusplus-dev libtinygltf-dev nlohmann-json3-dev
-  libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev libdtl-dev
+  libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev libdtl-dev libpcap-dev
   catch2 libbenchmark-dev
   systemd  # systemd-analyze: the test that checks systemd/facecapd.service
 )

@@ -6,6 +6,7 @@
 #include "core/io.hpp"
 #include "formats/c3d.hpp"
 #include "formats/livelinkface.hpp"
+#include "formats/natnet_capture.hpp"
 #include "formats/recording.hpp"
 #include "formats/trc.hpp"
 #include "tests/test_support.hpp"
@@ -58,6 +59,35 @@ void BM_ReadRecording(benchmark::State& state) {
 }
 BENCHMARK(BM_ReadRecording)->Unit(benchmark::kMillisecond);
 
+// A facial NatNet frame: 60 labelled markers, the same 60 as a marker set, one head rigid
+// body; parsed and encoded at bitstream 3.0 (Motive 2.x) and 4.1 (byte counts).
+natnet::Message facial_frame() {
+  natnet::FrameOfData frame;
+  frame.frame_number = 1000;
+  frame.marker_sets.push_back({"Face", {}});
+  for (int32_t k = 0; k < 60; ++k) {
+    const natnet::Position p{0.01f * float(k), 1.6f + 0.001f * float(k), -0.2f};
+    frame.labelled_markers.push_back({1 << 16 | (k + 1), p, 0.003f, 0x0a, 0.0001f});
+    frame.marker_sets[0].markers.push_back(p);
+  }
+  frame.rigid_bodies.push_back({1, {0.f, 1.6f, 0.f}, {0.f, 0.f, 0.f, 1.f}, 0.0002f, 1});
+  return {natnet::MessageId::kFrameOfData, frame};
+}
+
+void BM_ParseNatNetFrame(benchmark::State& state, natnet::Version bitstream) {
+  const auto bytes = natnet::encode_message(facial_frame(), bitstream);
+  for (auto _ : state) benchmark::DoNotOptimize(natnet::parse_message(bytes, bitstream, "bench"));
+  state.SetBytesProcessed(int64_t(state.iterations() * bytes.size()));
+}
+BENCHMARK_CAPTURE(BM_ParseNatNetFrame, bitstream_3_0, natnet::kBitstream30)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_ParseNatNetFrame, bitstream_4_1, natnet::kBitstream41)->Unit(benchmark::kMicrosecond);
+
+void BM_EncodeNatNetFrame(benchmark::State& state) {
+  const natnet::Message frame = facial_frame();
+  for (auto _ : state) benchmark::DoNotOptimize(natnet::encode_message(frame, natnet::kBitstream41));
+}
+BENCHMARK(BM_EncodeNatNetFrame)->Unit(benchmark::kMicrosecond);
+
 // The largest shared files of each kind, from disk (page cache warm after the first read).
 void BM_ReadSharedFile(benchmark::State& state, const char* relative) {
   const auto path = test::shared_data(relative);
@@ -79,6 +109,18 @@ BENCHMARK_CAPTURE(BM_ReadSharedFile, livelinkface_alex_rom_3, "livelinkface/alex
 BENCHMARK_CAPTURE(BM_ReadSharedFile, trc_JawMoCap, "markers/animface/JawMoCap.trc")->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_ReadSharedFile, c3d_s20_phasespace, "c3d/c3dorg_s20_phasespace_sample.c3d")
     ->Unit(benchmark::kMillisecond);
+
+// The real Motive session: 550 datagrams, 518 frames, through libpcap and the parser.
+void BM_ReadNatNetCapture(benchmark::State& state) {
+  const auto path = test::shared_data("natnet/traffic.pcapng");
+  if (path.empty()) {
+    state.SkipWithError(test::missing_shared_data_message("natnet/traffic.pcapng").c_str());
+    return;
+  }
+  for (auto _ : state) benchmark::DoNotOptimize(natnet::read_natnet_capture(path));
+  state.SetBytesProcessed(int64_t(state.iterations() * std::filesystem::file_size(path)));
+}
+BENCHMARK(BM_ReadNatNetCapture)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

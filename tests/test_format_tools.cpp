@@ -10,6 +10,8 @@
 #include "core/io.hpp"
 #include "formats/c3d.hpp"
 #include "formats/livelinkface.hpp"
+#include "formats/natnet.hpp"
+#include "tests/capture_test_support.hpp"
 #include "tests/formats_test_support.hpp"
 #include "tests/test_support.hpp"
 
@@ -132,4 +134,98 @@ TEST_CASE("facecap inspect on shared data: Eb015pi JSON and --time", "[tools][sh
   CHECK(j["first_frame"][0][0].get<double>() == Approx(248.583).margin(1e-3));
   CHECK(j["read_ms"]["reads"] == 3);
   CHECK(j["read_ms"]["min"].get<double>() > 0.0);
+}
+
+TEST_CASE("facecap inspect decodes a NatNet capture: all 518 frames with markers, bodies and sets",
+          "[tools][natnet][shared]") {
+  // Expected values from the UDP payloads tshark shows (`tshark -r traffic.pcapng -Y
+  // udp.dstport==1511 -T fields -e data.data`) decoded with Python's struct module
+  // ('<i' counts, '<i7ffh' rigid bodies, '<i4fhf' labelled markers), run once by hand.
+  FACECAP_REQUIRE_SHARED_DATA(path, "natnet/traffic.pcapng");
+  const auto dir = facecap::test::scratch_dir("tool-inspect-natnet");
+  const Run run = run_facecap(dir, {"inspect", path.string(), "--json", "--frames"});
+  INFO(run.err);
+  REQUIRE(run.exit_code == 0);
+  const auto j = nlohmann::json::parse(run.out);
+  CHECK(j["frames"] == 518);
+  CHECK(j["natnet_version"] == "3.0");
+  CHECK(j["rate_hz"].get<double>() == Approx(120.0).epsilon(1e-9));
+  const auto& frames = j["frame_list"];
+  REQUIRE(frames.size() == 518);
+  std::size_t labelled = 0, bodies = 0, sets = 0;
+  for (const auto& f : frames) {
+    labelled += f["labelled_markers"].size();
+    bodies += f["rigid_bodies"].size();
+    sets += f["marker_sets"].size();
+    CHECK(f["timecode"] == "00:00:00:00.0");
+  }
+  CHECK(labelled == 3108);  // 6 a frame
+  CHECK(bodies == 518);
+  CHECK(sets == 0);  // Motive sent its marker sets' definitions but no marker-set data
+  const auto& first = frames[0];
+  CHECK(first["frame_number"] == 162734);
+  CHECK(first["timestamp_s"].get<double>() == 1356.1166666666666);
+  const auto& marker = first["labelled_markers"][0];
+  CHECK(marker["id"] == 131073);
+  CHECK(marker["model_id"] == 2);
+  CHECK(marker["marker_id"] == 1);
+  CHECK(marker["occluded"] == false);
+  CHECK(marker["pos"][0].get<double>() == double(0.12721621990203857f));
+  CHECK(marker["pos"][2].get<double>() == double(-0.8858283758163452f));
+  CHECK(first["labelled_markers"][5]["model_id"] == 0);
+  CHECK(first["labelled_markers"][5]["marker_id"] == 50007);
+  const auto& body = first["rigid_bodies"][0];
+  CHECK(body["id"] == 2);
+  CHECK(body["rot"][3].get<double>() == double(-0.8573576807975769f));
+  const auto& last = frames[517];
+  CHECK(last["frame_number"] == 163251);
+  CHECK(last["rigid_bodies"][0]["pos"][0].get<double>() == double(0.17443732917308807f));
+  CHECK(last["labelled_markers"][5]["pos"][2].get<double>() == double(-0.8401832580566406f));
+
+  const Run summary = run_facecap(dir, {"inspect", path.string()});
+  REQUIRE(summary.exit_code == 0);
+  CHECK(summary.out.find("natnet    bitstream 3.0 (from server info)") != std::string::npos);
+  CHECK(summary.out.find("NAT_FRAMEOFDATA            518") != std::string::npos);
+  CHECK(summary.out.find("frames    518 (numbers 162734..163251") != std::string::npos);
+  CHECK(summary.out.find("rigid body   RaceQuad") != std::string::npos);
+  CHECK(summary.out.find("skipped   0 records") != std::string::npos);
+
+  // The capture options belong to captures.
+  const Run refused = run_facecap(dir, {"inspect", path.string(), "--natnet-version", "2.9"});
+  CHECK(refused.exit_code != 0);
+  CHECK(refused.err.find("a NatNet bitstream 3.x or 4.x") != std::string::npos);
+}
+
+TEST_CASE("facecap inspect on a capture without a session start uses --natnet-version", "[tools][natnet]") {
+  // Two 4.1 frames sent to the data port and nothing else: without --natnet-version they
+  // are read as 3.0 and refused, with the record and byte named.
+  namespace natnet = formats::natnet;
+  using namespace facecap::test;
+  const auto dir = scratch_dir("tool-inspect-natnet-option");
+  std::vector<PcapRecord> records;
+  for (int32_t n = 1; n <= 2; ++n) {
+    natnet::FrameOfData frame;
+    frame.frame_number = n;
+    frame.timestamp_s = n / 100.0;
+    frame.labelled_markers = {{7, {1.f, 2.f, 3.f}, 0.01f, 0x01, 0.f}};
+    const auto packet = bytes_of(natnet::encode_message({natnet::MessageId::kFrameOfData, frame}, natnet::kBitstream41));
+    const auto ip = ipv4_packet({10, 0, 0, 1}, {239, 255, 42, 99}, 17, udp_segment(1511, 1511, packet));
+    records.push_back({n * 10'000'000, ethernet_frame(0x0800, ip)});
+  }
+  const auto capture = (dir / "frames.pcap").string();
+  write_file_atomically(capture, pcap_file(1, records));
+  const Run as41 = run_facecap(dir, {"inspect", capture, "--json", "--frames", "--natnet-version", "4.1"});
+  INFO(as41.err);
+  REQUIRE(as41.exit_code == 0);
+  const auto j = nlohmann::json::parse(as41.out);
+  CHECK(j["frames"] == 2);
+  CHECK(j["natnet_version"] == "4.1");
+  CHECK(j["rate_hz"].get<double>() == Approx(100.0));
+  CHECK(j["frame_list"][1]["labelled_markers"][0]["occluded"] == true);
+
+  const Run as30 = run_facecap(dir, {"inspect", capture});
+  REQUIRE(as30.exit_code == 0);
+  CHECK(as30.out.find("natnet    bitstream 3.0 (from option)") != std::string::npos);
+  CHECK(as30.out.find("2 not NatNet") != std::string::npos);
+  CHECK(as30.out.find("error     frames.pcap record 1 @ byte ") != std::string::npos);
 }

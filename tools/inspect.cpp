@@ -1,16 +1,20 @@
-// facecap inspect: what a marker take, recording or Live Link Face CSV holds.
+// facecap inspect: what a marker take, recording, Live Link Face CSV or NatNet capture holds.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <optional>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "core/error.hpp"
 #include "formats/livelinkface.hpp"
+#include "formats/natnet_capture.hpp"
 #include "formats/take.hpp"
 #include "tools/commands.hpp"
+#include "tools/inspect_capture.hpp"
 
 namespace facecap::tools {
 namespace {
@@ -19,15 +23,24 @@ using formats::FaceTake;
 using formats::MarkerTake;
 using formats::TakeFormat;
 
-// A file read as whichever kind it is: markers, or blendshape weights.
+// A file read as whichever kind it is: markers, blendshape weights, or NatNet traffic.
 struct LoadedFile {
   std::optional<MarkerTake> markers;
   std::optional<FaceTake> face;
+  std::optional<formats::natnet::NatNetCapture> capture;
 };
 
-LoadedFile load(const std::filesystem::path& path) {
+bool is_capture(const std::filesystem::path& path) {
+  char head[4] = {};
+  std::ifstream(path, std::ios::binary).read(head, sizeof head);
+  return formats::looks_like_capture(head);
+}
+
+LoadedFile load(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options) {
   LoadedFile loaded;
-  if (formats::detect_file_format(path) == TakeFormat::kLiveLinkFace) {
+  if (is_capture(path)) {
+    loaded.capture = formats::natnet::read_natnet_capture(path, capture_options);
+  } else if (formats::detect_file_format(path) == TakeFormat::kLiveLinkFace) {
     loaded.face = formats::read_livelinkface(path);
   } else {
     loaded.markers = formats::read_take(path);
@@ -42,11 +55,12 @@ struct ReadTimes {
 };
 
 // Reads the file `reads` more times and reports min and median wall time of one read.
-ReadTimes time_reads(const std::filesystem::path& path, int reads) {
+ReadTimes time_reads(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options,
+                     int reads) {
   std::vector<double> ms;
   for (int i = 0; i < reads; ++i) {
     const auto start = std::chrono::steady_clock::now();
-    const LoadedFile loaded = load(path);
+    const LoadedFile loaded = load(path, capture_options);
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
   }
   std::sort(ms.begin(), ms.end());
@@ -165,27 +179,51 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
     bool json = false;
     bool time = false;
     int repeat = 10;
+    bool frames = false;
+    std::string natnet_version;
   };
   auto opts = std::make_shared<Options>();
-  auto* cmd = app.add_subcommand("inspect", "Show what a C3D, TRC, Live Link Face CSV or .fcrec recording holds");
+  auto* cmd = app.add_subcommand(
+      "inspect", "Show what a C3D, TRC, Live Link Face CSV, .fcrec recording or pcap/pcapng NatNet capture holds");
   cmd->add_option("file", opts->file, "The file to inspect")->required()->check(CLI::ExistingFile);
-  cmd->add_flag("--json", opts->json, "Print JSON: format, frames, rate_hz, markers, labels, units, gaps, first_frame");
+  cmd->add_flag("--json", opts->json,
+                "Print JSON: format, frames, rate_hz, markers, labels, units, gaps, first_frame (captures: frames, "
+                "natnet_version, rate_hz)");
   cmd->add_flag("--time", opts->time, "Also measure how long reading the file takes");
   cmd->add_option("--repeat", opts->repeat, "Reads timed by --time")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
+  cmd->add_flag("--frames", opts->frames, "Captures: list every frame of data in the JSON (frame_list)");
+  cmd->add_option("--natnet-version", opts->natnet_version,
+                  "Captures: the NatNet bitstream when the capture holds no session start [default: 3.0, Motive 2.x]")
+      ->check([](const std::string& text) -> std::string {
+        const auto version = formats::natnet::parse_version(text);
+        if (version && formats::natnet::is_supported_bitstream(*version)) return "";
+        return "a NatNet bitstream 3.x or 4.x, like 3.0 or 4.1";
+      });
   cmd->callback([opts, &exit_code] {
     const std::filesystem::path path(opts->file);
-    const LoadedFile loaded = load(path);
+    formats::natnet::CaptureOptions capture_options;
+    if (!opts->natnet_version.empty()) {
+      capture_options.default_bitstream = *formats::natnet::parse_version(opts->natnet_version);
+    }
+    const LoadedFile loaded = load(path, capture_options);
+    if (!loaded.capture && (opts->frames || !opts->natnet_version.empty())) {
+      throw file_error(path.string(), "--frames and --natnet-version apply to pcap/pcapng captures only");
+    }
     std::optional<ReadTimes> times;
-    if (opts->time) times = time_reads(path, opts->repeat);
+    if (opts->time) times = time_reads(path, capture_options, opts->repeat);
     if (opts->json) {
-      nlohmann::json j = loaded.markers ? markers_json(path, *loaded.markers) : face_json(path, *loaded.face);
+      nlohmann::json j = loaded.capture   ? capture_json(*loaded.capture, opts->frames)
+                         : loaded.markers ? markers_json(path, *loaded.markers)
+                                          : face_json(path, *loaded.face);
       if (times) j["read_ms"] = {{"min", times->min_ms}, {"median", times->median_ms}, {"reads", times->reads}};
       // NaN has no JSON form; missing positions are already null.
       std::puts(j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
     } else {
-      if (loaded.markers)
+      if (loaded.capture)
+        print_capture(path, *loaded.capture);
+      else if (loaded.markers)
         print_markers(path, *loaded.markers);
       else
         print_face(path, *loaded.face);

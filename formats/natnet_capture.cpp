@@ -1,0 +1,124 @@
+#include "formats/natnet_capture.hpp"
+
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+
+namespace facecap::formats::natnet {
+namespace {
+
+bool on_natnet_port(const UdpDatagram& d) noexcept {
+  for (const uint16_t port : {d.source_port, d.destination_port}) {
+    if (port == kCommandPort || port == kDataPort) return true;
+  }
+  return false;
+}
+
+std::string record_label(const std::string& name, const UdpDatagram& d) {
+  return fmt::format("{} record {}", name, d.record + 1);
+}
+
+// The session's starting bitstream: a client's explicit request wins over the server's
+// version, which wins over the option.
+void choose_bitstream(const std::vector<UdpDatagram>& datagrams, const std::string& name, const CaptureOptions& options,
+                      NatNetCapture& capture) {
+  std::optional<Version> requested;
+  for (const UdpDatagram& d : datagrams) {
+    try {
+      const MessageId id = peek_message_id(d.payload, name);
+      if (id == MessageId::kConnect && !requested) {
+        const auto connect = std::get<Connect>(parse_message(d.payload, options.default_bitstream, name).body);
+        if (connect.options && connect.options->bitstream != Version{}) requested = connect.options->bitstream;
+      } else if (id == MessageId::kServerInfo && !capture.server_info) {
+        capture.server_info = std::get<ServerInfo>(parse_message(d.payload, options.default_bitstream, name).body);
+      }
+    } catch (const Error&) {
+      // Counted when the datagram is parsed for real.
+    }
+  }
+  if (requested) {
+    capture.bitstream = *requested;
+    capture.bitstream_source = BitstreamSource::kClientRequest;
+  } else if (capture.server_info) {
+    capture.bitstream = capture.server_info->sender.natnet_version;
+    capture.bitstream_source = BitstreamSource::kServerInfo;
+  } else {
+    capture.bitstream = options.default_bitstream;
+    capture.bitstream_source = BitstreamSource::kOption;
+  }
+}
+
+// "Bitstream,3.1" asks a 4.x server for another layout.
+std::optional<Version> requested_bitstream(const Message& message) {
+  const auto* request = std::get_if<Text>(&message.body);
+  constexpr std::string_view kPrefix = "Bitstream,";
+  if (message.id != MessageId::kRequest || !request || !request->text.starts_with(kPrefix)) return std::nullopt;
+  const auto version = parse_version(std::string_view(request->text).substr(kPrefix.size()));
+  if (!version || !is_supported_bitstream(*version)) return std::nullopt;
+  return version;
+}
+
+NatNetCapture decode(UdpCapture& udp, const std::string& name, const CaptureOptions& options) {
+  NatNetCapture capture;
+  capture.file_format = udp.file_format();
+  capture.link_type = udp.link_type_name();
+  std::vector<UdpDatagram> datagrams;
+  try {
+    UdpDatagram d;
+    while (udp.next(d)) {
+      if (options.any_port || on_natnet_port(d)) {
+        datagrams.push_back(std::move(d));
+      } else {
+        ++capture.other_ports;
+      }
+    }
+  } catch (const Error& e) {
+    capture.damage = e.what();
+  }
+  capture.records = udp.counts();
+  choose_bitstream(datagrams, name, options, capture);
+
+  Version bitstream = capture.bitstream;
+  capture.messages.reserve(datagrams.size());
+  for (UdpDatagram& d : datagrams) {
+    try {
+      Message message = parse_message(d.payload, bitstream, record_label(name, d));
+      if (const auto version = requested_bitstream(message)) bitstream = *version;
+      capture.messages.push_back(CapturedMessage{d.capture_time_ns, d.source, d.destination, d.source_port,
+                                                 d.destination_port, std::move(message)});
+    } catch (const Error& e) {
+      ++capture.undecodable;
+      if (capture.errors.size() < NatNetCapture::kMaxErrors) capture.errors.emplace_back(e.what());
+    }
+  }
+  return capture;
+}
+
+}  // namespace
+
+NatNetCapture read_natnet_capture(const std::filesystem::path& path, const CaptureOptions& options) {
+  UdpCapture udp(path);
+  return decode(udp, path.filename().string(), options);
+}
+
+NatNetCapture read_natnet_capture(std::span<const char> bytes, const std::string& name, const CaptureOptions& options) {
+  UdpCapture udp(bytes, name);
+  return decode(udp, name, options);
+}
+
+double frame_rate_hz(const NatNetCapture& capture) {
+  const FrameOfData* first = nullptr;
+  const FrameOfData* last = nullptr;
+  for (const CapturedMessage& m : capture.messages) {
+    if (const auto* frame = std::get_if<FrameOfData>(&m.message.body)) {
+      if (!first) first = frame;
+      last = frame;
+    }
+  }
+  if (!first) return 0.0;
+  const double frames = double(last->frame_number) - double(first->frame_number);
+  const double seconds = last->timestamp_s - first->timestamp_s;
+  return frames > 0 && seconds > 0 ? frames / seconds : 0.0;
+}
+
+}  // namespace facecap::formats::natnet

@@ -1,0 +1,86 @@
+#pragma once
+// UDP datagrams out of packet captures (.pcap and .pcapng, read by libpcap). Pure framing:
+// capture records -> link layer -> IPv4/IPv6 (fragments reassembled) -> UDP; it knows
+// nothing of what the datagrams carry.
+//
+// Link types: Ethernet (with 802.1Q/802.1ad VLAN tags), Linux cooked (SLL and SLL2), raw
+// IP (DLT_RAW, DLT_IPV4, DLT_IPV6) and BSD loopback (DLT_NULL, DLT_LOOP); another link
+// type is an Error when the capture is opened. Every other record (ARP, TCP, ICMP, a snap
+// length that cut the datagram, headers that contradict the captured bytes, fragments
+// whose datagram never completes) is skipped and counted in CaptureCounts.
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace facecap::formats {
+
+struct IpAddress {
+  uint8_t version = 4;              // 4 or 6
+  std::array<uint8_t, 16> bytes{};  // IPv4 uses the first 4
+  static IpAddress v4(uint8_t a, uint8_t b, uint8_t c, uint8_t d) noexcept;
+  std::string to_string() const;  // "239.255.42.99", "fe80::1"
+  bool operator==(const IpAddress&) const = default;
+};
+
+struct UdpDatagram {
+  int64_t capture_time_ns = 0;  // the capture's clock (ns since the Unix epoch); for a
+                                // reassembled datagram, the time of its last fragment
+  std::size_t record = 0;       // 0-based index of the capture record that completed it
+  IpAddress source, destination;
+  uint16_t source_port = 0, destination_port = 0;
+  std::vector<char> payload;
+};
+
+// Every capture record lands in exactly one of the buckets after `records` (once the
+// capture has been read to its end).
+struct CaptureCounts {
+  std::size_t records = 0;               // records read from the capture
+  std::size_t udp_records = 0;           // carried (part of) a UDP datagram that was yielded
+  std::size_t not_ip = 0;                // link-layer protocol other than IPv4/IPv6 (ARP, LLDP, ...)
+  std::size_t not_udp = 0;               // IP protocol other than UDP (TCP, ICMP, ...)
+  std::size_t truncated = 0;             // the capture's snap length cut the datagram
+  std::size_t malformed = 0;             // headers contradicting themselves or the bytes captured, or a time past 2262
+  std::size_t unfinished_fragments = 0;  // IP fragments of datagrams that never completed
+  std::size_t datagrams = 0;             // UDP datagrams yielded
+  std::size_t reassembled = 0;           // of which were put together from IP fragments
+  std::size_t skipped() const noexcept { return not_ip + not_udp + truncated + malformed + unfinished_fragments; }
+};
+
+// True for the magic numbers of pcap (microsecond or nanosecond, either byte order) and
+// pcapng files.
+bool looks_like_capture(std::span<const char> head) noexcept;
+
+// Reads a capture record by record. Not thread-safe; not real-time safe (libpcap reads
+// the file, datagrams are allocated).
+class UdpCapture {
+ public:
+  // Opens a file; throws Error naming it when libpcap cannot read it or its link type is
+  // not one of those above.
+  explicit UdpCapture(const std::filesystem::path& path);
+  // Reads a capture held in memory (tests, fuzzing); `bytes` must outlive this object.
+  UdpCapture(std::span<const char> bytes, const std::string& name);
+  ~UdpCapture();
+  UdpCapture(UdpCapture&&) noexcept;
+  UdpCapture& operator=(UdpCapture&&) noexcept;
+
+  // The next UDP datagram into `out`; false once the capture is exhausted. Throws Error
+  // naming the record when the file is damaged (a record cut short, a bad block).
+  bool next(UdpDatagram& out);
+
+  const CaptureCounts& counts() const noexcept;
+  // libpcap's name of the link type: "EN10MB", "LINUX_SLL", ...
+  std::string_view link_type_name() const noexcept;
+  // "pcap" or "pcapng".
+  std::string_view file_format() const noexcept;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace facecap::formats
