@@ -56,8 +56,8 @@ std::string run_and_capture(const std::string& command, int* status) {
   return out;
 }
 
-Run run_facecap(const std::filesystem::path& dir, const std::vector<std::string>& args) {
-  std::string command = std::string("'") + FACECAP_BINARY_DIR + "/tools/facecap'";
+Run run_built(const std::string& program, const std::filesystem::path& dir, const std::vector<std::string>& args) {
+  std::string command = std::string("'") + FACECAP_BINARY_DIR + "/" + program + "'";
   for (const auto& a : args) command += " '" + a + "'";
   command += " >'" + (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "' </dev/null";
   const int status = std::system(command.c_str());

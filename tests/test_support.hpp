@@ -31,7 +31,12 @@ struct Run {
   int exit_code = -1;
   std::string out, err;
 };
-Run run_facecap(const std::filesystem::path& dir, const std::vector<std::string>& args);
+// Runs a program of the build tree (relative to it: "tools/facecap", "daemon/facecapd") with
+// args, its output captured in dir.
+Run run_built(const std::string& program, const std::filesystem::path& dir, const std::vector<std::string>& args);
+inline Run run_facecap(const std::filesystem::path& dir, const std::vector<std::string>& args) {
+  return run_built("tools/facecap", dir, args);
+}
 
 }  // namespace facecap::test
 

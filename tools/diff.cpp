@@ -22,6 +22,7 @@
 
 #include "core/error.hpp"
 #include "core/frame.hpp"
+#include "core/units.hpp"
 #include "formats/recording.hpp"
 #include "tools/commands.hpp"
 #include "tools/progress.hpp"
