@@ -108,7 +108,10 @@ void Daemon::start() {
                                                    pipeline::solve_settings_toml(c));
   context.vertex_count = uint32_t(rig_->vertex_count());
   context.loop_rate_hz = c.loop.rate_hz;
+  io_ = std::make_unique<IoThread>();
+  context.io = &io_->context();
   sinks_ = outputs::make_outputs(c, context);
+  io_->start();
   std::vector<outputs::OutputSink*> sinks;
   for (const auto& sink : sinks_) {
     spdlog::info("output {}", sink->description());
@@ -383,7 +386,9 @@ void Daemon::shutdown(const std::string& reason) {
   if (const std::string flagged = flagged_text(run); !flagged.empty()) spdlog::info("frames flagged: {}", flagged);
   write_stats_file(run);
   loop_.reset();
+  io_->stop();  // after every sink stopped: none has work left on it
   sinks_.clear();
+  io_.reset();
   source_.reset();
   spdlog::info("stopped in {:.0f} ms", ms(monotonic_now_ns() - begin));
 }
