@@ -5,6 +5,7 @@
 #include "facecap_client.h"
 
 #include <cerrno>
+#include <cstddef>
 #include <cstring>
 #include <ctime>
 #include <memory>
@@ -137,6 +138,12 @@ int map_segment(const std::string& name, Mapping& out) {
 }
 
 using facecap::udp::Message;
+
+// The frame's layout as bindings in other languages mirror it (docs/subscribers.md).
+static_assert(offsetof(facecap_frame, frame_no) == 16 && offsetof(facecap_frame, head_rotation_wxyz) == 64 &&
+              offsetof(facecap_frame, flags) == 92 && offsetof(facecap_frame, timecode_hours) == 108 &&
+              offsetof(facecap_frame, timecode_rate_hz) == 112 && offsetof(facecap_frame, rig_hash) == 120 &&
+              offsetof(facecap_frame, weights) == 128 && sizeof(facecap_frame) == 144);
 
 // What a client shows of its writer, whichever the transport.
 struct Schema {

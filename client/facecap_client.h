@@ -61,13 +61,13 @@ typedef struct facecap_frame {
   uint32_t markers_used;
   uint32_t shape_count;
   uint32_t vertex_count;        /* 0 when the writer does not publish vertices */
-  uint64_t rig_hash;            /* identity of the solved rig */
   uint8_t timecode_hours, timecode_minutes, timecode_seconds, timecode_frames;
-  uint16_t timecode_rate_hz;    /* 0: the source gave no timecode */
+  uint32_t timecode_rate_hz;    /* 0: the source gave no timecode */
   float timecode_subframe;
+  uint64_t rig_hash;            /* identity of the solved rig */
   const float* weights;         /* shape_count values */
   const float* vertices;        /* vertex_count * 3 values (x, y, z per vertex), or NULL */
-} facecap_frame;
+} facecap_frame;                /* no padding on LP64: bindings (ctypes, ...) can mirror it field by field */
 
 typedef struct facecap_client facecap_client;
 
