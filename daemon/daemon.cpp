@@ -431,7 +431,7 @@ void Daemon::write_stats_file(const Figures& f) const {
     const LatencyHistogram::Snapshot offer = loop_->sink_timing(i).offer_ns.snapshot();
     nlohmann::json& out = outputs[std::string(sink.name())] = {
         {"description", sink.description()}, {"offered", h.offered}, {"delivered", h.delivered},
-        {"dropped", h.dropped}, {"errors", h.errors}, {"failed", h.failed},
+        {"dropped", h.dropped}, {"errors", h.errors}, {"failed", h.failed}, {"bytes", h.bytes},
         {"offer_us", {{"p50", double(offer.quantile_ns(0.5)) / kNsPerUs}, {"p99", double(offer.quantile_ns(0.99)) / kNsPerUs},
                       {"max", double(loop_->sink_timing(i).max_ns.load()) / kNsPerUs}}}};
     // Sinks that deliver on their own thread: marker frame received -> delivered (sent).

@@ -23,6 +23,7 @@ struct SinkHealth {
   uint64_t delivered = 0;  // frames that reached the destination (published, written, sent)
   uint64_t dropped = 0;    // frames offered but not delivered (queue full, write failed after queuing)
   uint64_t errors = 0;     // failures of the destination (disk full, socket errors)
+  uint64_t bytes = 0;      // bytes sent (network outputs; 0 where not counted)
   bool failed = false;     // the sink gave up after an error (a stopped recording); the loop goes on
 };
 

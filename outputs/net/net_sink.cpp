@@ -94,6 +94,7 @@ SinkHealth NetSink::health() const noexcept {
   h.delivered = delivered_.load(std::memory_order_relaxed);
   h.dropped = dropped_.load(std::memory_order_relaxed);
   h.errors = sender_.errors();
+  h.bytes = sender_.bytes_sent();
   return h;
 }
 
