@@ -17,7 +17,8 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/lip_region.hpp"
+#include "solver/collide/metrics.hpp"
 #include "solver/mesh_topology.hpp"
 
 namespace facecap {

@@ -11,10 +11,13 @@
 #include "core/error.hpp"
 #include "core/time.hpp"
 #include "solver/box_qp.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/collider.hpp"
+#include "solver/collide/geometry.hpp"
+#include "solver/collide/pair_batch.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/mesh_topology.hpp"
 #include "solver/meshik.hpp"
+#include "solver/simd.hpp"
 #include "solver/solver_model.hpp"
 
 namespace facecap {
@@ -24,7 +27,7 @@ constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear",
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
 
 // 16 slots of one component of a ShapeBlocks block.
-using Lanes16 = float __attribute__((vector_size(64)));
+using Lanes16 = simd::FloatX16;
 
 // 16 stored values as floats: 8-bit and 16-bit ones widened and converted (GCC 12 turns
 // __builtin_convertvector from small integers into scalar code, so AVX-512 gets the two
@@ -46,18 +49,6 @@ Lanes16 load_values(const std::byte* p) noexcept {
   for (int i = 0; i < 16; ++i) out[i] = float(v[i]);
   return out;
 #endif
-}
-
-// Unaligned loads and stores of 16 lanes (V = Lanes16) or one (V = float).
-template <class V>
-V load_lanes(const float* p) noexcept {
-  V v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-template <class V>
-void store_lanes(float* p, V v) noexcept {
-  std::memcpy(p, &v, sizeof v);
 }
 
 // `Components` floats from p into the first lanes, zeros after.
@@ -540,8 +531,8 @@ class PoissonSolver : public FaceSolver {
   template <class V>
   static void rest_gradients(const float* frame, int t, V (&q1)[3], V (&q2)[3]) noexcept {
     constexpr int B = ShapeBlocks::kBlock;
-    const V half_l = load_lanes<V>(frame + 6 * B + t), half_u = load_lanes<V>(frame + 7 * B + t),
-            half_v = load_lanes<V>(frame + 8 * B + t);
+    const V half_l = simd::load<V>(frame + 6 * B + t), half_u = simd::load<V>(frame + 7 * B + t),
+            half_v = simd::load<V>(frame + 8 * B + t);
     q1[0] = -half_v, q1[1] = half_v, q1[2] = V{};
     q2[0] = half_u - half_l, q2[1] = -half_u, q2[2] = half_l;
   }
@@ -554,8 +545,8 @@ class PoissonSolver : public FaceSolver {
       Lanes16 q1[3], q2[3];
       rest_gradients(frame, t, q1, q2);
       for (int r = 0; r < 3; ++r) {
-        const Lanes16 g1 = load_lanes<Lanes16>(sum + r * B + t), g2 = load_lanes<Lanes16>(sum + (3 + r) * B + t);
-        for (int k = 0; k < 3; ++k) store_lanes(out + (3 * k + r) * B + t, g1 * q1[k] + g2 * q2[k]);
+        const Lanes16 g1 = simd::load<Lanes16>(sum + r * B + t), g2 = simd::load<Lanes16>(sum + (3 + r) * B + t);
+        for (int k = 0; k < 3; ++k) simd::store(out + (3 * k + r) * B + t, g1 * q1[k] + g2 * q2[k]);
       }
     }
   }
@@ -566,7 +557,7 @@ class PoissonSolver : public FaceSolver {
     constexpr int B = ShapeBlocks::kBlock;
     constexpr float kLargestSeriesAngleSq = 6.25f;
     for (int t = 0; t < B; t += 16) {
-      const Lanes16 rx = load_lanes<Lanes16>(sum + t), ry = load_lanes<Lanes16>(sum + B + t), rz = load_lanes<Lanes16>(sum + 2 * B + t);
+      const Lanes16 rx = simd::load<Lanes16>(sum + t), ry = simd::load<Lanes16>(sum + B + t), rz = simd::load<Lanes16>(sum + 2 * B + t);
       const Lanes16 x = rx * rx + ry * ry + rz * rz;
       // sin(theta)/theta and (1 - cos(theta))/theta^2 as series in theta^2, exact to float
       // precision for theta <= 2.5; larger turns are redone with sin and cos below.
@@ -600,13 +591,13 @@ class PoissonSolver : public FaceSolver {
     D[0] = b * (rx * rx - x);     D[3] = -a * rz + b * rx * ry;  D[6] = a * ry + b * rx * rz;
     D[1] = a * rz + b * rx * ry;  D[4] = b * (ry * ry - x);      D[7] = -a * rx + b * ry * rz;
     D[2] = -a * ry + b * rx * rz; D[5] = a * rx + b * ry * rz;   D[8] = b * (rz * rz - x);
-    const V t1[3] = {load_lanes<V>(frame + t), load_lanes<V>(frame + B + t), load_lanes<V>(frame + 2 * B + t)};
-    const V t2[3] = {load_lanes<V>(frame + 3 * B + t), load_lanes<V>(frame + 4 * B + t), load_lanes<V>(frame + 5 * B + t)};
+    const V t1[3] = {simd::load<V>(frame + t), simd::load<V>(frame + B + t), simd::load<V>(frame + 2 * B + t)};
+    const V t2[3] = {simd::load<V>(frame + 3 * B + t), simd::load<V>(frame + 4 * B + t), simd::load<V>(frame + 5 * B + t)};
     const V n[3] = {t1[1] * t2[2] - t1[2] * t2[1], t1[2] * t2[0] - t1[0] * t2[2], t1[0] * t2[1] - t1[1] * t2[0]};
     V q1[3], q2[3];
     rest_gradients(frame, t, q1, q2);
-    const V sxx = load_lanes<V>(sum + 3 * B + t), syy = load_lanes<V>(sum + 4 * B + t), sxy = load_lanes<V>(sum + 5 * B + t);
-    const V sxz = load_lanes<V>(sum + 6 * B + t), syz = load_lanes<V>(sum + 7 * B + t);
+    const V sxx = simd::load<V>(sum + 3 * B + t), syy = simd::load<V>(sum + 4 * B + t), sxy = simd::load<V>(sum + 5 * B + t);
+    const V sxz = simd::load<V>(sum + 6 * B + t), syz = simd::load<V>(sum + 7 * B + t);
     for (int k = 0; k < 3; ++k) {
       const V u0 = sxx * q1[k] + sxy * q2[k], u1 = sxy * q1[k] + syy * q2[k], u2 = sxz * q1[k] + syz * q2[k];
       V w[3], y[3];  // W and Q + W, column k
@@ -614,7 +605,7 @@ class PoissonSolver : public FaceSolver {
         w[r] = t1[r] * u0 + t2[r] * u1 + n[r] * u2;
         y[r] = t1[r] * q1[k] + t2[r] * q2[k] + w[r];
       }
-      for (int r = 0; r < 3; ++r) store_lanes(out + (3 * k + r) * B + t, D[r] * y[0] + D[3 + r] * y[1] + D[6 + r] * y[2] + w[r]);
+      for (int r = 0; r < 3; ++r) simd::store(out + (3 * k + r) * B + t, D[r] * y[0] + D[3 + r] * y[1] + D[6 + r] * y[2] + w[r]);
     }
   }
 

@@ -308,7 +308,7 @@ TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers"
   CHECK(counter.count() >= 1);
 }
 
-#include "solver/collide.hpp"
+#include "solver/collide/metrics.hpp"
 
 TEST_CASE("collision handling removes the lip intersections the nonlinear blend makes") {
   const Rig& rig = BuiltinFace::instance().rig();

@@ -15,7 +15,7 @@
 #include "core/error.hpp"
 #include "core/units.hpp"
 #include "formats/take.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/metrics.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/commands.hpp"
 #include "pipeline/settings.hpp"

@@ -11,7 +11,7 @@
 #include "formats/take.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/metrics.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/align_support.hpp"
