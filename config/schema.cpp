@@ -5,18 +5,14 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
-#include "solver/face_solver.hpp"
+#include "solver/params.hpp"
 
 namespace facecap::config {
 namespace {
 
 // TODO(solver params table): solver.method and solver.collisions become enums.
-std::vector<Choice> solver_method_choices() {
-  std::vector<Choice> out;
-  for (const auto name : solver_names()) out.push_back({name, ""});
-  return out;
-}
-std::vector<Choice> collision_choices() { return {{"none", ""}, {"lips", ""}, {"face", ""}}; }
+std::vector<Choice> solver_method_choices() { return kSolverMethods.choices(); }
+std::vector<Choice> collision_choices() { return kCollisionRegions.choices(); }
 template <std::vector<Choice> (*kChoices)()>
 bool set_string_choice(std::string& member, std::string_view name) {
   for (const Choice& c : kChoices())
@@ -115,9 +111,7 @@ const std::vector<KeySpec>& schema_rows() {
 
       {FACECAP_STRING_CHOICE_KEY(solver.method, solver_method_choices), .default_value = std::string("nonlinear"),
        .reload = Reload::kRebuild,
-       .description = "nonlinear: the paper's non-linear blendshape interpolation; linear: direct manipulation "
-                      "(x0 + B w); dt: deformation transfer; meshik: MeshIK, an offline baseline far too slow for "
-                      "the loop."},
+       .description = "The per-frame face solver."},
       {FACECAP_KEY(solver.alpha), .default_value = 0.1, .min = 0, .max = 1000, .reload = Reload::kRebuild,
        .description = "Temporal smoothing of the weights: alpha |w - w_prev|^2 in Eq. 2."},
       {FACECAP_KEY(solver.mu), .default_value = 0.001, .min = 0, .max = 1000, .reload = Reload::kRebuild,
@@ -130,7 +124,7 @@ const std::vector<KeySpec>& schema_rows() {
                       "solver); 0 gives the paper's linear fit."},
       {FACECAP_STRING_CHOICE_KEY(solver.collisions, collision_choices), .default_value = std::string("lips"),
        .reload = Reload::kRebuild,
-       .description = "Collision handling: none, lips (the lip region) or face (every triangle, slower)."},
+       .description = "Which triangles the collision stage checks for pairs closer than collision_epsilon."},
       {FACECAP_KEY(solver.collision_epsilon), .default_value = 0.01, .unit = "rig units", .min = 0, .max = 10,
        .reload = Reload::kRebuild,
        .description = "Triangle pairs closer than this are held apart at their linear-blend positions."},

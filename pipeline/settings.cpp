@@ -14,9 +14,7 @@ SolveSettings solve_settings(const config::DaemonConfig& config) {
   settings.params.mu = s.mu;
   settings.params.beta = s.beta;
   settings.params.weight_refinements = int(s.weight_refinements);
-  settings.params.collision_region = s.collisions == "none"   ? CollisionRegion::kNone
-                                     : s.collisions == "face" ? CollisionRegion::kFace
-                                                              : CollisionRegion::kLips;
+  settings.params.collision_region = parse_collision_region(s.collisions);
   settings.params.collision_epsilon = s.collision_epsilon;
   settings.params.collision_max_pins = int(s.collision_max_pins);
   settings.params.active_weight = s.active_weight;

@@ -372,7 +372,7 @@ MeshIkSolver::MeshIkSolver(std::shared_ptr<const SolverModel> model, const MeshI
     : FaceSolver(std::move(model)) {
   if (!(options.difference_step > 0) || options.max_iterations < 0)
     throw Error("meshik: the difference step must be > 0 and the iteration count >= 0");
-  state_ = std::make_unique<State>(*model_, options, make_solver("linear", model_));
+  state_ = std::make_unique<State>(*model_, options, make_solver(SolverMethod::kLinear, model_));
   state_->configure();
 }
 

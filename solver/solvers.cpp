@@ -23,7 +23,6 @@
 namespace facecap {
 namespace {
 
-constexpr std::array<std::string_view, 4> kSolverNames = {"nonlinear", "linear", "dt", "meshik"};
 constexpr uint32_t kMinimumMarkers = 3;  // fewer cannot pin position and orientation
 
 // 16 slots of one component of a ShapeBlocks block.
@@ -331,7 +330,7 @@ class LinearSolver final : public FaceSolver {
  public:
   explicit LinearSolver(std::shared_ptr<const SolverModel> model)
       : FaceSolver(std::move(model)), weights_(*model_, false), active_(std::size_t(model_->shape_count())) {}
-  std::string_view name() const noexcept override { return "linear"; }
+  std::string_view name() const noexcept override { return kSolverMethods.name(SolverMethod::kLinear); }
   void reset() noexcept override { weights_.reset(); }
   void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
     StageClock clock(out);
@@ -436,7 +435,9 @@ class PoissonSolver : public FaceSolver {
                  std::as_bytes(std::span(terms.offsets)), std::as_bytes(std::span(operator_))};
   }
 
-  std::string_view name() const noexcept override { return blend_ == Blend::kNonlinear ? "nonlinear" : "dt"; }
+  std::string_view name() const noexcept override {
+    return kSolverMethods.name(blend_ == Blend::kNonlinear ? SolverMethod::kNonlinear : SolverMethod::kDt);
+  }
   void reset() noexcept override { weights_.reset(); }
   std::span<const std::span<const std::byte>> streamed_memory() const noexcept override { return streamed_; }
 
@@ -876,15 +877,16 @@ SolveResult FaceSolver::make_result() const {
   return r;
 }
 
-std::span<const std::string_view> solver_names() noexcept { return kSolverNames; }
-
-std::unique_ptr<FaceSolver> make_solver(std::string_view name, std::shared_ptr<const SolverModel> model) {
+std::unique_ptr<FaceSolver> make_solver(SolverMethod method, std::shared_ptr<const SolverModel> model) {
   if (!model) throw Error("make_solver: no solver model");
-  if (name == "nonlinear") return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kNonlinear);
-  if (name == "dt") return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kDeformationTransfer);
-  if (name == "linear") return std::make_unique<LinearSolver>(std::move(model));
-  if (name == "meshik") return make_meshik_solver(std::move(model));
-  throw Error(fmt::format("unknown solver '{}': choose nonlinear, linear, dt or meshik", name));
+  switch (method) {
+    case SolverMethod::kNonlinear: return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kNonlinear);
+    case SolverMethod::kDt:
+      return std::make_unique<PoissonSolver>(std::move(model), PoissonSolver::Blend::kDeformationTransfer);
+    case SolverMethod::kLinear: return std::make_unique<LinearSolver>(std::move(model));
+    case SolverMethod::kMeshik: return make_meshik_solver(std::move(model));
+  }
+  throw Error("make_solver: not a solver method");
 }
 
 }  // namespace facecap

@@ -214,8 +214,8 @@ TEST_CASE("Calibrated offsets give the rig neutral at rest despite identity mism
   for (int i = 0; i < 5; ++i) cal.stable_markers.push_back(labels[by_height[std::size_t(i)]]);
   pipeline::MarkerMapper mapper(cal, labels, "");
   auto model = build_solver_model(rig, cal.bindings());
-  for (const char* name : {"nonlinear", "linear"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear}) {
+    auto solver = make_solver(method, model);
     auto result = solver->make_result();
     auto mapped = mapper.make_output();
     // At rest: the targets are the bound points, the face the rig's neutral.
@@ -229,7 +229,7 @@ TEST_CASE("Calibrated offsets give the rig neutral at rest despite identity mism
     mapper.process(frame, mapped);
     for (std::size_t k = 0; k < layout.size(); ++k) CHECK((mapped.targets.col(Eigen::Index(k)) - cal.markers[k].bound_point).norm() < 1e-9);
     solver->solve(mapped.targets, mapped.present, result);
-    INFO(name << " at rest: largest weight " << result.weights.maxCoeff() << ", vertex error "
+    INFO(solver->name() << " at rest: largest weight " << result.weights.maxCoeff() << ", vertex error "
               << (result.vertices - rig.neutral).colwise().norm().maxCoeff() * 10.0 << " mm");
     CHECK(result.weights.maxCoeff() < 0.02);
     CHECK((result.vertices - rig.neutral).colwise().norm().maxCoeff() * 10.0 < 0.2);
@@ -244,7 +244,7 @@ TEST_CASE("Calibrated offsets give the rig neutral at rest despite identity mism
     solver->reset();
     mapper.process(frame, mapped);
     solver->solve(mapped.targets, mapped.present, result);
-    INFO(name << " jawOpen 0.6 solved as " << result.weights[jaw]);
+    INFO(solver->name() << " jawOpen 0.6 solved as " << result.weights[jaw]);
     CHECK(std::abs(result.weights[jaw] - 0.6) < 0.15);
   }
 }

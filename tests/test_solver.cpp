@@ -73,12 +73,12 @@ TEST_CASE("solvers reproduce the neutral and every built-in shape exactly") {
   const auto layout = spread_marker_layout(rig, 60);
   const auto model = build_solver_model(rig, layout);
   const auto present = all_present(60);
-  for (const char* name : {"nonlinear", "dt", "linear"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt, SolverMethod::kLinear}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
     solver->solve_with_weights(w, markers_of(rig.neutral, layout), present, out);
-    INFO(name);
+    INFO(kSolverMethods.name(method));
     CHECK(max_error(out.vertices, rig.neutral) < 1e-5);
     for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
       w.setZero();
@@ -100,8 +100,8 @@ TEST_CASE("nonlinear and dt reproduce every ICT FaceKit shape within 1e-5 cm") {
   SolverParams params;
   params.collision_region = CollisionRegion::kNone;  // the shapes themselves have lip contacts
   const auto model = build_solver_model(rig, layout, params);
-  for (const char* name : {"nonlinear", "dt"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
     double worst = 0.0;
@@ -114,7 +114,7 @@ TEST_CASE("nonlinear and dt reproduce every ICT FaceKit shape within 1e-5 cm") {
       const double error = max_error(out.vertices, shape);
       if (error > worst) { worst = error; worst_shape = rig.shape_names[std::size_t(s)]; }
     }
-    INFO(name << ": largest error " << worst << " cm, on " << worst_shape);
+    INFO(kSolverMethods.name(method) << ": largest error " << worst << " cm, on " << worst_shape);
     CHECK(worst < 1e-5);
   }
 }
@@ -129,7 +129,7 @@ TEST_CASE("dt with small ICT FaceKit weights equals the mix of single-shape solv
   SolverParams params;
   params.collision_region = CollisionRegion::kNone;
   const auto model = build_solver_model(rig, layout, params);
-  auto solver = make_solver("dt", model);
+  auto solver = make_solver(SolverMethod::kDt, model);
   SolveResult out = solver->make_result();
   const Eigen::Index M = rig.shape_count();
   Eigen::VectorXd w = Eigen::VectorXd::Zero(M);
@@ -168,15 +168,15 @@ TEST_CASE("a missing marker gives the same mesh as a layout without it") {
   const Eigen::Matrix3Xd pose = BuiltinFace::instance().articulated_pose(w);
   auto present = all_present(40);
   present[7] = present[21] = 0;
-  for (const char* name : {"nonlinear", "dt"}) {
-    auto a = make_solver(name, full_model);
-    auto b = make_solver(name, small_model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt}) {
+    auto a = make_solver(method, full_model);
+    auto b = make_solver(method, small_model);
     SolveResult ra = a->make_result(), rb = b->make_result();
     Eigen::Matrix3Xd targets = markers_of(pose, layout);
     targets.col(7).setConstant(std::numeric_limits<double>::quiet_NaN());
     a->solve(targets, present, ra);
     b->solve(markers_of(pose, without), all_present(38), rb);
-    INFO(name);
+    INFO(kSolverMethods.name(method));
     CHECK(ra.markers_used == 38);
     CHECK((ra.weights - rb.weights).cwiseAbs().maxCoeff() < 1e-9);
     CHECK(max_error(ra.vertices, rb.vertices) < 1e-8);
@@ -187,7 +187,7 @@ TEST_CASE("pinned vertices end near their targets") {
   const Rig& rig = BuiltinFace::instance().rig();
   const auto layout = spread_marker_layout(rig, 60);
   const auto model = build_solver_model(rig, layout);
-  auto solver = make_solver("nonlinear", model);
+  auto solver = make_solver(SolverMethod::kNonlinear, model);
   SolveResult out = solver->make_result();
   // Targets 2 mm off the neutral at every marker, in alternating directions.
   Eigen::Matrix3Xd targets = markers_of(rig.neutral, layout);
@@ -209,8 +209,8 @@ TEST_CASE("nonlinear matches the articulated jaw better than linear") {
   const Eigen::Matrix3Xd targets = markers_of(truth, layout);
   double error[2];
   int i = 0;
-  for (const char* name : {"nonlinear", "linear"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     solver->solve(targets, all_present(60), out);
     error[i++] = mean_error(out.vertices, truth);
@@ -224,13 +224,13 @@ TEST_CASE("too few markers hold the previous result and unknown solvers are reje
   const Rig& rig = BuiltinFace::instance().rig();
   const auto layout = spread_marker_layout(rig, 10);
   const auto model = build_solver_model(rig, layout);
-  auto solver = make_solver("nonlinear", model);
+  auto solver = make_solver(SolverMethod::kNonlinear, model);
   SolveResult out = solver->make_result();
   std::vector<uint8_t> present(10, 0);
   present[0] = present[1] = 1;
   solver->solve(markers_of(rig.neutral, layout), present, out);
   CHECK(out.held);
-  CHECK_THROWS_WITH(make_solver("magic", model), Catch::Contains("unknown solver 'magic'"));
+  CHECK_THROWS_WITH(parse_solver_method("magic"), Catch::Contains("unknown solver 'magic': choose nonlinear, linear, dt, meshik"));
   CHECK_THROWS_WITH(build_solver_model(rig, {MarkerBinding::at_vertex("bad", 1 << 30)}), Catch::Contains("marker 'bad'"));
   SolverParams too_many;
   too_many.collision_max_pins = 2000;
@@ -263,15 +263,15 @@ TEST_CASE("the Poisson solvers stream their blend's terms and operators, the lin
   auto bytes_of = [](const BlendTerms& t) {
     return t.values.size() + t.scales.size() * sizeof(uint16_t) + t.offsets.size() * sizeof(float);
   };
-  auto streamed = [&](const char* name) {
-    const auto solver = make_solver(name, model);
+  auto streamed = [&](SolverMethod method) {
+    const auto solver = make_solver(method, model);
     std::size_t total = 0;
     for (const auto range : solver->streamed_memory()) total += range.size();
     return total;
   };
-  CHECK(streamed("nonlinear") == bytes_of(model->triangle_nonlinear) + operators);
-  CHECK(streamed("dt") == bytes_of(model->triangle_gradient) + operators);
-  CHECK(streamed("linear") == 0);
+  CHECK(streamed(SolverMethod::kNonlinear) == bytes_of(model->triangle_nonlinear) + operators);
+  CHECK(streamed(SolverMethod::kDt) == bytes_of(model->triangle_gradient) + operators);
+  CHECK(streamed(SolverMethod::kLinear) == 0);
   CHECK(bytes_of(model->triangle_nonlinear) > 1'000'000);  // megabytes: more than a core's L2 keeps
 }
 
@@ -282,8 +282,8 @@ TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers"
   const Rig& rig = face.rig();
   const auto layout = spread_marker_layout(rig, 60);
   const auto model = build_solver_model(rig, layout);
-  for (const char* name : {"nonlinear", "linear", "dt"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear, SolverMethod::kDt}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     auto present = all_present(60);
     std::vector<Eigen::Matrix3Xd> frames;
@@ -298,7 +298,7 @@ TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers"
       }
       allocations = counter.count();
     }
-    INFO(name);
+    INFO(kSolverMethods.name(method));
     CHECK(allocations == 0);
     CHECK_FALSE(out.held);
   }
@@ -315,8 +315,8 @@ TEST_CASE("collision handling removes the lip intersections the nonlinear blend 
   const auto layout = spread_marker_layout(rig, 60);
   SolverParams without;
   without.collision_region = CollisionRegion::kNone;
-  auto handled = make_solver("nonlinear", build_solver_model(rig, layout));
-  auto unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+  auto handled = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout));
+  auto unhandled = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout, without));
   Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
   w[*rig.shape_index("mouthPucker")] = 1.0;
   w[*rig.shape_index("mouthClose")] = 1.0;
@@ -342,7 +342,7 @@ TEST_CASE("whole-face collision handling solves its pins per frame and removes t
   face.collision_region = CollisionRegion::kFace;  // too many vertices to precompute columns for
   const auto model = build_solver_model(rig, layout, face);
   REQUIRE_FALSE(model->collision_columns_precomputed());
-  auto solver = make_solver("nonlinear", model);
+  auto solver = make_solver(SolverMethod::kNonlinear, model);
   Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
   w[*rig.shape_index("mouthPucker")] = 1.0;
   w[*rig.shape_index("mouthClose")] = 1.0;
@@ -362,8 +362,8 @@ struct LipPoseSolves {
     SolverParams without = params;
     without.collision_region = CollisionRegion::kNone;
     model = build_solver_model(rig, layout, params);
-    handled = make_solver("nonlinear", model);
-    unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+    handled = make_solver(SolverMethod::kNonlinear, model);
+    unhandled = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout, without));
     with_handling = handled->make_result();
     without_handling = unhandled->make_result();
   }
@@ -525,4 +525,36 @@ TEST_CASE("SparseLdlt solves match Eigen's with 16-bit and 32-bit row indices") 
     factor.solve_in_place(one, one_work);
     CHECK((one - expected.row(1).transpose()).cwiseAbs().maxCoeff() < 1e-10);
   }
+}
+
+// ---- The parameter tables (solver/params.hpp) ------------------------------------------
+
+TEST_CASE("solver methods and collision regions parse and print from one table") {
+  std::vector<std::string_view> names;
+  for (const auto& entry : kSolverMethods.entries()) {
+    names.push_back(entry.name);
+    CHECK(kSolverMethods.parse(entry.name) == entry.value);
+    CHECK(parse_solver_method(entry.name) == entry.value);
+    CHECK_FALSE(entry.description.empty());
+  }
+  CHECK(names == std::vector<std::string_view>{"nonlinear", "linear", "dt", "meshik"});
+  CHECK(solver_method_is_realtime(SolverMethod::kNonlinear));
+  CHECK(solver_method_is_realtime(SolverMethod::kLinear));
+  CHECK(solver_method_is_realtime(SolverMethod::kDt));
+  CHECK_FALSE(solver_method_is_realtime(SolverMethod::kMeshik));
+  CHECK_THROWS_WITH(parse_solver_method("Nonlinear"), Catch::Contains("unknown solver 'Nonlinear': choose nonlinear, linear, dt, meshik"));
+
+  names.clear();
+  for (const auto& entry : kCollisionRegions.entries()) {
+    names.push_back(entry.name);
+    CHECK(parse_collision_region(entry.name) == entry.value);
+    CHECK_FALSE(entry.description.empty());
+  }
+  CHECK(names == std::vector<std::string_view>{"none", "lips", "face"});
+  CHECK_THROWS_WITH(parse_collision_region("mouth"), Catch::Contains("unknown collision region 'mouth': choose none, lips, face"));
+
+  // Every solver calls itself by its table name.
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto model = build_solver_model(rig, spread_marker_layout(rig, 20));
+  for (const auto& entry : kSolverMethods.entries()) CHECK(make_solver(entry.value, model)->name() == entry.name);
 }

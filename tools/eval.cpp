@@ -131,10 +131,10 @@ void run_eval(const Options& o, const SolverParams& params) {
 
   const auto model = build_solver_model(rig, bindings, params);
   std::vector<SolverRun> runs;
-  for (const auto& name : solver_list) {
+  for (const SolverMethod method : solver_list) {
     SolverRun run;
-    run.name = name;
-    run.solver = make_solver(name, model);
+    run.name = kSolverMethods.name(method);
+    run.solver = make_solver(method, model);
     run.result = run.solver->make_result();
     runs.push_back(std::move(run));
   }
