@@ -40,7 +40,10 @@ struct SolveResult {
   uint32_t markers_used = 0;
   uint32_t collision_pairs = 0;        // colliding triangle pairs found
   uint32_t collision_constraints = 0;  // vertices pinned to the linear blend
-  bool held = false;                   // too few markers: previous result kept
+  // SolvedFlags (core/frame.hpp) this solve raised: kSolvedTooFewMarkers (the previous
+  // result kept), kSolvedQpIterationCap, kSolvedPinsBeyondCapacity,
+  // kSolvedSingularCorrection. 0 for a normal frame.
+  uint32_t status = 0;
 };
 
 class SolverModel;

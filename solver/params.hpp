@@ -45,13 +45,18 @@ struct SolverParams {
   CollisionRegion collision_region = CollisionRegion::kLips;
   double collision_epsilon = 0.01;  // rig units: triangle pairs closer than this collide
   // Vertices pinned per frame at most: bounds the collision stage's cost. Lip poses that
-  // need more keep some crossings (ICT: one pose in 41 needs 100).
+  // need more keep some crossings (ICT: one pose in 41 needs 100) and are flagged
+  // kSolvedPinsBeyondCapacity.
   int collision_max_pins = 64;
   double active_weight = 1e-4;      // weights below this are left out of T(w)
   // Gauss-Newton refinements of Eq. 2 for the nonlinear solver, fitting markers along
   // the paths the rotations of Eq. 4 move them (a hinge swings, it does not slide);
   // 0 gives the paper's linear fit.
   int weight_refinements = 2;
+  // Iterations Eq. 2's box QP may take per solve; 0: 10 M + 10, far more than the few it
+  // takes. A solve stopped at the cap keeps its last feasible iterate and is flagged
+  // kSolvedQpIterationCap.
+  int weight_qp_iteration_cap = 0;
 };
 
 }  // namespace facecap

@@ -171,7 +171,7 @@ void run_eval(const Options& o, const SolverParams& params) {
     for (auto& run : runs) {
       if (o.truth_weights) run.solver->solve_with_weights(truth.weights[f], targets, present, run.result);
       else run.solver->solve(targets, present, run.result);
-      run.held += run.result.held;
+      run.held += (run.result.status & kSolvedTooFewMarkers) != 0;
       const Eigen::Matrix3Xd error = run.result.vertices - truth_pose_now;
       for (Eigen::Index v = 0; v < error.cols(); ++v) run.errors.add(error.col(v).norm() * mm_per_rig);
       if (f > 0) {

@@ -121,7 +121,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       const auto t0 = std::chrono::steady_clock::now();
       run.full->solve(mapped.targets, mapped.present, run.result);
       run.solve_ms.add(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-      run.held += run.result.held;
+      run.held += (run.result.status & kSolvedTooFewMarkers) != 0;
       for (Eigen::Index k = 0; k < K; ++k)
         if (mapped.present[std::size_t(k)])
           run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
@@ -146,7 +146,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
         std::copy(mapped.present.begin(), mapped.present.end(), present.begin());
         present[std::size_t(k)] = 0;
         run.held_out[i]->solve(mapped.targets, present, run.held_result);
-        if (run.held_result.held) continue;
+        if (run.held_result.status & kSolvedTooFewMarkers) continue;
         run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
       }
     }
