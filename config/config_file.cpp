@@ -126,10 +126,11 @@ class Loader {
       problem(where("loop.mode"), fmt::format("lockstep needs a source that can hand every frame on request; the {} "
                                               "driver runs on its own clock (use mode = \"fixed\")",
                                               drivers::kDriverIds.name(c.source.driver)));
-    if (c.solver.method == "meshik" && c.loop.mode == LoopMode::kFixed)
-      problem(where("solver.method"), "meshik is an offline baseline that takes seconds a frame and cannot keep a "
-                                      "fixed-rate loop: use \"nonlinear\" live, or meshik with loop.mode = \"lockstep\" and "
-                                      "a replay (or `facecap solve --set solver.method=meshik`)");
+    if (!solver_method_is_realtime(c.solver.method) && c.loop.mode == LoopMode::kFixed)
+      problem(where("solver.method"),
+              fmt::format("{0} is an offline baseline that takes seconds a frame and cannot keep a fixed-rate loop: use "
+                          "\"nonlinear\" live, or {0} with loop.mode = \"lockstep\" and a replay (or `facecap solve "
+                          "--set solver.method={0}`)", kSolverMethods.name(c.solver.method)));
     if (c.calibration.file.empty() && (c.calibration.head_markers == 1 || c.calibration.head_markers == 2))
       problem(where("calibration.head_markers"),
               fmt::format("{} head markers cannot fix a rigid pose: use 0 (no stabilisation) or at least 3",

@@ -17,7 +17,7 @@ constexpr double kLabelMarginMm = 1.0;      // in favour of the label a point ca
 SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                              const SolveSettings& settings)
     : mapper_(calibration, source.labels, source.units, settings.mapper),
-      solver_(make_solver(parse_solver_method(settings.method),
+      solver_(make_solver(settings.method,
                           build_solver_model(rig, calibration.bindings(), settings.params))),
       mapped_(mapper_.make_output()),
       result_(solver_->make_result()),
