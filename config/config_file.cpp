@@ -10,6 +10,7 @@
 #include <toml++/toml.h>
 
 #include "client/facecap_shm_layout.hpp"
+#include "core/toml_reader.hpp"
 #include "drivers/registry.hpp"
 
 namespace facecap::config {
@@ -313,13 +314,10 @@ LoadedConfig load_config(const std::string& file, const std::vector<std::string>
   Loader loader(out);
   if (!file.empty()) {
     try {
-      const toml::table table = toml::parse_file(file);
+      const toml::table table = parse_toml_file(file);
       loader.apply_table(table, "", Origin::kFile, file, fs::path(file).parent_path());
-    } catch (const toml::parse_error& e) {
-      const auto& begin = e.source().begin;
-      const bool missing = !fs::exists(file);
-      loader.problem({.file = file, .line = missing ? -1 : int64_t(begin.line), .column = missing ? -1 : int64_t(begin.column)},
-                     missing ? "cannot open the configuration file" : std::string(e.description()));
+    } catch (const Error& e) {
+      loader.problem(e.where(), e.message());
     }
   }
   for (const std::string& text : overrides)

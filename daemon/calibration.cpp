@@ -4,6 +4,7 @@
 #include <toml++/toml.h>
 
 #include "core/error.hpp"
+#include "core/toml_reader.hpp"
 #include "solver/align/profile.hpp"
 
 namespace facecap::daemon {
@@ -88,13 +89,7 @@ MarkerCalibration from_profile(const std::string& file, const Rig& rig) {
 }
 
 MarkerCalibration read_calibration_file(const std::string& file, const Rig& rig) {
-  toml::table table;
-  try {
-    table = toml::parse_file(file);
-  } catch (const toml::parse_error& e) {
-    throw Error(std::string(e.description()),
-                {.file = file, .line = int64_t(e.source().begin.line), .column = int64_t(e.source().begin.column)});
-  }
+  const toml::table table = parse_toml_file(file);
   if (table.contains("transform") && table.contains("marker")) return from_profile(file, rig);
   if (table["version"].value_or<int64_t>(0) != 1) throw Error("calibration needs version = 1", {.file = file, .key = "version"});
   MarkerCalibration calibration;

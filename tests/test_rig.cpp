@@ -3,6 +3,7 @@
 
 #include <catch2/catch.hpp>
 #include <Eigen/Geometry>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
@@ -118,6 +119,41 @@ TEST_CASE("malformed rigs fail with the file and line") {
   SECTION("no neutral mesh") {
     fs::remove(dir / "generic_neutral_mesh.obj");
     CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("no neutral mesh"));
+  }
+}
+
+TEST_CASE("hostile OBJ rigs and manifests fail with an Error naming the file and line") {
+  const auto dir = write_small_rig("hostile");
+  SECTION("a manifest shape path that names a directory") {
+    fs::create_directories(dir / "shapes_dir");
+    test::write_text(dir / "rig.toml", "neutral = \"generic_neutral_mesh.obj\"\n[shapes]\njawOpen = \"shapes_dir\"\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("shapes_dir") && Contains("is a directory"));
+  }
+  SECTION("a neutral with more faces than a shape") {
+    std::string text = shape_text(0.5);
+    test::write_text(dir / "jawOpen.obj", text.substr(0, text.find("f 2 3 6 5")));
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()),
+                      Contains("jawOpen.obj:7:") && Contains("ends after 2 triangles") && Contains("has 4"));
+  }
+  SECTION("a shape with more faces than the neutral") {
+    test::write_text(dir / "jawOpen.obj", shape_text(0.5) + "f 1 2 4\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()),
+                      Contains("jawOpen.obj:9:") && Contains("triangle 5 is one more than the neutral"));
+  }
+  SECTION("nan and inf coordinates") {
+    for (const char* bad : {"nan", "inf", "-infinity", "NaN"}) {
+      test::write_text(dir / "mouthClose.obj", fmt::format("v 0 0 0\nv 1 {} 0\n", bad));
+      CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()),
+                        Contains("mouthClose.obj:2:") && Contains(fmt::format("'{}' is not a finite number", bad)));
+    }
+  }
+  SECTION("a manifest with an unknown key") {
+    test::write_text(dir / "rig.toml", "neutral = \"generic_neutral_mesh.obj\"\nshape = 1\n[shapes]\njawOpen = \"jawOpen.obj\"\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("rig.toml:2:") && Contains("unknown key 'shape'"));
+  }
+  SECTION("a manifest that is not UTF-8") {
+    test::write_text(dir / "rig.toml", "neutral = \"generic_neutral_mesh.obj\"\nname = \"a\xff\"\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("rig.toml:2:10") && Contains("0xff") && Contains("not valid UTF-8"));
   }
 }
 

@@ -9,6 +9,7 @@
 
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "core/toml_reader.hpp"
 
 namespace facecap::align {
 
@@ -182,13 +183,7 @@ bool is_hex16(const std::string& s) {
 }  // namespace
 
 Calibration read_calibration_profile(std::string_view text, const std::string& name) {
-  toml::table root;
-  try {
-    root = toml::parse(text, name);
-  } catch (const toml::parse_error& e) {
-    const auto& b = e.source().begin;
-    throw Error(std::string(e.description()), ErrorLocation{.file = name, .line = b.line, .column = b.column});
-  }
+  const toml::table root = parse_toml(text, name);
   Reader r(name);
   r.only_keys(root, {"version", "checksum", "rig", "source", "transform", "fit", "stabilise", "notes", "marker"}, "");
   const int64_t version = r.integer(root, "version", "");
