@@ -1,5 +1,7 @@
 #include "daemon/calibration.hpp"
 
+#include <cmath>
+
 #include <fmt/format.h>
 #include <toml++/toml.h>
 
@@ -23,7 +25,8 @@ Eigen::Matrix<double, N, 1> read_vector(const toml::node& node, const std::strin
   Eigen::Matrix<double, N, 1> v;
   for (int i = 0; i < N; ++i) {
     const auto value = (*array)[std::size_t(i)].value<double>();
-    if (!value) throw Error(fmt::format("expected an array of {} numbers", N), where(node, file, key));
+    if (!value || !std::isfinite(*value))  // toml++ reads nan and inf as numbers
+      throw Error(fmt::format("expected an array of {} finite numbers", N), where(node, file, key));
     v[i] = *value;
   }
   return v;
@@ -33,15 +36,15 @@ MarkerBinding read_face_marker(const toml::table& entry, const std::string& file
   const std::string key = fmt::format("face[{}]", index);
   const auto label = entry["label"].value<std::string>();
   if (!label || label->empty()) throw Error("a face marker needs a label", where(entry, file, key));
-  auto check_vertex = [&](int64_t v, const toml::node& node) {
-    if (v < 0 || v >= rig.vertex_count())
+  auto check_vertex = [&](double v, const toml::node& node) {  // double: vertices are read as numbers
+    if (!(v >= 0 && v < double(rig.vertex_count())))
       throw Error(fmt::format("vertex {} is not in the rig's 0 to {}", v, rig.vertex_count() - 1), where(node, file, key));
     return int(v);
   };
   if (const toml::node* vertex = entry.get("vertex")) {
     const auto v = vertex->value_exact<int64_t>();
     if (!v) throw Error("vertex must be an integer", where(*vertex, file, key));
-    return MarkerBinding::at_vertex(*label, check_vertex(*v, *vertex));
+    return MarkerBinding::at_vertex(*label, check_vertex(double(*v), *vertex));
   }
   const toml::node* vertices = entry.get("vertices");
   const toml::node* barycentric = entry.get("barycentric");
@@ -50,7 +53,7 @@ MarkerBinding read_face_marker(const toml::table& entry, const std::string& file
   const Eigen::Vector3d ids = read_vector<3>(*vertices, file, key);
   MarkerBinding b;
   b.label = *label;
-  for (int i = 0; i < 3; ++i) b.vertices[std::size_t(i)] = check_vertex(int64_t(ids[i]), *vertices);
+  for (int i = 0; i < 3; ++i) b.vertices[std::size_t(i)] = check_vertex(ids[i], *vertices);
   b.barycentric = read_vector<3>(*barycentric, file, key);
   if (std::abs(b.barycentric.sum() - 1.0) > 1e-6)
     throw Error("barycentric coordinates must sum to 1", where(*barycentric, file, key));

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include <fmt/format.h>
@@ -238,7 +239,10 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     r.only_keys(fit, {"hull_rms_mm", "trimmed_rms_mm", "start"}, "fit.");
     c.hull_rms_mm = r.number(fit, "hull_rms_mm", "fit.");
     c.trimmed_rms_mm = r.number(fit, "trimmed_rms_mm", "fit.");
-    c.start_index = int(r.integer(fit, "start", "fit."));
+    const int64_t start = r.integer(fit, "start", "fit.");
+    if (start < 0 || start > std::numeric_limits<int>::max())
+      r.fail(fit.get("start"), "start must be a non-negative integer", "fit.start");
+    c.start_index = int(start);
   }
   const auto& stab = r.table(root, "stabilise", "");
   r.only_keys(stab, {"markers"}, "stabilise.");
@@ -264,7 +268,8 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     if (!va || va->size() != 3) r.fail(&verts, "vertices must be 3 integers", "marker.vertices");
     for (std::size_t i = 0; i < 3; ++i) {
       const toml::node* v = va->get(i);
-      if (!v->is_integer() || v->as_integer()->get() < 0) r.fail(v, "vertices must be 3 non-negative integers", "marker.vertices");
+      if (!v->is_integer() || v->as_integer()->get() < 0 || v->as_integer()->get() > std::numeric_limits<int>::max())
+        r.fail(v, "vertices must be 3 non-negative integers (vertex indices)", "marker.vertices");
       m.binding.vertices[i] = int(v->as_integer()->get());
     }
     m.binding.label = m.label;
