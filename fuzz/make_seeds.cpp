@@ -66,6 +66,7 @@ Rig small_rig() {
 }
 
 void write_recordings(const fs::path& dir) {
+  fs::create_directories(dir);
   const MarkerTake take = small_take(6, 3);
   write_recording(dir / "markers.fcrec", take, "fuzz seed");
   RecordingHeader header;

@@ -130,7 +130,11 @@ std::vector<int> read_indices(const tinygltf::Model& model, const tinygltf::Prim
 }
 
 // External buffers are read with read_file_bytes (tinygltf's own reader sizes a directory
-// as 2^63 bytes), and only when the rig came from a file.
+// as 2^63 bytes), and only when the rig came from a file (from bytes, "found" so that the
+// read says why not).
+bool external_file_exists(const std::string& path, void* from_file) {
+  return !from_file || tinygltf::FileExists(path, nullptr);
+}
 bool read_external_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* from_file) {
   if (!from_file) {
     *err += fmt::format("external file '{}' not read: the glTF was given as bytes\n", path);
@@ -166,7 +170,7 @@ Rig parse_gltf_rig(std::span<const char> bytes, const std::string& path, bool bi
     throw file_error(path, fmt::format("{} bytes: larger than a glTF file can be", bytes.size()));
   tinygltf::TinyGLTF loader;
   static int from_file_tag = 0;
-  loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_external_file,
+  loader.SetFsCallbacks({&external_file_exists, &tinygltf::ExpandFilePath, &read_external_file,
                          &tinygltf::WriteWholeFile, base_dir.empty() ? nullptr : &from_file_tag});
   loader.SetImageLoader(&skip_image, nullptr);
   tinygltf::Model model;

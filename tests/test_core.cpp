@@ -7,6 +7,7 @@
 #include "core/io.hpp"
 #include "core/realtime.hpp"
 #include "core/time.hpp"
+#include "core/toml_reader.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -89,4 +90,29 @@ TEST_CASE("an enum table parses and names exactly its rows, in order") {
   CHECK(kFruits.names() == std::vector<std::string_view>{"apple", "pear"});
   REQUIRE(kFruits.choices().size() == 2);
   CHECK(kFruits.choices()[1].description == "tapered");
+}
+
+TEST_CASE("read_file_bytes refuses a directory instead of sizing it as 2^63 bytes") {
+  const auto dir = test::scratch_dir("io-directory");
+  CHECK_THROWS_WITH(read_file_bytes(dir), Catch::Contains(dir.string()) && Catch::Contains("is a directory"));
+}
+
+TEST_CASE("TOML text is checked to be UTF-8 first, at the line and column of the first bad byte") {
+  CHECK_NOTHROW(check_utf8("name = \"a\xc3\xa9\xe2\x82\xac\xf0\x9f\x98\x80\"\n", "ok.toml"));  // é € 😀
+  const std::pair<const char*, const char*> bad[] = {
+      {"\xc0\xaf", "0xc0"},          // overlong '/'
+      {"\xed\xa0\x80", "0xed"},      // a UTF-16 surrogate
+      {"\xf4\x90\x80\x80", "0xf4"},  // past U+10FFFF
+      {"\xe2\x82", "0xe2"},          // cut short at the end
+      {"\x80", "0x80"},              // a lone continuation byte
+      {"\xff", "0xff"},
+  };
+  for (const auto& [bytes, first] : bad) {
+    INFO(first);
+    // Line 2, after "x = \"\xc3\xa9": column 7 counts é as one character.
+    const std::string text = std::string("a = 1\nx = \"\xc3\xa9") + bytes + "\"\n";
+    CHECK_THROWS_WITH(parse_toml(text, "bad.toml"),
+                      Catch::Contains("bad.toml:2:7") && Catch::Contains(first) && Catch::Contains("not valid UTF-8"));
+  }
+  CHECK_THROWS_WITH(parse_toml("a = \n", "syntax.toml"), Catch::Contains("syntax.toml:1:"));
 }

@@ -152,6 +152,26 @@ TEST_CASE("a calibration file binds markers and scales and moves them into rig s
   CHECK_THROWS_WITH(load_calibration(section, rig), Contains(file.string() + ":4:10") && Contains("vertex 999999 is not in the rig"));
 }
 
+TEST_CASE("a calibration file with nan, inf or out-of-range numbers is refused where they are") {
+  const fs::path file = test::scratch_dir("calibration-nan") / "cal.toml";
+  config::CalibrationSection section;
+  section.file = file.string();
+  const Rig& rig = BuiltinFace::instance().rig();
+  const std::string faces = "[[face]]\nlabel = \"a\"\nvertex = 10\n[[face]]\nlabel = \"b\"\nvertex = 20\n"
+                            "[[face]]\nlabel = \"c\"\nvertex = 30\n";
+  // rotation_wxyz = [nan, 0, 0, 0] was accepted (a NaN rotation for every marker).
+  for (const char* bad : {"rotation_wxyz = [nan, 0, 0, 0]", "rotation_wxyz = [1, 0, inf, 0]", "translation = [0, -inf, 0]"}) {
+    INFO(bad);
+    test::write_text(file, fmt::format("version = 1\n{}\n{}", bad, faces));
+    CHECK_THROWS_WITH(load_calibration(section, rig), Contains(file.string() + ":2:") && Contains("finite numbers"));
+  }
+  // A vertex number no integer holds (its conversion was undefined behaviour).
+  test::write_text(file, "version = 1\n[[face]]\nlabel = \"a\"\nvertices = [1e300, 1, 2]\nbarycentric = [1, 0, 0]\n" + faces);
+  CHECK_THROWS_WITH(load_calibration(section, rig), Contains(file.string() + ":4:") && Contains("vertex 1e+300 is not in the rig"));
+  test::write_text(file, "version = 1\n[[face]]\nlabel = \"\xc3\x28\"\nvertex = 1\n" + faces);
+  CHECK_THROWS_WITH(load_calibration(section, rig), Contains(file.string() + ":3:10") && Contains("not valid UTF-8"));
+}
+
 // `facecap calibrate` then facecapd: the daemon reads the profile the tool writes and
 // maps a take's markers to the same solver targets as the alignment tools do, a bumped
 // head marker included.

@@ -157,6 +157,44 @@ TEST_CASE("hostile OBJ rigs and manifests fail with an Error naming the file and
   }
 }
 
+TEST_CASE("hostile glTF rigs and cache entries fail with an Error before anything large is allocated") {
+  const Rig& builtin = BuiltinFace::instance().rig();
+  const auto dir = test::scratch_dir("hostile-gltf");
+  save_gltf_rig(builtin, (dir / "face.gltf").string());
+  const std::string json = test::slurp(dir / "face.gltf");
+  auto parse = [](const std::string& text) { return parse_gltf_rig(std::span<const char>(text.data(), text.size()), "x.gltf", false); };
+  CHECK(parse(json).shape_count() == builtin.shape_count());
+  auto replaced = [&](const std::string& from, const std::string& to) {
+    std::string text = json;
+    const auto at = text.find(from);
+    REQUIRE(at != std::string::npos);
+    return text.replace(at, from.size(), to);
+  };
+  // An accessor count the buffer cannot hold: it was allocated before the range check,
+  // and count * stride could wrap.
+  const std::string count = fmt::format("\"count\": {}", builtin.vertex_count());
+  CHECK_THROWS_WITH(parse(replaced(count, "\"count\": 2305843009213693952")),
+                    Contains("x.gltf [meshes[0].primitives[0].attributes.POSITION]") && Contains("do not fit in bufferView"));
+  // A buffer given as a file is not read from bytes (the fuzzers pass no directory).
+  {
+    std::string external = json;
+    const auto uri = external.find("data:application/octet-stream;base64,");
+    external.replace(uri, external.find('"', uri) - uri, "face.bin");
+    CHECK_THROWS_WITH(parse(external), Contains("external file 'face.bin' not read"));
+  }
+  // Target names that are not strings.
+  CHECK_THROWS_WITH(parse(replaced("\"targetNames\": [", "\"targetNames\": [7,")), Contains("must be a string"));
+
+  // A cache entry naming 100,000 shapes and holding no deltas for them: 6174 x 3 x 100,000
+  // doubles (15 GB) were allocated before the read failed.
+  Rig wide = builtin;
+  wide.deltas.resize(wide.deltas.rows(), 0);
+  wide.shape_names.clear();
+  for (int s = 0; s < 100000; ++s) wide.shape_names.push_back(fmt::format("s{}", s));
+  CHECK_THROWS_WITH(deserialize_rig(serialize_rig(wide, RigCacheKey{3}), RigCacheKey{3}, "wide.fcrig"),
+                    Contains("wide.fcrig") && Contains("100000 shapes of 6174 vertices do not fit"));
+}
+
 TEST_CASE("glTF morph targets round-trip through .gltf and .glb") {
   const Rig& builtin = BuiltinFace::instance().rig();
   const auto dir = test::scratch_dir("gltf");
