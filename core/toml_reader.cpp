@@ -1,5 +1,6 @@
 #include "core/toml_reader.hpp"
 
+#include <algorithm>
 #include <cstdint>
 
 #include <fmt/format.h>
@@ -29,6 +30,60 @@ std::size_t utf8_sequence_length(std::string_view text, std::size_t at) noexcept
   return 0;
 }
 
+// toml++ 3.3 reaches __builtin_unreachable when it tests a non-ASCII character for
+// whitespace and the character lies in U+00A1..U+0499 or some other ranges (é, any
+// Cyrillic letter, ...). TOML allows non-ASCII text only inside strings and comments,
+// where toml++ never makes that test: a character anywhere else is refused first.
+void check_non_ascii_placement(std::string_view text, const std::string& name) {
+  enum class State { kCode, kComment, kBasic, kLiteral, kMultiBasic, kMultiLiteral } state = State::kCode;
+  int64_t line = 1, column = 1;
+  for (std::size_t at = 0; at < text.size();) {
+    const char c = text[at];
+    const auto starts = [&](std::string_view s) { return text.substr(at, s.size()) == s; };
+    // An escape skips the ASCII character after the backslash (\" does not end a string).
+    const bool escape = c == '\\' && at + 1 < text.size() && uint8_t(text[at + 1]) < 0x80 && text[at + 1] != '\n';
+    std::size_t step = std::max<std::size_t>(1, utf8_sequence_length(text, at));  // text is valid UTF-8 here
+    switch (state) {
+      case State::kCode:
+        if (uint8_t(c) >= 0x80)
+          throw Error("non-ASCII character outside a string or comment (quote the text)",
+                      ErrorLocation{.file = name, .line = line, .column = column});
+        if (c == '#') state = State::kComment;
+        else if (starts(R"(""")")) state = State::kMultiBasic, step = 3;
+        else if (starts("'''")) state = State::kMultiLiteral, step = 3;
+        else if (c == '"') state = State::kBasic;
+        else if (c == '\'') state = State::kLiteral;
+        break;
+      case State::kComment:
+        if (c == '\n') state = State::kCode;
+        break;
+      case State::kBasic:
+        if (escape) step = 2;
+        else if (c == '"' || c == '\n') state = State::kCode;  // unterminated: toml++ reports it
+        break;
+      case State::kLiteral:
+        if (c == '\'' || c == '\n') state = State::kCode;
+        break;
+      case State::kMultiBasic:
+        if (escape) step = 2;
+        else if (starts(R"(""")")) state = State::kCode, step = 3;
+        break;
+      case State::kMultiLiteral:
+        if (starts("'''")) state = State::kCode, step = 3;
+        break;
+    }
+    for (std::size_t i = at; i < at + step && i < text.size(); ++i) {
+      if (text[i] == '\n') {
+        ++line;
+        column = 1;
+      } else if ((uint8_t(text[i]) & 0xc0) != 0x80) {
+        ++column;  // characters, not bytes
+      }
+    }
+    at += step;
+  }
+}
+
 }  // namespace
 
 void check_utf8(std::string_view text, const std::string& name) {
@@ -51,6 +106,7 @@ void check_utf8(std::string_view text, const std::string& name) {
 
 toml::table parse_toml(std::string_view text, const std::string& name) {
   check_utf8(text, name);
+  check_non_ascii_placement(text, name);
   try {
     return toml::parse(text, name);
   } catch (const toml::parse_error& e) {

@@ -16,7 +16,9 @@ namespace facecap {
 // U+10FFFF).
 void check_utf8(std::string_view text, const std::string& name);
 
-// Parses TOML text; `name` labels errors. Throws Error.
+// Parses TOML text; `name` labels errors. Throws Error, also for a non-ASCII character
+// outside strings and comments (invalid TOML, on which toml++ 3.3 reaches undefined
+// behaviour).
 toml::table parse_toml(std::string_view text, const std::string& name);
 // Reads and parses a file (read_file_bytes: a directory or unreadable file is an Error).
 toml::table parse_toml_file(const std::filesystem::path& path);

@@ -48,6 +48,7 @@ class Reader {
   T value() { T v; raw(&v, sizeof(T)); return v; }
   void raw(void* p, std::size_t n) {
     if (n > size_ - pos_) throw offset_error(name_, int64_t(pos_), fmt::format("truncated: needs {} more bytes", n));
+    if (n == 0) return;  // p may be an empty matrix's null data(), which memcpy must not get
     std::memcpy(p, data_ + pos_, n);
     pos_ += n;
   }

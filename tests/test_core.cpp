@@ -116,3 +116,18 @@ TEST_CASE("TOML text is checked to be UTF-8 first, at the line and column of the
   }
   CHECK_THROWS_WITH(parse_toml("a = \n", "syntax.toml"), Catch::Contains("syntax.toml:1:"));
 }
+TEST_CASE("a non-ASCII character outside TOML strings and comments is refused before toml++ sees it") {
+  // toml++ 3.3 tested it for whitespace and reached __builtin_unreachable (found by the
+  // calibration_profile fuzzer: "offset = [0.01, 0, Н").
+  CHECK_THROWS_WITH(parse_toml("a = 1\noffset = [0.01, 0, \xd0\x9d\n", "cyrillic.toml"),
+                    Catch::Contains("cyrillic.toml:2:20") && Catch::Contains("non-ASCII character outside a string"));
+  CHECK_THROWS_WITH(parse_toml("caf\xc3\xa9 = 1\n", "key.toml"), Catch::Contains("key.toml:1:4"));
+  // Inside strings (escaped quotes, multi-line, literal) and comments it is text.
+  const toml::table t = parse_toml("# caf\xc3\xa9\na = \"q\\\"\xc3\xa9\" # \xd0\x9d\nb = '\xc3\xa9'\n"
+                                   "c = \"\"\"x\"\xc3\xa9\n\xd0\x9d\"\"\"\nd = '''\xc3\xa9'''\n",
+                                   "strings.toml");
+  CHECK(t["a"].value<std::string>() == "q\"\xc3\xa9");
+  CHECK(t["b"].value<std::string>() == "\xc3\xa9");
+  CHECK(t["c"].value<std::string>() == "x\"\xc3\xa9\n\xd0\x9d");
+  CHECK(t["d"].value<std::string>() == "\xc3\xa9");
+}

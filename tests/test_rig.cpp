@@ -241,6 +241,11 @@ TEST_CASE("the binary cache returns the same rig and survives damage") {
   CHECK_FALSE(fourth.from_cache);
   CHECK(d.deltas(3 * 4 + 2, 0) == Approx(0.75));
 
+  // An empty rig round-trips (its null data() pointers never reach memcpy: a UBSan finding).
+  const Rig empty = deserialize_rig(serialize_rig(Rig{}, RigCacheKey{5}), RigCacheKey{5}, "empty.fcrig");
+  CHECK(empty.vertex_count() == 0);
+  CHECK(empty.shape_count() == 0);
+
   const auto bytes = serialize_rig(a, RigCacheKey{7});
   CHECK_THROWS_WITH(deserialize_rig(bytes, RigCacheKey{8}, "x.fcrig"), Contains("x.fcrig") && Contains("key"));
   auto truncated = bytes;
