@@ -11,7 +11,6 @@
 
 #include "client/facecap_shm_layout.hpp"
 #include "core/toml_reader.hpp"
-#include "drivers/registry.hpp"
 
 namespace facecap::config {
 namespace fs = std::filesystem;
@@ -102,16 +101,18 @@ class Loader {
   // Rules that involve more than one key.
   void check_across_keys() {
     const DaemonConfig& c = out_.values;
-    const drivers::DriverEntry* driver = drivers::find_driver(c.source.driver);
-    if (c.source.driver == "replay" && c.source.replay.file.empty())
+    if (!drivers::driver_built(c.source.driver))
+      problem(where("source.driver"), fmt::format("the {} driver is not built into this facecapd", drivers::kDriverIds.name(c.source.driver)));
+    if (c.source.driver == drivers::DriverId::kReplay && c.source.replay.file.empty())
       problem(where("source.replay.file"), "source.driver is \"replay\" but no file is given");
     if (c.source.replay.end_s != 0.0 && c.source.replay.end_s <= c.source.replay.start_s)
       problem(where("source.replay.end_s"),
               fmt::format("{} must be after source.replay.start_s ({}) or 0 for the end of the take",
                           format_value(c.source.replay.end_s), format_value(c.source.replay.start_s)));
-    if (c.loop.mode == "lockstep" && driver && !driver->supports_lockstep)
+    if (c.loop.mode == LoopMode::kLockstep && !drivers::supports_lockstep(c.source.driver))
       problem(where("loop.mode"), fmt::format("lockstep needs a source that can hand every frame on request; the {} "
-                                              "driver runs on its own clock (use mode = \"fixed\")", c.source.driver));
+                                              "driver runs on its own clock (use mode = \"fixed\")",
+                                              drivers::kDriverIds.name(c.source.driver)));
     if (c.calibration.file.empty() && (c.calibration.head_markers == 1 || c.calibration.head_markers == 2))
       problem(where("calibration.head_markers"),
               fmt::format("{} head markers cannot fix a rigid pose: use 0 (no stabilisation) or at least 3",
@@ -200,14 +201,18 @@ class Loader {
       case ValueType::kString: {
         auto v = node.value_exact<std::string>();
         if (!v) return wrong_type();
-        if (key.choices) {
-          const auto choices = key.choices();
-          if (std::find(choices.begin(), choices.end(), *v) == choices.end()) {
-            const std::string near = closest_match(*v, choices);
-            problem(where, fmt::format("\"{}\" is not allowed (allowed: {}){}", *v, allowed_range(key),
-                                       near.empty() ? "" : fmt::format("; did you mean \"{}\"?", near)));
-            return std::nullopt;
-          }
+        return Value(*v);
+      }
+      case ValueType::kChoice: {
+        auto v = node.value_exact<std::string>();
+        if (!v) return wrong_type();
+        std::vector<std::string> names;
+        for (const Choice& c : key.choices()) names.emplace_back(c.name);
+        if (std::find(names.begin(), names.end(), *v) == names.end()) {
+          const std::string near = closest_match(*v, names);
+          problem(where, fmt::format("\"{}\" is not allowed (allowed: {}){}", *v, allowed_range(key),
+                                     near.empty() ? "" : fmt::format("; did you mean \"{}\"?", near)));
+          return std::nullopt;
         }
         return Value(*v);
       }
@@ -266,7 +271,7 @@ toml::table parse_override(const std::string& text, Loader& loader) {
     return toml::parse(std::string_view(key + " = " + value), std::string_view("--set"));
   } catch (const toml::parse_error&) {
     const KeySpec* spec = find_key(key);
-    if (spec && spec->type() == ValueType::kString) {
+    if (spec && (spec->type() == ValueType::kString || spec->type() == ValueType::kChoice)) {
       // The same nesting TOML gives a dotted key.
       toml::table table;
       toml::table* at = &table;
@@ -366,6 +371,8 @@ std::string key_notes(const KeySpec& key) {
     case Reload::kRestart: break;
   }
   std::string out = comment_block(key.description);
+  for (const Choice& c : key.choices())
+    if (!c.description.empty()) out += comment_block(fmt::format("  {}: {}.", c.name, c.description));
   if (!facts.empty()) out += comment_block(facts.front() == ' ' ? facts.substr(1) : facts);
   return out;
 }
@@ -436,8 +443,11 @@ std::string render_markdown_reference() {
     std::string allowed = allowed_range(key);
     if (allowed.empty() && !key.unit.empty()) allowed = std::string(key.unit);
     const char* reload = key.reload == Reload::kLive ? "applied" : key.reload == Reload::kRebuild ? "rebuilds solver" : "restart";
+    std::string description(key.description);
+    for (const Choice& c : key.choices())
+      if (!c.description.empty()) description += fmt::format("<br>`{}`: {}.", c.name, c.description);
     out += fmt::format("| `{}` | {} | `{}` | {} | {} | {} |\n", key.name(), value_type_name(key.type()),
-                       cell(format_value(key.default_value)), cell(allowed), reload, cell(std::string(key.description)));
+                       cell(format_value(key.default_value)), cell(allowed), reload, cell(description));
   }
   return out;
 }

@@ -2,13 +2,23 @@
 // facecapd's effective configuration. Member paths are the TOML key paths
 // (config.loop.rate_hz is `[loop] rate_hz`): config/schema.cpp declares each key's type,
 // default, unit, range and description from the member itself, so the two cannot drift.
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
 
-#include "drivers/source_config.hpp"
+#include "core/enum_table.hpp"
+#include "core/log.hpp"
+#include "drivers/api/source_config.hpp"
 
 namespace facecap::config {
+
+enum class LoopMode : uint8_t { kFixed, kLockstep };
+inline constexpr EnumTable kLoopModes{std::array{
+    EnumEntry{LoopMode::kFixed, "fixed", "at every tick, solve the newest frame (live sources, paced replay)"},
+    EnumEntry{LoopMode::kLockstep, "lockstep",
+              "solve every frame of the source in order as fast as possible (replay only; not real time)"},
+}};
 
 struct RigSection {
   std::string path;
@@ -36,7 +46,7 @@ struct SolverSection {
 
 struct LoopSection {
   double rate_hz = 0.0;
-  std::string mode;
+  LoopMode mode = LoopMode::kFixed;
   int64_t phase_margin_us = 0;
   int64_t prefetch_lead_us = 0;
   bool realtime = true;
@@ -70,7 +80,7 @@ struct ControlSection {
 };
 
 struct LoggingSection {
-  std::string level;
+  LogLevel level = LogLevel::kInfo;
   double stats_interval_s = 0.0;
   std::string stats_file;
 };

@@ -4,37 +4,56 @@
 
 #include <fmt/format.h>
 
-#include "drivers/registry.hpp"
+#include "core/error.hpp"
 #include "solver/face_solver.hpp"
 
 namespace facecap::config {
 namespace {
 
-std::vector<std::string> driver_names() {
-  std::vector<std::string> names;
-  for (const auto& d : drivers::driver_table()) names.emplace_back(d.name);
-  return names;
+// TODO(solver params table): solver.method and solver.collisions become enums.
+std::vector<Choice> solver_method_choices() {
+  std::vector<Choice> out;
+  for (const auto name : solver_names()) out.push_back({name, ""});
+  return out;
 }
-std::vector<std::string> solver_method_names() {
-  std::vector<std::string> names;
-  for (const auto name : solver_names()) names.emplace_back(name);
-  return names;
+std::vector<Choice> collision_choices() { return {{"none", ""}, {"lips", ""}, {"face", ""}}; }
+template <std::vector<Choice> (*kChoices)()>
+bool set_string_choice(std::string& member, std::string_view name) {
+  for (const Choice& c : kChoices())
+    if (c.name == name) {
+      member.assign(name);
+      return true;
+    }
+  return false;
 }
-std::vector<std::string> collision_names() { return {"none", "lips", "face"}; }
-std::vector<std::string> loop_mode_names() { return {"fixed", "lockstep"}; }
-std::vector<std::string> log_level_names() { return {"trace", "debug", "info", "warn", "error", "off"}; }
 
 // The key path is the member path, so a key and the field it sets cannot disagree.
 #define FACECAP_KEY(member) .path = #member, .field = +[](DaemonConfig& c) -> auto& { return c.member; }
+// A choice key: the member is an enum, its names and descriptions come from `table`.
+#define FACECAP_CHOICE_KEY(member, table)                                                              \
+  .path = #member, .field = ChoiceField {                                                              \
+    +[](const DaemonConfig& c) { return table.name(c.member); },                                       \
+    +[](DaemonConfig& c, std::string_view name) {                                                      \
+      const auto value = table.parse(name);                                                            \
+      if (value) c.member = *value;                                                                    \
+      return value.has_value();                                                                        \
+    },                                                                                                 \
+    +[] { return table.choices(); }                                                                    \
+  }
+#define FACECAP_STRING_CHOICE_KEY(member, choices)                                                     \
+  .path = #member, .field = ChoiceField {                                                              \
+    +[](const DaemonConfig& c) { return std::string_view(c.member); },                                 \
+    +[](DaemonConfig& c, std::string_view name) { return set_string_choice<&choices>(c.member, name); }, \
+    &choices                                                                                           \
+  }
 
 const std::vector<KeySpec>& schema_rows() {
   static const std::vector<KeySpec> rows = {
       {FACECAP_KEY(version), .default_value = int64_t{1}, .min = 1, .max = 1,
        .description = "Version of this file's format; this facecapd reads version 1."},
 
-      {FACECAP_KEY(source.driver), .default_value = std::string("sim"), .choices = &driver_names,
-       .description = "Where marker frames come from: sim simulates a capture of the rig, replay plays a C3D, TRC or "
-                      "facecapd recording."},
+      {FACECAP_CHOICE_KEY(source.driver, drivers::kDriverIds), .default_value = std::string("sim"),
+       .description = "The driver that delivers marker frames."},
 
       {FACECAP_KEY(source.sim.rate_hz), .default_value = 120.0, .unit = "Hz", .min = 1, .max = 2000,
        .description = "Frames per second the simulated capture system delivers."},
@@ -94,7 +113,7 @@ const std::vector<KeySpec>& schema_rows() {
        .description = "Fit the head's rigid motion to the head markers every frame and solve the face in head space "
                       "(needs 3 head markers present; otherwise the last pose is held)."},
 
-      {FACECAP_KEY(solver.method), .default_value = std::string("nonlinear"), .choices = &solver_method_names,
+      {FACECAP_STRING_CHOICE_KEY(solver.method, solver_method_choices), .default_value = std::string("nonlinear"),
        .reload = Reload::kRebuild,
        .description = "nonlinear: the paper's non-linear blendshape interpolation; linear: direct manipulation "
                       "(x0 + B w); dt: deformation transfer; meshik: MeshIK, an offline baseline far too slow for "
@@ -109,7 +128,7 @@ const std::vector<KeySpec>& schema_rows() {
        .reload = Reload::kRebuild,
        .description = "Gauss-Newton refinements of the weights along the paths rotations move markers (nonlinear "
                       "solver); 0 gives the paper's linear fit."},
-      {FACECAP_KEY(solver.collisions), .default_value = std::string("lips"), .choices = &collision_names,
+      {FACECAP_STRING_CHOICE_KEY(solver.collisions, collision_choices), .default_value = std::string("lips"),
        .reload = Reload::kRebuild,
        .description = "Collision handling: none, lips (the lip region) or face (every triangle, slower)."},
       {FACECAP_KEY(solver.collision_epsilon), .default_value = 0.01, .unit = "rig units", .min = 0, .max = 10,
@@ -124,9 +143,8 @@ const std::vector<KeySpec>& schema_rows() {
 
       {FACECAP_KEY(loop.rate_hz), .default_value = 120.0, .unit = "Hz", .min = 1, .max = 2000,
        .description = "Ticks per second of the fixed-rate solve loop."},
-      {FACECAP_KEY(loop.mode), .default_value = std::string("fixed"), .choices = &loop_mode_names,
-       .description = "fixed: at every tick, solve the newest frame; lockstep: solve every frame of the source in "
-                      "order as fast as possible (replay only)."},
+      {FACECAP_CHOICE_KEY(loop.mode, kLoopModes), .default_value = std::string("fixed"),
+       .description = "How the loop takes frames."},
       {FACECAP_KEY(loop.phase_margin_us), .default_value = int64_t{300}, .unit = "us", .min = 0, .max = 100000,
        .description = "With a source on its own clock (sim, live devices) the loop shifts its ticks to fall this "
                       "long after frames arrive, so frames wait as little as possible; 0 keeps the ticks fixed."},
@@ -172,7 +190,7 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(control.run_seconds), .default_value = 0.0, .unit = "s", .min = 0, .max = 1e7,
        .description = "Stop cleanly after this long (benchmarks, tests); 0 runs until stopped."},
 
-      {FACECAP_KEY(logging.level), .default_value = std::string("info"), .choices = &log_level_names,
+      {FACECAP_CHOICE_KEY(logging.level, kLogLevels), .default_value = std::string("info"),
        .reload = Reload::kLive, .description = "Least severe log level written."},
       {FACECAP_KEY(logging.stats_interval_s), .default_value = 10.0, .unit = "s", .min = 0, .max = 86400,
        .reload = Reload::kLive, .description = "How often the loop's figures are logged; 0 never."},
@@ -208,6 +226,7 @@ std::string_view value_type_name(ValueType type) noexcept {
     case ValueType::kFloat: return "number";
     case ValueType::kString: return "string";
     case ValueType::kIntList: return "array of integers";
+    case ValueType::kChoice: return "string";
   }
   return "?";
 }
@@ -231,16 +250,31 @@ const KeySpec* find_key(std::string_view path) noexcept {
   return nullptr;
 }
 
+std::vector<Choice> KeySpec::choices() const {
+  const auto* choice = std::get_if<ChoiceField>(&field);
+  return choice ? choice->choices() : std::vector<Choice>{};
+}
+
 Value get_value(const KeySpec& key, const DaemonConfig& config) {
   auto& mutable_config = const_cast<DaemonConfig&>(config);  // the accessors only read here
-  return std::visit([&](auto field) -> Value { return field(mutable_config); }, key.field);
+  return std::visit(
+      [&](const auto& field) -> Value {
+        if constexpr (std::is_same_v<std::decay_t<decltype(field)>, ChoiceField>) return std::string(field.get(config));
+        else return field(mutable_config);
+      },
+      key.field);
 }
 
 void set_value(const KeySpec& key, DaemonConfig& config, const Value& value) {
   std::visit(
-      [&](auto field) {
-        using T = std::remove_reference_t<decltype(field(config))>;
-        field(config) = std::get<T>(value);
+      [&](const auto& field) {
+        if constexpr (std::is_same_v<std::decay_t<decltype(field)>, ChoiceField>) {
+          if (!field.set(config, std::get<std::string>(value)))
+            throw Error(fmt::format("\"{}\" is not one of {}'s choices", std::get<std::string>(value), key.path));
+        } else {
+          using T = std::remove_reference_t<decltype(field(config))>;
+          field(config) = std::get<T>(value);
+        }
       },
       key.field);
 }
@@ -289,7 +323,11 @@ std::string format_value(const Value& value) {
 }
 
 std::string allowed_range(const KeySpec& key) {
-  if (key.choices) return fmt::format("one of: {}", fmt::join(key.choices(), ", "));
+  if (key.type() == ValueType::kChoice) {
+    std::vector<std::string_view> names;
+    for (const Choice& c : key.choices()) names.push_back(c.name);
+    return fmt::format("one of: {}", fmt::join(names, ", "));
+  }
   const bool numeric = key.type() == ValueType::kInt || key.type() == ValueType::kFloat || key.type() == ValueType::kIntList;
   if (!numeric || (std::isinf(key.min) && std::isinf(key.max))) return {};
   const std::string unit = key.unit.empty() ? "" : fmt::format(" {}", key.unit);

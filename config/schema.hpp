@@ -14,12 +14,21 @@
 
 namespace facecap::config {
 
+// A key whose value is one of an enum table's rows (core/enum_table.hpp): written and
+// read as the row's name, stored as the enum.
+struct ChoiceField {
+  std::string_view (*get)(const DaemonConfig&);
+  bool (*set)(DaemonConfig&, std::string_view name);  // false: not a row's name
+  std::vector<Choice> (*choices)();
+};
+
 // The member of DaemonConfig a key sets; its type is the key's type.
 using Field = std::variant<bool& (*)(DaemonConfig&), int64_t& (*)(DaemonConfig&), double& (*)(DaemonConfig&),
-                           std::string& (*)(DaemonConfig&), std::vector<int64_t>& (*)(DaemonConfig&)>;
+                           std::string& (*)(DaemonConfig&), std::vector<int64_t>& (*)(DaemonConfig&), ChoiceField>;
+// A choice's value is its name.
 using Value = std::variant<bool, int64_t, double, std::string, std::vector<int64_t>>;
 
-enum class ValueType : uint8_t { kBool, kInt, kFloat, kString, kIntList };
+enum class ValueType : uint8_t { kBool, kInt, kFloat, kString, kIntList, kChoice };
 std::string_view value_type_name(ValueType type) noexcept;  // "boolean", "integer", ...
 
 // What SIGHUP does when the key changed.
@@ -38,12 +47,13 @@ struct KeySpec {
   std::string_view unit;  // "Hz", "mm", "s", ... or empty
   double min = -kUnbounded;  // numeric keys and list elements
   double max = kUnbounded;
-  std::vector<std::string> (*choices)() = nullptr;  // allowed strings, when restricted
   Reload reload = Reload::kRestart;
   bool names_input_file = false;  // a path that must exist (unless empty or "builtin")
   std::string_view description;
 
   ValueType type() const noexcept { return ValueType(field.index()); }
+  // The rows of a choice key; empty for other keys.
+  std::vector<Choice> choices() const;
   std::string_view section() const noexcept;  // "loop" for "loop.rate_hz", "" for "version"
   std::string_view name() const noexcept;     // "rate_hz"
 };

@@ -2,11 +2,15 @@
 
 namespace facecap {
 
-bool set_log_level(std::string_view level) {
-  const auto parsed = spdlog::level::from_str(std::string(level));
-  if (parsed == spdlog::level::off && level != "off") return false;
-  spdlog::set_level(parsed);
-  return true;
+void set_log_level(LogLevel level) {
+  switch (level) {
+    case LogLevel::kTrace: spdlog::set_level(spdlog::level::trace); return;
+    case LogLevel::kDebug: spdlog::set_level(spdlog::level::debug); return;
+    case LogLevel::kInfo: spdlog::set_level(spdlog::level::info); return;
+    case LogLevel::kWarn: spdlog::set_level(spdlog::level::warn); return;
+    case LogLevel::kError: spdlog::set_level(spdlog::level::err); return;
+    case LogLevel::kOff: spdlog::set_level(spdlog::level::off); return;
+  }
 }
 
 }  // namespace facecap

@@ -7,6 +7,7 @@
 
 #include "core/error.hpp"
 #include "core/toml_reader.hpp"
+#include "core/units.hpp"
 #include "solver/align/profile.hpp"
 
 namespace facecap::daemon {
@@ -138,7 +139,7 @@ MarkerCalibration read_calibration_file(const std::string& file, const Rig& rig)
 MarkerCalibration load_calibration(const config::CalibrationSection& section, const Rig& rig) {
   if (!section.file.empty()) return read_calibration_file(section.file, rig);
   MarkerCalibration calibration;
-  calibration.markers = drivers::default_marker_set(rig, int(section.face_markers), int(section.head_markers));
+  calibration.markers = default_marker_set(rig, int(section.face_markers), int(section.head_markers));
   calibration.origin = "default marker set";
   return calibration;
 }
@@ -147,7 +148,7 @@ double marker_to_rig_scale(const MarkerCalibration& calibration, const std::stri
   if (calibration.marker_scale > 0.0) return calibration.marker_scale;
   const double mm_per_unit = calibration.marker_mm_per_unit > 0.0 ? calibration.marker_mm_per_unit
                                                                   : millimetres_per_unit(source_units).value_or(0.0);
-  return mm_per_unit > 0.0 ? mm_per_unit * drivers::rig_units_per_mm(rig) : 1.0;
+  return mm_per_unit > 0.0 ? mm_per_unit * rig_units_per_mm(rig) : 1.0;
 }
 
 }  // namespace facecap::daemon

@@ -8,13 +8,13 @@
 #include <Eigen/Geometry>
 
 #include "config/daemon_config.hpp"
-#include "drivers/marker_set.hpp"
+#include "solver/marker_layout.hpp"
 #include "solver/rig.hpp"
 
 namespace facecap::daemon {
 
 struct MarkerCalibration {
-  drivers::MarkerSet markers;
+  MarkerSet markers;
   // Marker units to millimetres (0: take the source's units, else assume rig units).
   double marker_mm_per_unit = 0.0;
   // Marker units to rig units when a calibration measured it (an actor's face is not the

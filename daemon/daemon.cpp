@@ -13,7 +13,7 @@
 #include "core/io.hpp"
 #include "core/log.hpp"
 #include "core/time.hpp"
-#include "drivers/registry.hpp"
+#include "drivers/table.hpp"
 #include "solver/builtin_face.hpp"
 
 namespace facecap::daemon {
@@ -86,7 +86,7 @@ void Daemon::start() {
 
   rig_ = load_configured_rig(c.rig);
   calibration_ = load_calibration(c.calibration, *rig_);
-  source_ = drivers::make_source(c.source, {.rig = rig_, .markers = &calibration_.markers});
+  source_ = drivers::make_source(c.source, {.rig = rig_, .markers = calibration_.markers});
   source_->open();
   spdlog::info("source {}", source_->description());
 
@@ -126,7 +126,7 @@ void Daemon::start() {
     r.header.rig_hash = rig_->content_hash();
     r.header.source_description = source_->description();
     r.header.units = source_->info().units;
-    r.header.rate_hz = c.loop.mode == "lockstep" ? source_->info().nominal_rate_hz : c.loop.rate_hz;
+    r.header.rate_hz = c.loop.mode == config::LoopMode::kLockstep ? source_->info().nominal_rate_hz : c.loop.rate_hz;
     r.header.marker_labels = source_->info().labels;
     r.header.shape_names = rig_->shape_names;
     if (!c.calibration.file.empty()) {
@@ -140,7 +140,7 @@ void Daemon::start() {
 
   LoopOptions loop_options;
   loop_options.rate_hz = c.loop.rate_hz;
-  loop_options.lockstep = c.loop.mode == "lockstep";
+  loop_options.lockstep = c.loop.mode == config::LoopMode::kLockstep;
   loop_options.phase_margin_ns = c.loop.phase_margin_us * kNsPerUs;
   loop_options.prefetch_lead_ns = c.loop.prefetch_lead_us * kNsPerUs;
   loop_options.realtime = {.fifo = c.loop.realtime, .priority = int(c.loop.priority), .cpus = c.loop.cpu_affinity};
@@ -208,7 +208,7 @@ std::string Daemon::status_line(const Figures& w) const {
 }
 
 void Daemon::apply_live_settings() {
-  if (!set_log_level(config_.values.logging.level)) spdlog::warn("unknown log level {}", config_.values.logging.level);
+  set_log_level(config_.values.logging.level);
 }
 
 bool Daemon::reload() {

@@ -17,7 +17,7 @@
 #include "daemon/shm_writer.hpp"
 #include "daemon/solve_loop.hpp"
 #include "daemon/systemd_notify.hpp"
-#include "drivers/marker_source.hpp"
+#include "drivers/api/marker_source.hpp"
 
 namespace facecap::daemon {
 

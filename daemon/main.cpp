@@ -10,7 +10,7 @@
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "daemon/daemon.hpp"
-#include "drivers/registry.hpp"
+#include "drivers/table.hpp"
 
 namespace {
 
@@ -55,8 +55,12 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (list_drivers) {
-    for (const auto& d : drivers::driver_table())
-      fmt::print("{:<8} {}{}\n", d.name, d.summary, d.supports_lockstep ? " (lockstep capable)" : "");
+    for (const auto& entry : drivers::kDriverIds.entries()) {
+      const drivers::DriverEntry* built = drivers::find_driver(entry.value);
+      fmt::print("{:<8} {}{}\n{:<8} needs: {}\n", entry.name, entry.description,
+                 drivers::supports_lockstep(entry.value) ? " (lockstep capable)" : "", "",
+                 built ? built->needs : "not built into this facecapd");
+    }
     return 0;
   }
   if (!check_file.empty()) {

@@ -9,7 +9,7 @@
 #include <thread>
 
 #include "core/frame.hpp"
-#include "daemon/spsc_slots.hpp"
+#include "core/rt/spsc_slots.hpp"
 #include "formats/recording.hpp"
 
 namespace facecap::daemon {
@@ -64,7 +64,7 @@ class Recorder {
 
   RecorderOptions options_;
   std::unique_ptr<formats::RecordingWriter> writer_;
-  SpscSlots<Entry> queue_;
+  rt::SpscSlots<Entry> queue_;
   std::thread thread_;
   std::atomic<bool> stop_requested_{false};
   std::atomic<uint64_t> marker_frames_{0}, solved_frames_{0}, dropped_{0}, errors_{0};

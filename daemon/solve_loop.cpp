@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "core/time.hpp"
-#include "daemon/deadline_grid.hpp"
+#include "core/rt/deadline_grid.hpp"
 
 namespace facecap::daemon {
 namespace {
@@ -68,8 +68,6 @@ SolveLoop::SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::un
 SolveLoop::~SolveLoop() {
   request_stop();
   join();
-  collect_retired();
-  delete offered_.exchange(nullptr);
 }
 
 void SolveLoop::start() {
@@ -85,22 +83,12 @@ void SolveLoop::join() {
   if (thread_.joinable()) thread_.join();
 }
 
-void SolveLoop::offer_pipeline(std::unique_ptr<SolvePipeline> pipeline) {
-  collect_retired();
-  delete offered_.exchange(pipeline.release(), std::memory_order_acq_rel);  // an offer not yet taken
-}
+void SolveLoop::offer_pipeline(std::unique_ptr<SolvePipeline> pipeline) { pipeline_handoff_.offer(std::move(pipeline)); }
 
-void SolveLoop::collect_retired() { delete retired_.exchange(nullptr, std::memory_order_acq_rel); }
+void SolveLoop::collect_retired() { pipeline_handoff_.collect(); }
 
 void SolveLoop::adopt_offered_pipeline() noexcept {
-  if (!offered_.load(std::memory_order_relaxed)) return;
-  // Only hand the old one back once the main thread has collected the previous one.
-  if (retired_.load(std::memory_order_acquire)) return;
-  SolvePipeline* offered = offered_.exchange(nullptr, std::memory_order_acq_rel);
-  if (!offered) return;
-  retired_.store(pipeline_.release(), std::memory_order_release);
-  pipeline_.reset(offered);
-  add(counters_.pipeline_swaps);
+  if (pipeline_handoff_.adopt(pipeline_)) add(counters_.pipeline_swaps);
 }
 
 void SolveLoop::record_stage(LoopStage stage, int64_t ns) noexcept {
@@ -170,7 +158,7 @@ void SolveLoop::wait_for_tick(int64_t deadline_ns) noexcept {
 }
 
 void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
-  DeadlineGrid grid(epoch_ns, period_ns_);
+  rt::DeadlineGrid grid(epoch_ns, period_ns_);
   while (!stop_requested_.load(std::memory_order_acquire)) {
     wait_for_tick(grid.deadline_ns());
     const int64_t wake_ns = monotonic_now_ns();
@@ -180,7 +168,7 @@ void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
 
     const int64_t end_ns = monotonic_now_ns();
     store_max(counters_.max_tick_ns, end_ns - wake_ns);
-    const TickOutcome outcome = grid.advance(wake_ns, end_ns, phase_correction_ns_);
+    const rt::TickOutcome outcome = grid.advance(wake_ns, end_ns, phase_correction_ns_);
     phase_correction_ns_ = 0;
     if (outcome.missed) {
       add(counters_.missed_deadlines);

@@ -11,12 +11,13 @@
 #include <thread>
 
 #include "core/frame.hpp"
+#include "core/rt/handoff.hpp"
 #include "daemon/latency_histogram.hpp"
 #include "daemon/recorder.hpp"
 #include "core/realtime.hpp"
 #include "daemon/shm_writer.hpp"
 #include "daemon/solve_pipeline.hpp"
-#include "drivers/marker_source.hpp"
+#include "drivers/api/marker_source.hpp"
 
 namespace facecap::daemon {
 
@@ -118,8 +119,7 @@ class SolveLoop {
   MarkerFrame marker_frame_;
   SolvedFrame solved_frame_;
 
-  std::atomic<SolvePipeline*> offered_{nullptr};
-  std::atomic<SolvePipeline*> retired_{nullptr};
+  rt::Handoff<SolvePipeline> pipeline_handoff_;
 
   LoopCounters counters_;
   LatencyHistogram latency_;

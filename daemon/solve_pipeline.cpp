@@ -4,7 +4,7 @@
 
 #include "core/error.hpp"
 #include "core/time.hpp"
-#include "drivers/marker_set.hpp"
+#include "solver/marker_layout.hpp"
 
 namespace facecap::daemon {
 namespace {
@@ -33,7 +33,7 @@ SolverParams solver_params(const config::SolverSection& section) {
 SolvePipeline::SolvePipeline(const Rig& rig, const MarkerCalibration& calibration, const drivers::SourceInfo& source,
                              const config::SolverSection& solver, bool stabilise_head)
     : scale_(marker_to_rig_scale(calibration, source.units, rig)),
-      mapper_(calibration, source.labels, scale_, stabilise_head, kHeadOutlierFloorMm * drivers::rig_units_per_mm(rig)),
+      mapper_(calibration, source.labels, scale_, stabilise_head, kHeadOutlierFloorMm * rig_units_per_mm(rig)),
       solver_(make_solver(solver.method, build_solver_model(rig, calibration.markers.face, solver_params(solver)))),
       result_(solver_->make_result()),
       targets_(Eigen::Matrix3Xd::Zero(3, Eigen::Index(calibration.markers.face.size()))),

@@ -11,7 +11,7 @@
 #include "core/frame.hpp"
 #include "daemon/calibration.hpp"
 #include "daemon/marker_mapper.hpp"
-#include "drivers/marker_source.hpp"
+#include "drivers/api/marker_source.hpp"
 #include "solver/face_solver.hpp"
 
 namespace facecap::daemon {

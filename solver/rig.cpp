@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "core/io.hpp"
 #include "core/toml_reader.hpp"
+#include "core/units.hpp"
 #include "solver/builtin_face.hpp"
 #include "solver/gltf_rig.hpp"
 #include "solver/obj_mesh.hpp"
@@ -59,14 +60,9 @@ std::string guess_face_units(const BoundingBox& box) {
   return "unknown";
 }
 
-std::optional<double> millimetres_per_unit(const std::string& units) {
-  std::string u;
-  for (char c : units)
-    if (!std::isspace(static_cast<unsigned char>(c))) u += char(std::tolower(static_cast<unsigned char>(c)));
-  if (u == "mm" || u == "millimeter" || u == "millimeters" || u == "millimetre" || u == "millimetres") return 1.0;
-  if (u == "cm" || u == "centimeter" || u == "centimeters" || u == "centimetre" || u == "centimetres") return 10.0;
-  if (u == "m" || u == "meter" || u == "meters" || u == "metre" || u == "metres") return 1000.0;
-  return std::nullopt;
+double rig_units_per_mm(const Rig& rig) {
+  const double mm = millimetres_per_unit(guess_face_units(bounding_box(rig.neutral))).value_or(0.0);
+  return mm > 0.0 ? 1.0 / mm : 0.1;
 }
 
 Eigen::VectorXd max_shape_displacement(const Rig& rig) {

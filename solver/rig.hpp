@@ -45,9 +45,9 @@ BoundingBox bounding_box(const Eigen::Matrix3Xd& points);
 // "mm", "cm" or "m" from the size of a human face (about 15-25 cm tall), or "unknown".
 std::string guess_face_units(const BoundingBox& box);
 
-// Millimetres per unit for "mm", "cm", "m" (and their spelled-out forms, any case,
-// spaces ignored); nullopt for anything else.
-std::optional<double> millimetres_per_unit(const std::string& units);
+// Rig units per millimetre from the face's size (0.1 for a rig in cm); 0.1 when the size
+// fits no unit.
+double rig_units_per_mm(const Rig& rig);
 
 // Per-shape maximum vertex displacement, in rig units. M.
 Eigen::VectorXd max_shape_displacement(const Rig& rig);

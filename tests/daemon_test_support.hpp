@@ -4,8 +4,8 @@
 #include <filesystem>
 #include <memory>
 
-#include "drivers/marker_set.hpp"
-#include "drivers/marker_source.hpp"
+#include "solver/marker_layout.hpp"
+#include "drivers/api/marker_source.hpp"
 #include "drivers/sim/sim_source.hpp"
 #include "formats/take.hpp"
 #include "solver/rig.hpp"
@@ -15,7 +15,7 @@ namespace facecap::test {
 // The sim source's first `frames` frames (its configuration `sim`, driving `rig` with
 // `markers`) written to `file` as a 120 Hz recording: a take for the replay driver.
 inline void write_sim_take(const std::filesystem::path& file, const drivers::SimOptions& options,
-                           std::shared_ptr<const Rig> rig, const drivers::MarkerSet& markers, int64_t frames) {
+                           std::shared_ptr<const Rig> rig, const MarkerSet& markers, int64_t frames) {
   drivers::SimSource sim(options, std::move(rig), markers);
   sim.open();
   formats::MarkerTake take;

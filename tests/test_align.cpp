@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "core/units.hpp"
 #include "solver/align/calibrate.hpp"
 #include "solver/align/hull.hpp"
 #include "solver/align/label.hpp"

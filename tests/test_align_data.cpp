@@ -6,6 +6,7 @@
 
 #include <catch2/catch.hpp>
 
+#include "core/units.hpp"
 #include "formats/take.hpp"
 #include "solver/align/calibrate.hpp"
 #include "solver/align/label.hpp"

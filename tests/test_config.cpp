@@ -54,7 +54,9 @@ TEST_CASE("every schema key has a default of its own type and sections are conti
   for (const KeySpec& key : config_schema()) {
     INFO(key.path);
     CHECK(paths.insert(key.path).second);
-    CHECK(key.default_value.index() == key.field.index());
+    // A choice's value is its name; every other key's value has the field's own type.
+    if (key.type() == ValueType::kChoice) CHECK(std::holds_alternative<std::string>(key.default_value));
+    else CHECK(key.default_value.index() == key.field.index());
     CHECK_FALSE(key.description.empty());
     if (key.section() != section) {
       CHECK(finished_sections.insert(section).second);
@@ -67,14 +69,15 @@ TEST_CASE("every schema key has a default of its own type and sections are conti
       CHECK(d >= key.min);
       CHECK(d <= key.max);
     }
-    if (key.choices) {
+    if (key.type() == ValueType::kChoice) {
       const auto choices = key.choices();
-      CHECK(std::find(choices.begin(), choices.end(), std::get<std::string>(key.default_value)) != choices.end());
+      CHECK(std::count_if(choices.begin(), choices.end(),
+                          [&](const Choice& c) { return c.name == std::get<std::string>(key.default_value); }) == 1);
     }
   }
   CHECK(paths.count("loop.rate_hz"));
   CHECK(default_config().loop.rate_hz == 120.0);
-  CHECK(default_config().source.driver == "sim");
+  CHECK(default_config().source.driver == drivers::DriverId::kSim);
 }
 
 TEST_CASE("the shipped config/facecapd.toml is exactly what the schema generates") {
@@ -185,7 +188,7 @@ TEST_CASE("overrides apply after the file and are reported as such") {
 TEST_CASE("changed_keys lists exactly the keys that differ") {
   DaemonConfig a = default_config(), b = default_config();
   b.solver.alpha = 0.5;
-  b.logging.level = "debug";
+  b.logging.level = LogLevel::kDebug;
   const auto changed = changed_keys(a, b);
   REQUIRE(changed.size() == 2);
   CHECK(changed[0]->path == "solver.alpha");

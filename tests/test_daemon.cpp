@@ -13,7 +13,6 @@
 #include "core/log.hpp"
 #include "core/time.hpp"
 #include "daemon/daemon.hpp"
-#include "daemon/deadline_grid.hpp"
 #include "daemon/latency_histogram.hpp"
 #include "daemon/marker_mapper.hpp"
 #include "daemon/solve_pipeline.hpp"
@@ -86,7 +85,7 @@ TEST_CASE("solved frames match the sim's ground truth under noise and dropouts a
 TEST_CASE("head stabilisation undoes a known rigid motion exactly") {
   const Rig& rig = BuiltinFace::instance().rig();
   MarkerCalibration calibration;
-  calibration.markers = drivers::default_marker_set(rig, 6, 4);
+  calibration.markers = default_marker_set(rig, 6, 4);
   calibration.origin = "test";
   const std::vector<std::string> labels = calibration.markers.labels();
   MarkerMapper mapper(calibration, labels, 1.0, true, 0.1);
@@ -121,7 +120,7 @@ TEST_CASE("head stabilisation undoes a known rigid motion exactly") {
 
 TEST_CASE("a source with none of the calibration's markers is refused") {
   MarkerCalibration calibration;
-  calibration.markers = drivers::default_marker_set(BuiltinFace::instance().rig(), 4, 0);
+  calibration.markers = default_marker_set(BuiltinFace::instance().rig(), 4, 0);
   calibration.origin = "default marker set";
   CHECK_THROWS_WITH(MarkerMapper(calibration, {"LeftCheek", "Chin"}, 1.0, true, 0.1),
                     Contains("none of the 4 face markers of the default marker set (M000, ...) is among the source's 2 markers"));
@@ -337,38 +336,13 @@ TEST_CASE("a reload rejects an invalid file and applies live keys and rebuilds t
   d.request_reload();
   REQUIRE(wait_for([&] { return d.reloads_accepted() == 1; }));
   CHECK(d.config().solver.alpha == 0.5);        // rebuilt aside and swapped in
-  CHECK(d.config().logging.level == "warn");    // live
+  CHECK(d.config().logging.level == LogLevel::kWarn);    // live
   CHECK(d.config().loop.rate_hz == 120.0);      // needs a restart: kept
   CHECK(wait_for([&] { return d.loop()->counters().pipeline_swaps.load() == 1; }));
   REQUIRE(reader.wait_next(frame, 5 * kNsPerSecond) == FACECAP_OK);  // still solving
   d.request_stop();
   supervisor.join();
-  set_log_level("info");
-}
-
-TEST_CASE("the deadline grid counts a late start, a long tick and the slots each gives up") {
-  constexpr int64_t kPeriod = 4'000'000;
-  DeadlineGrid grid(1'000'000, kPeriod);
-  // On time: work within the period, the next deadline one period on.
-  TickOutcome t = grid.advance(1'000'000, 2'000'000);
-  CHECK_FALSE(t.missed);
-  CHECK(grid.deadline_ns() == 5'000'000);
-  // Woke 3.5 ms late, 1 ms of work: past the next deadline by 0.5 ms, one slot given up.
-  t = grid.advance(8'500'000, 9'500'000);
-  CHECK(t.missed);
-  CHECK(t.started_late);
-  CHECK(t.skipped == 1);
-  CHECK(grid.deadline_ns() == 13'000'000);
-  // Woke on time, 10 ms of work: ran past the deadlines at 17 and 21 ms; both given up.
-  t = grid.advance(13'000'000, 23'000'000);
-  CHECK(t.missed);
-  CHECK_FALSE(t.started_late);
-  CHECK(t.skipped == 2);
-  CHECK(grid.deadline_ns() == 25'000'000);
-  // A phase correction moves the next deadline by exactly itself.
-  t = grid.advance(25'000'000, 25'500'000, -300'000);
-  CHECK_FALSE(t.missed);
-  CHECK(grid.deadline_ns() == 28'700'000);
+  set_log_level(LogLevel::kInfo);
 }
 
 TEST_CASE("the fixed-rate loop stays on its deadline grid and counts what it skips when solves overrun") {

@@ -1,4 +1,4 @@
-// Marker sources: the mailbox, the registry, the simulated capture and replay pacing.
+// Marker sources: the driver table, the simulated capture and replay pacing.
 #include <cmath>
 #include <thread>
 
@@ -6,8 +6,7 @@
 
 #include "core/error.hpp"
 #include "core/time.hpp"
-#include "drivers/latest_mailbox.hpp"
-#include "drivers/registry.hpp"
+#include "drivers/table.hpp"
 #include "drivers/replay/replay_source.hpp"
 #include "drivers/sim/sim_source.hpp"
 #include "formats/take.hpp"
@@ -63,63 +62,18 @@ ReplayOptions replay_options(const std::filesystem::path& file) {
 
 }  // namespace
 
-TEST_CASE("the mailbox hands over the newest value and counts the ones overwritten") {
-  LatestMailbox<int> box(0);
-  CHECK(box.take() == nullptr);
-  box.write_buffer() = 1;
-  box.publish();
-  box.write_buffer() = 2;
-  box.publish();
-  const int* v = box.take();
-  REQUIRE(v != nullptr);
-  CHECK(*v == 2);
-  CHECK(box.overwritten() == 1);
-  CHECK(box.take() == nullptr);  // nothing new
-  box.write_buffer() = 3;
-  box.publish();
-  v = box.take();
-  REQUIRE(v != nullptr);
-  CHECK(*v == 3);
-  CHECK(box.published() == 3);
-}
-
-TEST_CASE("the mailbox never hands out a value the producer is still writing") {
-  LatestMailbox<std::array<int64_t, 64>> box(std::array<int64_t, 64>{});
-  std::atomic<bool> done{false};
-  std::thread producer([&] {
-    for (int64_t n = 1; n <= 200000; ++n) {
-      box.write_buffer().fill(n);
-      box.publish();
-    }
-    done = true;
-  });
-  int64_t last = 0, torn = 0, taken = 0;
-  while (!done.load()) {
-    if (const auto* v = box.take()) {
-      ++taken;
-      for (const int64_t x : *v) torn += x != (*v)[0] ? 1 : 0;
-      CHECK((*v)[0] > last);
-      last = (*v)[0];
-    }
-  }
-  producer.join();
-  CHECK(taken > 0);
-  CHECK(torn == 0);
-  CHECK(box.overwritten() + uint64_t(taken) <= 200000);
-}
-
-TEST_CASE("the driver table is ordered and bounded and knows which drivers can lockstep") {
+TEST_CASE("the driver table holds the built drivers in the order of their ids and knows which can lockstep") {
   const auto table = driver_table();
-  REQUIRE(table.size() == 2);
-  CHECK(table[0].name == "sim");
-  CHECK_FALSE(table[0].supports_lockstep);
-  CHECK(table[1].name == "replay");
-  CHECK(table[1].supports_lockstep);
-  CHECK(find_driver("natnet") == nullptr);
-  const MarkerSet markers = default_marker_set(BuiltinFace::instance().rig(), 8, 0);
-  SourceConfig config;
-  config.driver = "natnet";
-  CHECK_THROWS_WITH(make_source(config, {.rig = builtin_rig(), .markers = &markers}), Contains("unknown marker source driver 'natnet'"));
+  REQUIRE(table.size() == std::size_t(FACECAP_WITH_SIM + FACECAP_WITH_REPLAY));
+  for (std::size_t i = 1; i < table.size(); ++i) CHECK(table[i - 1].id < table[i].id);
+  for (const auto& entry : kDriverIds.entries()) {
+    CHECK((find_driver(entry.value) != nullptr) == driver_built(entry.value));
+    if (const DriverEntry* row = find_driver(entry.value)) CHECK(row->name() == entry.name);
+  }
+  CHECK(kDriverIds.parse("sim") == DriverId::kSim);
+  CHECK_FALSE(supports_lockstep(DriverId::kSim));
+  CHECK(supports_lockstep(DriverId::kReplay));
+  CHECK_FALSE(kDriverIds.parse("natnet"));
 }
 
 TEST_CASE("the sim is deterministic per frame and seed") {

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
+#include "core/units.hpp"
 #include "formats/take.hpp"
 #include "solver/align/neutral.hpp"
 #include "solver/align/pipeline.hpp"
@@ -112,7 +113,7 @@ void run_calibrate(const Options& o, bool frame_given) {
                                     cal.source_frame));
   if (cal.units_detected && file_units && *file_units != cal.take_mm_per_unit)
     cal.notes.push_back(fmt::format("the take states '{}' but its size says '{}'; used '{}' (override with --units)", take.units,
-                                    align::unit_name(cal.take_mm_per_unit), align::unit_name(cal.take_mm_per_unit)));
+                                    unit_name(cal.take_mm_per_unit), unit_name(cal.take_mm_per_unit)));
 
   // How well the stable markers hold still once the head motion is removed, over the take.
   auto setup = make_calibrated_setup(rig, cal, take.labels);
@@ -140,7 +141,7 @@ void run_calibrate(const Options& o, bool frame_given) {
     j["frame"] = cal.source_frame;
     j["auto_neutral"] = auto_neutral;
     if (auto_neutral) j["neutral"] = {{"distance_mm", neutral.distance_mm}, {"speed_mm_s", neutral.speed_mm_s}};
-    j["units"] = align::unit_name(cal.take_mm_per_unit);
+    j["units"] = unit_name(cal.take_mm_per_unit);
     j["units_detected"] = cal.units_detected;
     j["scale"] = cal.take_to_rig.scale;
     j["hull_rms_mm"] = cal.hull_rms_mm;
@@ -160,7 +161,7 @@ void run_calibrate(const Options& o, bool frame_given) {
              !auto_neutral ? "" : fmt::format(" (auto-neutral: {:.2f} mm from the median shape, {:.1f} mm/s)",
                                             neutral.distance_mm, neutral.speed_mm_s));
   fmt::print("units {} ({}), scale {:.4f} rig units per take unit, hull ICP {:.2f} mm, surface ICP {:.2f} mm (trimmed RMS)\n",
-             align::unit_name(cal.take_mm_per_unit), cal.units_detected ? "detected" : "given", cal.take_to_rig.scale,
+             unit_name(cal.take_mm_per_unit), cal.units_detected ? "detected" : "given", cal.take_to_rig.scale,
              cal.hull_rms_mm, cal.trimmed_rms_mm);
   fmt::print("\n{:<24} {:>10}  {}\n", "marker", "residual", "bound to (triangle vertices, barycentric)");
   for (const auto& m : cal.markers) {

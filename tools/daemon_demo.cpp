@@ -60,7 +60,7 @@ struct DemoOptions {
 class GroundTruth {
  public:
   static std::optional<GroundTruth> for_config(const config::DaemonConfig& c) {
-    if (c.source.driver != "sim" || c.rig.path != "builtin" || c.source.sim.motion != "builtin") return std::nullopt;
+    if (c.source.driver != drivers::DriverId::kSim || c.rig.path != "builtin" || c.source.sim.motion != "builtin") return std::nullopt;
     return GroundTruth(c.source.sim.rate_hz);
   }
   // Every 12th frame: the articulated pose costs a fraction of a millisecond.

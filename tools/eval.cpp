@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
+#include "core/units.hpp"
 #include "formats/take.hpp"
 #include "solver/collide.hpp"
 #include "solver/solver_model.hpp"

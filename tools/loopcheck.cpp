@@ -13,7 +13,7 @@
 #include "core/error.hpp"
 #include "core/realtime.hpp"
 #include "core/time.hpp"
-#include "daemon/deadline_grid.hpp"
+#include "core/rt/deadline_grid.hpp"
 #include "tools/commands.hpp"
 #include "tools/progress.hpp"
 #include "tools/tool_support.hpp"
@@ -69,7 +69,7 @@ void run_loop(const LoopCheckOptions& options, const RealtimeRequest& realtime, 
   result.realtime = apply_realtime(realtime);
   const auto period_ns = int64_t(double(kNsPerSecond) / options.rate_hz + 0.5);
   const auto slots = uint64_t(options.seconds * options.rate_hz + 0.5);
-  daemon::DeadlineGrid grid(monotonic_now_ns() + 10 * kNsPerMs, period_ns);
+  rt::DeadlineGrid grid(monotonic_now_ns() + 10 * kNsPerMs, period_ns);
   double sink = 1.0;
   uint64_t slot = 0;
   while (slot < slots) {
@@ -79,7 +79,7 @@ void run_loop(const LoopCheckOptions& options, const RealtimeRequest& realtime, 
     const int64_t end_ns = monotonic_now_ns();
     result.wake_late_ms.push_back(double(wake_ns - grid.deadline_ns()) / kNsPerMs);  // reserved: no allocation
     result.tick_ms.push_back(double(end_ns - wake_ns) / kNsPerMs);
-    const daemon::TickOutcome outcome = grid.advance(wake_ns, end_ns);
+    const rt::TickOutcome outcome = grid.advance(wake_ns, end_ns);
     ++result.ticks;
     slot += 1 + outcome.skipped;
     if (outcome.missed) {

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "core/units.hpp"
 #include "formats/take.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "core/units.hpp"
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
 #include "solver/builtin_face.hpp"
@@ -96,13 +97,6 @@ WeightCurves builtin_motion_curves(const Rig& rig, double rate_hz, long max_fram
     curves.frames.push_back(std::move(w));
   }
   return curves;
-}
-
-std::optional<double> millimetres_per_unit(std::string_view units) {
-  if (units == "mm") return 1.0;
-  if (units == "cm") return 10.0;
-  if (units == "m") return 1000.0;
-  return std::nullopt;
 }
 
 std::string rig_units(const Rig& rig, const std::string& override_units) {

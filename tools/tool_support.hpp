@@ -37,9 +37,6 @@ WeightCurves livelinkface_curves(const std::filesystem::path& csv, const Rig& ri
 // none of the built-in shape names.
 WeightCurves builtin_motion_curves(const Rig& rig, double rate_hz, long max_frames);
 
-// Millimetres per unit for "mm", "cm", "m"; nullopt for anything else.
-std::optional<double> millimetres_per_unit(std::string_view units);
-
 // The rig's length unit: `override_units` when given, else guess_face_units(). Throws
 // Error when neither names mm, cm or m.
 std::string rig_units(const Rig& rig, const std::string& override_units);

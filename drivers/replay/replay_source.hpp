@@ -5,8 +5,8 @@
 #include <atomic>
 #include <vector>
 
-#include "drivers/marker_source.hpp"
-#include "drivers/source_config.hpp"
+#include "drivers/api/marker_source.hpp"
+#include "drivers/api/source_config.hpp"
 #include "formats/take.hpp"
 
 namespace facecap::drivers {

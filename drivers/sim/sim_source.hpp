@@ -9,9 +9,9 @@
 
 #include <Eigen/Geometry>
 
-#include "drivers/marker_set.hpp"
-#include "drivers/marker_source.hpp"
-#include "drivers/source_config.hpp"
+#include "solver/marker_layout.hpp"
+#include "drivers/api/marker_source.hpp"
+#include "drivers/api/source_config.hpp"
 #include "solver/rig.hpp"
 
 namespace facecap::drivers {

@@ -13,13 +13,6 @@
 
 namespace facecap::align {
 
-std::string unit_name(double mm_per_unit) {
-  if (std::abs(mm_per_unit - 1.0) < 1e-9) return "mm";
-  if (std::abs(mm_per_unit - 10.0) < 1e-9) return "cm";
-  if (std::abs(mm_per_unit - 1000.0) < 1e-9) return "m";
-  return fmt::format("{}mm", mm_per_unit);
-}
-
 int Calibration::find(const std::string& label) const {
   for (std::size_t i = 0; i < markers.size(); ++i)
     if (markers[i].label == label) return int(i);

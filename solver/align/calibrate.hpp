@@ -32,9 +32,6 @@
 
 namespace facecap::align {
 
-// The canonical name ("mm", "cm", "m") of a unit size.
-std::string unit_name(double mm_per_unit);
-
 struct CalibrationOptions {
   std::optional<double> take_mm_per_unit;  // nullopt: detect from the hulls' sizes
   double rig_mm_per_unit = 10.0;           // the rig's units (ICT FaceKit and the built-in face: cm)

@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "core/io.hpp"
 #include "core/toml_reader.hpp"
+#include "core/units.hpp"
 
 namespace facecap::align {
 

@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <string>
 
+#include "drivers/api/driver_id.hpp"
+
 namespace facecap::drivers {
 
 struct SimOptions {
@@ -26,7 +28,7 @@ struct ReplayOptions {
 };
 
 struct SourceConfig {
-  std::string driver;
+  DriverId driver = DriverId::kSim;
   SimOptions sim;
   ReplayOptions replay;
 };

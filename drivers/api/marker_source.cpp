@@ -1,4 +1,4 @@
-#include "drivers/marker_source.hpp"
+#include "drivers/api/marker_source.hpp"
 
 namespace facecap::drivers {
 
@@ -14,7 +14,7 @@ MarkerFrame make_marker_frame(const std::vector<std::string>& labels) {
 }
 
 void MailboxSource::configure_mailbox(const std::vector<std::string>& labels) {
-  mailbox_ = std::make_unique<LatestMailbox<MarkerFrame>>(make_marker_frame(labels));
+  mailbox_ = std::make_unique<rt::LatestMailbox<MarkerFrame>>(make_marker_frame(labels));
 }
 
 bool MailboxSource::take_frame(int64_t /*now_ns*/, MarkerFrame& out) noexcept {

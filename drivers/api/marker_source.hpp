@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "core/frame.hpp"
-#include "drivers/latest_mailbox.hpp"
+#include "core/rt/latest_mailbox.hpp"
 
 namespace facecap::drivers {
 
@@ -80,7 +80,7 @@ class MailboxSource : public MarkerSource {
   // Sizes the mailbox for frames with these labels. Not RT-safe.
   void configure_mailbox(const std::vector<std::string>& labels);
 
-  std::unique_ptr<LatestMailbox<MarkerFrame>> mailbox_;
+  std::unique_ptr<rt::LatestMailbox<MarkerFrame>> mailbox_;
   std::atomic<uint64_t> delivered_{0};
   std::atomic<uint64_t> late_{0};
   std::atomic<uint64_t> errors_{0};

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace facecap::daemon {
+namespace facecap::rt {
 
 template <typename T>
 class SpscSlots {
@@ -40,4 +40,4 @@ class SpscSlots {
   alignas(64) std::atomic<uint64_t> tail_{0};  // slots ever popped
 };
 
-}  // namespace facecap::daemon
+}  // namespace facecap::rt

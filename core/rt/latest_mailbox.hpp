@@ -6,7 +6,7 @@
 #include <atomic>
 #include <cstdint>
 
-namespace facecap::drivers {
+namespace facecap::rt {
 
 template <typename T>
 class LatestMailbox {
@@ -47,4 +47,4 @@ class LatestMailbox {
   std::atomic<uint64_t> overwritten_{0};
 };
 
-}  // namespace facecap::drivers
+}  // namespace facecap::rt

@@ -5,7 +5,7 @@
 // solve loop and `facecap loopcheck`, so that both count missed deadlines alike.
 #include <cstdint>
 
-namespace facecap::daemon {
+namespace facecap::rt {
 
 struct TickOutcome {
   bool missed = false;        // the work ended past the next deadline
@@ -40,4 +40,4 @@ class DeadlineGrid {
   int64_t period_ns_;
 };
 
-}  // namespace facecap::daemon
+}  // namespace facecap::rt
