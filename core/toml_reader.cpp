@@ -33,21 +33,24 @@ std::size_t utf8_sequence_length(std::string_view text, std::size_t at) noexcept
 // toml++ 3.3 reaches __builtin_unreachable when it tests a non-ASCII character for
 // whitespace and the character lies in U+00A1..U+0499 or some other ranges (é, any
 // Cyrillic letter, ...). TOML allows non-ASCII text only inside strings and comments,
-// where toml++ never makes that test: a character anywhere else is refused first.
+// where toml++ makes that test only after a backslash in a multi-line basic string (an
+// escape, or a line-ending backslash and the whitespace it trims): a non-ASCII character
+// anywhere it would be tested is refused first.
 void check_non_ascii_placement(std::string_view text, const std::string& name) {
   enum class State { kCode, kComment, kBasic, kLiteral, kMultiBasic, kMultiLiteral } state = State::kCode;
+  bool trimming = false;  // in a multi-line basic string, after a backslash and whitespace
   int64_t line = 1, column = 1;
   for (std::size_t at = 0; at < text.size();) {
     const char c = text[at];
     const auto starts = [&](std::string_view s) { return text.substr(at, s.size()) == s; };
-    // An escape skips the ASCII character after the backslash (\" does not end a string).
-    const bool escape = c == '\\' && at + 1 < text.size() && uint8_t(text[at + 1]) < 0x80 && text[at + 1] != '\n';
     std::size_t step = std::max<std::size_t>(1, utf8_sequence_length(text, at));  // text is valid UTF-8 here
+    const auto refuse = [&](const char* what) {
+      throw Error(what, ErrorLocation{.file = name, .line = line, .column = column});
+    };
+    const bool space = c == ' ' || c == '\t' || c == '\r' || c == '\n';
     switch (state) {
       case State::kCode:
-        if (uint8_t(c) >= 0x80)
-          throw Error("non-ASCII character outside a string or comment (quote the text)",
-                      ErrorLocation{.file = name, .line = line, .column = column});
+        if (uint8_t(c) >= 0x80) refuse("non-ASCII character outside a string or comment (quote the text)");
         if (c == '#') state = State::kComment;
         else if (starts(R"(""")")) state = State::kMultiBasic, step = 3;
         else if (starts("'''")) state = State::kMultiLiteral, step = 3;
@@ -57,16 +60,30 @@ void check_non_ascii_placement(std::string_view text, const std::string& name) {
       case State::kComment:
         if (c == '\n') state = State::kCode;
         break;
-      case State::kBasic:
-        if (escape) step = 2;
+      case State::kBasic:  // an escape skips the ASCII character after the backslash (\" does not end it)
+        if (c == '\\' && at + 1 < text.size() && uint8_t(text[at + 1]) < 0x80 && text[at + 1] != '\n') step = 2;
         else if (c == '"' || c == '\n') state = State::kCode;  // unterminated: toml++ reports it
         break;
       case State::kLiteral:
         if (c == '\'' || c == '\n') state = State::kCode;
         break;
       case State::kMultiBasic:
-        if (escape) step = 2;
-        else if (starts(R"(""")")) state = State::kCode, step = 3;
+        if (trimming) {  // toml++ tests each character for whitespace here
+          if (uint8_t(c) >= 0x80) refuse("non-ASCII character in the whitespace a line-ending backslash trims");
+          if (space) break;
+          trimming = false;  // c is content again
+        }
+        if (c == '\\') {
+          const char next = at + 1 < text.size() ? text[at + 1] : '\0';
+          if (uint8_t(next) >= 0x80) {  // the escaped character is tested too
+            ++column;
+            refuse("non-ASCII character after a backslash in a multi-line string");
+          }
+          trimming = next == ' ' || next == '\t' || next == '\r' || next == '\n';
+          step = trimming ? 1 : 2;
+        } else if (starts(R"(""")")) {
+          state = State::kCode, step = 3;
+        }
         break;
       case State::kMultiLiteral:
         if (starts("'''")) state = State::kCode, step = 3;

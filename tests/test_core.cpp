@@ -130,4 +130,12 @@ TEST_CASE("a non-ASCII character outside TOML strings and comments is refused be
   CHECK(t["b"].value<std::string>() == "\xc3\xa9");
   CHECK(t["c"].value<std::string>() == "x\"\xc3\xa9\n\xd0\x9d");
   CHECK(t["d"].value<std::string>() == "\xc3\xa9");
+  // In a multi-line basic string toml++ also tests the character after a backslash, and
+  // the whitespace a line-ending backslash trims (found by the fuzzer the same way).
+  CHECK_THROWS_WITH(parse_toml("a = \"\"\"x\\\xc3\xa9\"\"\"\n", "escape.toml"),
+                    Catch::Contains("escape.toml:1:10") && Catch::Contains("after a backslash"));
+  CHECK_THROWS_WITH(parse_toml("a = \"\"\"x\\\n\n  \xcd\x9c\"\"\"\n", "trim.toml"),
+                    Catch::Contains("trim.toml:3:3") && Catch::Contains("a line-ending backslash trims"));
+  const toml::table trimmed = parse_toml("a = \"\"\"x\\\n  y\xc3\xa9 \\\\\xc3\xa9\"\"\"\n", "trimmed.toml");
+  CHECK(trimmed["a"].value<std::string>() == "xy\xc3\xa9 \\\xc3\xa9");
 }
