@@ -35,10 +35,13 @@ std::size_t utf8_sequence_length(std::string_view text, std::size_t at) noexcept
 // Cyrillic letter, ...). TOML allows non-ASCII text only inside strings and comments,
 // where toml++ makes that test only after a backslash in a multi-line basic string (an
 // escape, or a line-ending backslash and the whitespace it trims): a non-ASCII character
-// anywhere it would be tested is refused first.
+// anywhere it would be tested is refused first. A quote counts as opening a string only
+// where TOML allows one (a key or a value); elsewhere (`+"é"`) toml++ reads on as a bare
+// value and tests every character.
 void check_non_ascii_placement(std::string_view text, const std::string& name) {
   enum class State { kCode, kComment, kBasic, kLiteral, kMultiBasic, kMultiLiteral } state = State::kCode;
   bool trimming = false;  // in a multi-line basic string, after a backslash and whitespace
+  char before = '\n';     // in code, the last character other than a space or tab
   int64_t line = 1, column = 1;
   for (std::size_t at = 0; at < text.size();) {
     const char c = text[at];
@@ -51,21 +54,24 @@ void check_non_ascii_placement(std::string_view text, const std::string& name) {
     switch (state) {
       case State::kCode:
         if (uint8_t(c) >= 0x80) refuse("non-ASCII character outside a string or comment (quote the text)");
-        if (c == '#') state = State::kComment;
-        else if (starts(R"(""")")) state = State::kMultiBasic, step = 3;
-        else if (starts("'''")) state = State::kMultiLiteral, step = 3;
-        else if (c == '"') state = State::kBasic;
-        else if (c == '\'') state = State::kLiteral;
+        if (c == '#') {
+          state = State::kComment;
+        } else if ((c == '"' || c == '\'') && std::string_view("\n=[,{.").find(before) != std::string_view::npos) {
+          if (starts(R"(""")")) state = State::kMultiBasic, step = 3;
+          else if (starts("'''")) state = State::kMultiLiteral, step = 3;
+          else state = c == '"' ? State::kBasic : State::kLiteral;
+        }
+        if (c != ' ' && c != '\t') before = c;
         break;
       case State::kComment:
-        if (c == '\n') state = State::kCode;
+        if (c == '\n') state = State::kCode, before = '\n';
         break;
       case State::kBasic:  // an escape skips the ASCII character after the backslash (\" does not end it)
         if (c == '\\' && at + 1 < text.size() && uint8_t(text[at + 1]) < 0x80 && text[at + 1] != '\n') step = 2;
-        else if (c == '"' || c == '\n') state = State::kCode;  // unterminated: toml++ reports it
+        else if (c == '"' || c == '\n') state = State::kCode, before = c;  // unterminated: toml++ reports it
         break;
       case State::kLiteral:
-        if (c == '\'' || c == '\n') state = State::kCode;
+        if (c == '\'' || c == '\n') state = State::kCode, before = c;
         break;
       case State::kMultiBasic:
         if (trimming) {  // toml++ tests each character for whitespace here
@@ -82,11 +88,11 @@ void check_non_ascii_placement(std::string_view text, const std::string& name) {
           trimming = next == ' ' || next == '\t' || next == '\r' || next == '\n';
           step = trimming ? 1 : 2;
         } else if (starts(R"(""")")) {
-          state = State::kCode, step = 3;
+          state = State::kCode, before = c, step = 3;
         }
         break;
       case State::kMultiLiteral:
-        if (starts("'''")) state = State::kCode, step = 3;
+        if (starts("'''")) state = State::kCode, before = c, step = 3;
         break;
     }
     for (std::size_t i = at; i < at + step && i < text.size(); ++i) {

@@ -136,6 +136,9 @@ TEST_CASE("a non-ASCII character outside TOML strings and comments is refused be
                     Catch::Contains("escape.toml:1:10") && Catch::Contains("after a backslash"));
   CHECK_THROWS_WITH(parse_toml("a = \"\"\"x\\\n\n  \xcd\x9c\"\"\"\n", "trim.toml"),
                     Catch::Contains("trim.toml:3:3") && Catch::Contains("a line-ending backslash trims"));
+  // A quote where no string can start (after '+') is read by toml++ as part of a bare value.
+  CHECK_THROWS_WITH(parse_toml("units=+\"blink\xd0\x90\"\n", "plus.toml"),
+                    Catch::Contains("plus.toml:1:14") && Catch::Contains("outside a string"));
   const toml::table trimmed = parse_toml("a = \"\"\"x\\\n  y\xc3\xa9 \\\\\xc3\xa9\"\"\"\n", "trimmed.toml");
   CHECK(trimmed["a"].value<std::string>() == "xy\xc3\xa9 \\\xc3\xa9");
 }
