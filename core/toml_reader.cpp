@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <string>
 
 #include <fmt/format.h>
 
@@ -107,6 +108,46 @@ void check_non_ascii_placement(std::string_view text, const std::string& name) {
   }
 }
 
+// The characters toml++ 3.3's is_non_ascii_horizontal_whitespace cannot test (its table
+// sends them to __builtin_unreachable).
+bool untestable_by_toml(char32_t c) noexcept {
+  if (c < 0xa1 || c > 0xfefe || c == 0x3000) return false;
+  const auto block = (c - 0xa0) / 0x3fa;
+  return block == 0 || block == 11 || block == 63;
+}
+
+// The text with each such character replaced by '~' (one character for one, so line and
+// column stay), or empty when it has none.
+std::string with_untestable_replaced(std::string_view text) {
+  std::string out;
+  for (std::size_t at = 0; at < text.size();) {
+    const std::size_t length = utf8_sequence_length(text, at);  // text is valid UTF-8 here
+    char32_t c = uint8_t(text[at]);
+    if (length > 1) {
+      c &= 0x7fu >> length;
+      for (std::size_t i = 1; i < length; ++i) c = (c << 6) | (uint8_t(text[at + i]) & 0x3fu);
+    }
+    if (untestable_by_toml(c)) {
+      if (out.empty()) out.assign(text.substr(0, at));
+      out += '~';
+    } else if (!out.empty()) {
+      out.append(text.substr(at, length));
+    }
+    at += length;
+  }
+  return out;
+}
+
+toml::table parse_or_throw(std::string_view text, const std::string& name) {
+  try {
+    return toml::parse(text, name);
+  } catch (const toml::parse_error& e) {
+    const auto& begin = e.source().begin;
+    throw Error(std::string(e.description()),
+                ErrorLocation{.file = name, .line = int64_t(begin.line), .column = int64_t(begin.column)});
+  }
+}
+
 }  // namespace
 
 void check_utf8(std::string_view text, const std::string& name) {
@@ -130,13 +171,12 @@ void check_utf8(std::string_view text, const std::string& name) {
 toml::table parse_toml(std::string_view text, const std::string& name) {
   check_utf8(text, name);
   check_non_ascii_placement(text, name);
-  try {
-    return toml::parse(text, name);
-  } catch (const toml::parse_error& e) {
-    const auto& begin = e.source().begin;
-    throw Error(std::string(e.description()),
-                ErrorLocation{.file = name, .line = int64_t(begin.line), .column = int64_t(begin.column)});
-  }
+  // The scan cannot see every place invalid TOML makes toml++ test a character (it reads
+  // `x = +="é"` on as one bare value): the text with those characters replaced by '~'
+  // must parse first. Then they sit where toml++ never tests them but for what the scan
+  // refused.
+  if (const std::string stand_in = with_untestable_replaced(text); !stand_in.empty()) parse_or_throw(stand_in, name);
+  return parse_or_throw(text, name);
 }
 
 toml::table parse_toml_file(const std::filesystem::path& path) {

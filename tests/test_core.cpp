@@ -139,6 +139,9 @@ TEST_CASE("a non-ASCII character outside TOML strings and comments is refused be
   // A quote where no string can start (after '+') is read by toml++ as part of a bare value.
   CHECK_THROWS_WITH(parse_toml("units=+\"blink\xd0\x90\"\n", "plus.toml"),
                     Catch::Contains("plus.toml:1:14") && Catch::Contains("outside a string"));
+  // Nor where '=' does not separate a key from its value (rig_manifest fuzz finding).
+  CHECK_THROWS_WITH(parse_toml("namshapdeunitected=+=\"sub'''i\xef\xb9\xbfts_de\n", "junk.toml"),
+                    Catch::Contains("junk.toml:1:"));
   const toml::table trimmed = parse_toml("a = \"\"\"x\\\n  y\xc3\xa9 \\\\\xc3\xa9\"\"\"\n", "trimmed.toml");
   CHECK(trimmed["a"].value<std::string>() == "xy\xc3\xa9 \\\xc3\xa9");
 }
