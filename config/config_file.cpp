@@ -10,6 +10,7 @@
 #include <toml++/toml.h>
 
 #include "client/facecap_shm_layout.hpp"
+#include "core/toml_reader.hpp"
 
 namespace facecap::config {
 namespace fs = std::filesystem;
@@ -363,13 +364,10 @@ LoadedConfig load_config(const std::string& file, const std::vector<std::string>
   return load(file, overrides, checks, [&](Loader& loader) {
     if (file.empty()) return;
     try {
-      const toml::table table = toml::parse_file(file);
+      const toml::table table = parse_toml_file(file);
       loader.apply_table(table, "", Origin::kFile, file, fs::path(file).parent_path());
-    } catch (const toml::parse_error& e) {
-      const auto& begin = e.source().begin;
-      const bool missing = !fs::exists(file);
-      loader.problem({.file = file, .line = missing ? -1 : int64_t(begin.line), .column = missing ? -1 : int64_t(begin.column)},
-                     missing ? "cannot open the configuration file" : std::string(e.description()));
+    } catch (const Error& e) {
+      loader.problem(e.where(), e.message());
     }
   });
 }
@@ -378,11 +376,10 @@ LoadedConfig load_config_text(std::string_view text, const std::string& name, co
                               Checks checks) {
   return load(name, overrides, checks, [&](Loader& loader) {
     try {
-      const toml::table table = toml::parse(text, name);
+      const toml::table table = parse_toml(text, name);
       loader.apply_table(table, "", Origin::kFile, name, fs::current_path());
-    } catch (const toml::parse_error& e) {
-      loader.problem({.file = name, .line = int64_t(e.source().begin.line), .column = int64_t(e.source().begin.column)},
-                     std::string(e.description()));
+    } catch (const Error& e) {
+      loader.problem(e.where(), e.message());
     }
   });
 }

@@ -532,6 +532,20 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   bad_rotation.replace(bad_rotation.find("rotation = [["), 13, "rotation = [[2, ");
   CHECK_THROWS_WITH(read_calibration_profile(bad_rotation, "actor.toml"), Catch::Contains("transform.rotation"));
   CHECK_THROWS_WITH(read_calibration_profile("version = 1\n[rig\n", "broken.toml"), Catch::Contains("broken.toml:2"));
+  // A vertex index past int was truncated (2^32 bound vertex 0), and a start past int too.
+  std::string huge_vertex = unsummed;
+  const auto first_vertex = huge_vertex.find("vertices = [") + 12;
+  huge_vertex.replace(first_vertex, huge_vertex.find(',', first_vertex) - first_vertex, "4294967296");
+  CHECK_THROWS_WITH(read_calibration_profile(huge_vertex, "actor.toml"),
+                    Catch::Contains(fmt::format("actor.toml:{}:", line_of(huge_vertex, "vertices = [4294967296"))) &&
+                        Catch::Contains("vertex indices"));
+  std::string huge_start = unsummed;
+  huge_start.replace(huge_start.find("start = "), 8, "start = 4294967296");
+  CHECK_THROWS_WITH(read_calibration_profile(huge_start, "actor.toml"), Catch::Contains("fit.start"));
+  std::string not_utf8 = unsummed;
+  not_utf8.insert(not_utf8.find("a note") + 2, "\xed\xa0\x80");  // a UTF-16 surrogate
+  CHECK_THROWS_WITH(read_calibration_profile(not_utf8, "actor.toml"),
+                    Catch::Contains(fmt::format("actor.toml:{}:", line_of(not_utf8, "note\""))) && Catch::Contains("not valid UTF-8"));
   // A profile for another rig.
   Calibration other = back;
   other.rig_hash ^= 1;

@@ -273,3 +273,12 @@ TEST_CASE("the key reference in docs/config.md is what the schema generates") {
   REQUIRE(b != std::string::npos);
   CHECK(doc.substr(a + begin.size(), b - a - begin.size()) == render_markdown_reference());
 }
+
+TEST_CASE("a configuration that is not UTF-8 is refused at the first bad byte") {
+  const auto path = write_config("latin1.toml", "version = 1\n[outputs.shm]\nname = \"caf\xe9\"\n");
+  const Error e = only_problem(path);
+  CHECK(e.where().file == path.string());
+  CHECK(e.where().line == 3);
+  CHECK(e.where().column == 12);
+  CHECK_THAT(e.message(), Contains("0xe9") && Contains("not valid UTF-8"));
+}
