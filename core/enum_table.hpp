@@ -24,10 +24,6 @@ struct EnumEntry {
   std::string_view name;         // as written in config files and on command lines
   std::string_view description;  // one sentence for --help, the schema and docs
 };
-// Spelled out for clang before 17, which deduces no aggregate's arguments by itself (the
-// fuzz build, fuzz/, uses clang 14).
-template <typename E>
-EnumEntry(E, std::string_view, std::string_view) -> EnumEntry<E>;
 
 // Spelled out for compilers without aggregate deduction (clang before 17).
 template <typename E>

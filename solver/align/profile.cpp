@@ -64,8 +64,11 @@ std::string write_calibration_profile(const Calibration& c) {
   out(fmt::format("scale = {}\nrotation = [{}, {}, {}]\ntranslation = {}\n", c.take_to_rig.scale,
                   vec3(R.row(0).transpose()), vec3(R.row(1).transpose()), vec3(R.row(2).transpose()),
                   vec3(c.take_to_rig.translation)));
-  out("\n[fit]  # rig millimetres\n");
-  out(fmt::format("hull_rms_mm = {}\ntrimmed_rms_mm = {}\nstart = {}\n", c.hull_rms_mm, c.trimmed_rms_mm, c.start_index));
+  if (c.start_index >= 0) {  // only a calibration fitted to a take has a fit to report
+    out("\n[fit]  # rig millimetres\n");
+    out(fmt::format("hull_rms_mm = {}\ntrimmed_rms_mm = {}\nstart = {}\n", c.hull_rms_mm, c.trimmed_rms_mm,
+                    c.start_index));
+  }
   out("\n[stabilise]\nmarkers = [");
   for (std::size_t i = 0; i < c.stable_markers.size(); ++i) out((i ? ", " : "") + quote(c.stable_markers[i]));
   out("]\n");
