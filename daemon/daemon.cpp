@@ -275,7 +275,7 @@ void Daemon::adopt_rebuilt_pipeline() {
     Rebuilt rebuilt = rebuild_.get();
     calibration_ = std::move(rebuilt.calibration);
     loop_->offer_pipeline(std::move(rebuilt.pipeline));
-    spdlog::info("new solver handed to the loop ({}, calibration {})", config_.values.solver.method,
+    spdlog::info("new solver handed to the loop ({}, calibration {})", kSolverMethods.name(config_.values.solver.method),
                  calibration_.source_take);
   } catch (const std::exception& e) {
     spdlog::error("rebuilding the solver failed; the running one stays: {}", e.what());
@@ -407,7 +407,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["rate_hz"] = config_.values.loop.rate_hz;
   j["mode"] = config::kLoopModes.name(config_.values.loop.mode);
   j["rig"] = rig_->name;
-  j["solver"] = config_.values.solver.method;
+  j["solver"] = kSolverMethods.name(config_.values.solver.method);
   j["ticks"] = f.ticks;
   j["frames_solved"] = f.frames_solved;
   j["solved_fps"] = f.solved_fps;

@@ -3,11 +3,8 @@
 // datagrams, each a little-endian u16 length and that many bytes. Whatever completes must
 // be exactly as long as its chunks said, and a frame or schema that passes its checks must
 // be readable to its last byte (ASan and UBSan watch). The message limit is lowered to
-// 1 MiB so that inputs claiming huge messages stay fast.
-//
-// Built by hand (the fuzz/ build is scripts/fuzz's):
-//   clang++ -std=c++20 -g -O1 -fsanitize=fuzzer,address,undefined -I. \
-//     fuzz/udp_stream_reassembly.cpp client/udp_stream_reader.cpp -o udp_stream_reassembly
+// 1 MiB so that inputs claiming huge messages stay fast. Seeds: a schema and a frame with
+// vertices (fuzz_seeds).
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>

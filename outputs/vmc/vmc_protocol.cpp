@@ -3,9 +3,9 @@
 #include <set>
 
 #include <fmt/format.h>
-#include <toml++/toml.h>
 
 #include "core/error.hpp"
+#include "core/toml_reader.hpp"
 #include "formats/arkit.hpp"
 #include "formats/osc.hpp"
 
@@ -18,13 +18,7 @@ constexpr std::size_t kMaxBundleBytes = 65507;
 }  // namespace
 
 std::vector<VmcShape> mapped_vmc_shapes(std::span<const std::string> rig_shape_names, const std::filesystem::path& file) {
-  toml::table doc;
-  try {
-    doc = toml::parse_file(file.string());
-  } catch (const toml::parse_error& e) {
-    const auto& at = e.source().begin;
-    throw Error(fmt::format("{}:{}:{}: {}", file.string(), at.line, at.column, e.description()));
-  }
+  const toml::table doc = parse_toml_file(file);
   const toml::table* names = doc["names"].as_table();
   if (!names) throw Error(fmt::format("{}: no [names] table (rig shape = \"name to send\")", file.string()));
   std::vector<VmcShape> out;
