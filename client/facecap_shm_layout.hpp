@@ -4,7 +4,8 @@
 // the client library (facecap_client.h) instead of touching these structs directly.
 //
 // A segment is one Header at offset 0, then shape_count names of shape_name_bytes each
-// (NUL-padded), then as many ARKit names ("" for a shape without one), then slot_count slots of slot_bytes each. A slot is a SlotHeader, then
+// (NUL-padded), then as many ARKit names ("" for a shape without one), then slot_count
+// slots of slot_bytes each. A slot is a SlotHeader, then
 // shape_count float weights, then vertex_count * 3 float vertex coordinates (x, y, z per
 // vertex); each part starts on a 64-byte boundary. All integers little-endian (the host).
 //

@@ -63,7 +63,8 @@ std::unique_ptr<OutputSink> make_udp(const config::DaemonConfig& c, const SinkCo
   spec.destination.multicast_ttl = int(s.multicast_ttl);
   spec.destination.multicast_interface = s.multicast_interface;
   // Room for a few frames of datagrams in the kernel while the receivers catch up.
-  spec.destination.send_buffer_bytes = int(std::min<uint64_t>(4 * udp::frame_message_bytes(spec.shape_count, spec.vertex_count) + (256 << 10), 8 << 20));
+  const uint64_t frame_bytes = udp::frame_message_bytes(spec.shape_count, spec.vertex_count);
+  spec.destination.send_buffer_bytes = int(std::min<uint64_t>(4 * frame_bytes + (256 << 10), 8 << 20));
   spec.periodic_interval_ns = kNsPerSecond;  // the schema
   formats::udp_stream::StreamSchema schema;
   schema.rig_hash = context.header.rig_hash;
