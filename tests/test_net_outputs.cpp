@@ -5,6 +5,8 @@
 #include <cmath>
 #include <csignal>
 #include <cstring>
+#include <fstream>
+#include <map>
 #include <thread>
 
 #include <arpa/inet.h>
@@ -363,6 +365,33 @@ TEST_CASE("the rate limit sends every n-th frame") {
   sink.stop();
   CHECK(sink.health().offered == 9);
   CHECK(sink.health().delivered == 3);
+}
+
+TEST_CASE("a VMC map file names the shapes it lists, and its mistakes are errors at file:line") {
+  const std::vector<std::string> rig = {"jawOpen", "eyeBlink_L", "eyeBlink_R"};
+  const fs::path dir = fs::temp_directory_path() / fmt::format("facecap-vmc-map-{}", ::getpid());
+  fs::create_directories(dir);
+  const auto write_map = [&](const std::string& text) {
+    std::ofstream(dir / "map.toml", std::ios::trunc) << text;
+    return dir / "map.toml";
+  };
+  const std::vector<VmcShape> shapes = mapped_vmc_shapes(rig, write_map("[names]\neyeBlink_R = \"Blink_R\"\njawOpen = \"A\"\n"));
+  REQUIRE(shapes.size() == 2);  // eyeBlink_L is left out, so not sent
+  std::map<std::string, std::vector<std::size_t>> by_name;
+  for (const VmcShape& shape : shapes) by_name[shape.name] = shape.rig_shapes;
+  CHECK(by_name["A"] == std::vector<std::size_t>{0});
+  CHECK(by_name["Blink_R"] == std::vector<std::size_t>{2});
+
+  const std::string file = (dir / "map.toml").string();
+  CHECK_THROWS_WITH(mapped_vmc_shapes(rig, write_map("[names]\njawOpen = \"A\"\nmouthClose = \"B\"\n")),
+                    Catch::Contains(file + ":3") && Catch::Contains("names.mouthClose") &&
+                        Catch::Contains("the rig has no shape of that name"));
+  CHECK_THROWS_WITH(mapped_vmc_shapes(rig, write_map("[names]\neyeBlink_L = \"A\"\njawOpen = \"A\"\n")),
+                    Catch::Contains(file + ":3") && Catch::Contains("names.jawOpen: \"A\" is given to two shapes"));
+  CHECK_THROWS_WITH(mapped_vmc_shapes(rig, write_map("jawOpen = \"A\"\n")), Catch::Contains("no [names] table"));
+  // The shared TOML reader's errors: where the text stops being TOML.
+  CHECK_THROWS_WITH(mapped_vmc_shapes(rig, write_map("[names]\njawOpen = \n")), Catch::Contains(file + ":2:"));
+  fs::remove_all(dir);
 }
 
 TEST_CASE("oscdump (liblo) decodes our VMC bundle: every ARKit name in order, values the solved weights") {

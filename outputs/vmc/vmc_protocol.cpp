@@ -1,5 +1,6 @@
 #include "outputs/vmc/vmc_protocol.hpp"
 
+#include <algorithm>
 #include <set>
 
 #include <fmt/format.h>
@@ -20,20 +21,19 @@ constexpr std::size_t kMaxBundleBytes = 65507;
 std::vector<VmcShape> mapped_vmc_shapes(std::span<const std::string> rig_shape_names, const std::filesystem::path& file) {
   const toml::table doc = parse_toml_file(file);
   const toml::table* names = doc["names"].as_table();
-  if (!names) throw Error(fmt::format("{}: no [names] table (rig shape = \"name to send\")", file.string()));
+  if (!names) throw file_error(file.string(), "no [names] table (rig shape = \"name to send\")");
   std::vector<VmcShape> out;
   std::set<std::string> sent;
   for (const auto& [key, value] : *names) {
     const std::string rig(key.str());
-    const auto where = [&] { return fmt::format("{}:{}", file.string(), key.source().begin.line); };
+    const auto problem = [&](const std::string& what) {
+      return line_error(file.string(), int64_t(key.source().begin.line), fmt::format("names.{}: {}", rig, what));
+    };
     const auto* text = value.as_string();
-    if (!text || text->get().empty())
-      throw Error(fmt::format("{}: names.{}: the name to send must be a non-empty string", where(), rig));
+    if (!text || text->get().empty()) throw problem("the name to send must be a non-empty string");
     const auto found = std::find(rig_shape_names.begin(), rig_shape_names.end(), rig);
-    if (found == rig_shape_names.end())
-      throw Error(fmt::format("{}: names.{}: the rig has no shape of that name", where(), rig));
-    if (!sent.insert(text->get()).second)
-      throw Error(fmt::format("{}: names.{}: \"{}\" is given to two shapes", where(), rig, text->get()));
+    if (found == rig_shape_names.end()) throw problem("the rig has no shape of that name");
+    if (!sent.insert(text->get()).second) throw problem(fmt::format("\"{}\" is given to two shapes", text->get()));
     out.push_back({text->get(), {std::size_t(found - rig_shape_names.begin())}});
   }
   return out;
