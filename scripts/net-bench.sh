@@ -13,8 +13,11 @@
 #   - how noisy the machine was: missed deadlines, late starts, worst wake-up, load average.
 # Goals: 0 incomplete frames; latency p99 under 3 ms.
 #
-# Usage: scripts/net-bench.sh [--ci] [--seconds N] [--strict] [--build DIR]
-#   --strict   exit 1 when a goal is missed (default: report only)
+# Usage: scripts/net-bench.sh [--ci] [--seconds N] [--strict] [--chrt PRIO] [--build DIR]
+#   --strict     exit 1 when a goal is missed (default: report only)
+#   --chrt PRIO  run facecapd under `chrt -f PRIO`: every thread, the I/O thread included,
+#                at SCHED_FIFO PRIO (the solve thread still takes loop.priority); needs the
+#                right to (root or CAP_SYS_NICE)
 # Exits 77 (skipped) when ../shared/data/ict-face is absent.
 set -euo pipefail
 
@@ -22,13 +25,15 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 build_dir=${FACECAP_BUILD_DIR:-$here/build}
 seconds=60
 strict=0
+wrapper=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --ci) seconds=10 ;;
     --seconds) seconds=$2; shift ;;
     --strict) strict=1 ;;
+    --chrt) wrapper=(chrt -f "$2"); shift ;;
     --build) build_dir=$2; shift ;;
-    *) echo "usage: $0 [--ci] [--seconds N] [--strict] [--build DIR]" >&2; exit 2 ;;
+    *) echo "usage: $0 [--ci] [--seconds N] [--strict] [--chrt PRIO] [--build DIR]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -62,16 +67,22 @@ for port in "$vmc_port" "$livelink_port"; do
 import socket, sys
 s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 s.bind(("127.0.0.1", int(sys.argv[1])))
+open(sys.argv[2], "w").close()
 while True:
-    s.recv(65536)' "$port" &
+    s.recv(65536)' "$port" "$work/bound-$port" &
   pids+=($!)
+done
+# Not before both listen: a send to a port nobody has bound yet is refused (and counted).
+for _ in $(seq 100); do
+  [ -e "$work/bound-$vmc_port" ] && [ -e "$work/bound-$livelink_port" ] && break
+  sleep 0.1
 done
 "$facecap" subscribe --udp "127.0.0.1:$udp_port" > "$work/subscriber.txt" 2>&1 &
 subscriber=$!
 pids+=("$subscriber")
 
-echo "net-bench: ICT rig at 240 Hz for $seconds s, shm + UDP stream with vertices + VMC + Live Link; load average $(cut -d' ' -f1-3 /proc/loadavg) before"
-"$facecapd" \
+echo "net-bench: ICT rig at 240 Hz for $seconds s, shm + UDP stream with vertices + VMC + Live Link${wrapper[*]:+, facecapd under ${wrapper[*]}}; load average $(cut -d' ' -f1-3 /proc/loadavg) before"
+"${wrapper[@]}" "$facecapd" \
   --set "rig.path=$rig" \
   --set source.driver=replay --set "source.replay.file=$work/ict-240.fcrec" --set source.replay.loop=true \
   --set calibration.head_markers=0 \

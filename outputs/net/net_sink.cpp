@@ -105,7 +105,10 @@ void NetSink::wait_for_wake() {
     if (ec) return;  // closed by finish(): the sink may be gone, touch nothing
     uint64_t wakes = 0;
     [[maybe_unused]] const ssize_t read = ::read(wake_fd_, &wakes, sizeof wakes);
-    drain();
+    // Only the frames this wake-up announced (each commit is followed by one write): a
+    // frame queued meanwhile brings its own wake-up. Draining until empty would keep the
+    // I/O thread on one output as long as its frames keep coming, and starve the others.
+    drain(wakes);
     wait_for_wake();
   });
 }
@@ -120,8 +123,10 @@ void NetSink::wait_for_period() {
   });
 }
 
-void NetSink::drain() noexcept {
-  while (SolvedFrame* frame = queue_.front()) {
+void NetSink::drain(uint64_t at_most) noexcept {
+  for (uint64_t n = 0; n < at_most; ++n) {
+    SolvedFrame* frame = queue_.front();
+    if (!frame) return;
     bool sent = false;
     try {
       sent = protocol_->send_frame(*frame, sender_);
@@ -139,7 +144,7 @@ void NetSink::drain() noexcept {
 }
 
 void NetSink::finish() noexcept {
-  drain();
+  drain(queue_.capacity());
   try {
     protocol_->send_periodic(sender_, true);
   } catch (const std::exception& e) {

@@ -83,7 +83,7 @@ class NetSink final : public OutputSink {
  private:
   void wait_for_wake();
   void wait_for_period();
-  void drain() noexcept;
+  void drain(uint64_t at_most) noexcept;  // sends up to at_most queued frames
   void finish() noexcept;
 
   boost::asio::io_context& io_;
