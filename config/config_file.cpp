@@ -6,7 +6,9 @@
 #include <set>
 #include <tuple>
 
+#include <arpa/inet.h>
 #include <fmt/format.h>
+#include <net/if.h>
 #include <toml++/toml.h>
 
 #include "client/facecap_shm_layout.hpp"
@@ -141,6 +143,28 @@ class Loader {
                                                      c.outputs.shm.name));
     if (c.outputs.recording.enabled && c.outputs.recording.directory.empty())
       problem(where("outputs.recording.directory"), "recording is enabled but no directory is given");
+    check_network_output("udp", c.outputs.udp);
+    check_network_output("vmc", c.outputs.vmc);
+    check_network_output("livelink", c.outputs.livelink);
+    if (c.outputs.udp.enabled && !c.outputs.udp.multicast_interface.empty() &&
+        if_nametoindex(c.outputs.udp.multicast_interface.c_str()) == 0)
+      problem(where("outputs.udp.multicast_interface"),
+              fmt::format("this machine has no network interface \"{}\"", c.outputs.udp.multicast_interface));
+    if (c.outputs.vmc.enabled && c.outputs.vmc.names == VmcNames::kMap && c.outputs.vmc.map_file.empty())
+      problem(where("outputs.vmc.map_file"), "outputs.vmc.names is \"map\" but no map file is given");
+    if (c.outputs.livelink.enabled && (c.outputs.livelink.subject_name.empty() || c.outputs.livelink.subject_name.size() > 255))
+      problem(where("outputs.livelink.subject_name"), "the subject name must be 1 to 255 bytes");
+    if (c.outputs.livelink.enabled && c.outputs.livelink.device_id.size() > 255)
+      problem(where("outputs.livelink.device_id"), "the device id must be at most 255 bytes");
+  }
+
+  // An enabled network output needs an address it can send to.
+  void check_network_output(std::string_view name, const NetworkOutput& output) {
+    if (!output.enabled) return;
+    unsigned char parsed[sizeof(in6_addr)];
+    if (inet_pton(AF_INET, output.address.c_str(), parsed) != 1 && inet_pton(AF_INET6, output.address.c_str(), parsed) != 1)
+      problem(where(fmt::format("outputs.{}.address", name)),
+              fmt::format("\"{}\" is not a numeric IPv4 or IPv6 address", output.address));
   }
 
   void problem(ErrorLocation where, std::string what) { problems_.emplace_back(std::move(what), std::move(where)); }
