@@ -15,14 +15,18 @@ set(modules
   "drivers/api|core"
   "drivers/replay|drivers/api,formats,core"
   "drivers/sim|drivers/api,solver,formats,core"
-  "drivers|drivers/api,drivers/sim,drivers/replay,solver,formats,core"
+  "drivers/device|drivers/api,formats,core"
+  "drivers/usb|drivers/device,drivers/api,formats,core"
+  "drivers/hid|drivers/device,drivers/api,formats,core"
+  "drivers/v4l2|drivers/api,formats,core"
+  "drivers|drivers/api,drivers/sim,drivers/replay,drivers/device,drivers/usb,drivers/hid,drivers/v4l2,solver,formats,core"
   "config|drivers/api,solver,client,core"
   "pipeline|config,solver,formats,drivers/api,core"
   "outputs/api|formats,core"
   "outputs/shm|outputs/api,client,formats,core"
   "outputs/recording|outputs/api,formats,core"
   "outputs|outputs/api,outputs/shm,outputs/recording,config,drivers/api,solver,client,formats,core"
-  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,drivers,drivers/api,drivers/sim,drivers/replay,config,solver,formats,client,core"
+  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,drivers,drivers/api,drivers/sim,drivers/replay,drivers/device,drivers/usb,drivers/hid,drivers/v4l2,config,solver,formats,client,core"
 )
 
 if(NOT SOURCE_DIR)

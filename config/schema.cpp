@@ -47,6 +47,22 @@ bool set_string_choice(std::string& member, std::string_view name) {
     &choices                                                                                           \
   }
 
+// The keys of a marker-device section ([source.usb], [source.hid]): the same options, one
+// struct (drivers::MarkerDeviceOptions), for either transport.
+#define FACECAP_MARKER_DEVICE_KEYS(section, transport)                                                         \
+  {FACECAP_KEY(section.vendor_id), .default_value = int64_t{0}, .min = 0, .max = 65535,                        \
+   .description = "Vendor id of the " transport " marker device (TOML takes hex: 0x1209); 0 for any vendor."}, \
+  {FACECAP_KEY(section.product_id), .default_value = int64_t{0}, .min = 0, .max = 65535,                       \
+   .description = "Product id of the device; 0 for any product."},                                            \
+  {FACECAP_KEY(section.serial), .default_value = std::string(),                                                \
+   .description = "Serial number of the device, to pick one of several alike; empty for any."},              \
+  {FACECAP_KEY(section.rate_hz), .default_value = 0.0, .unit = "Hz", .min = 0, .max = 2000,                    \
+   .description = "Frame rate to ask the device for; 0 keeps the rate it states in its info block."},          \
+  {FACECAP_KEY(section.wait_for_device), .default_value = false,                                              \
+   .description = "When no such device is plugged in at start, wait for it (STATUS says so, READY follows "   \
+                  "the first frame) instead of refusing to start. A device that goes away while running is "   \
+                  "always waited for and reopened."}
+
 const std::vector<KeySpec>& schema_rows() {
   static const std::vector<KeySpec> rows = {
       {FACECAP_KEY(version), .default_value = int64_t{1}, .min = 1, .max = 1,
@@ -89,6 +105,9 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(source.replay.source_timestamps), .default_value = true,
        .description = "Pace frames by the file's own timestamps (gaps stay gaps); false paces them at the take's "
                       "nominal rate."},
+
+      FACECAP_MARKER_DEVICE_KEYS(source.usb, "USB"),
+      FACECAP_MARKER_DEVICE_KEYS(source.hid, "HID"),
 
       {FACECAP_KEY(rig.path), .default_value = std::string("builtin"),
        .names_input_file = true,
@@ -203,6 +222,7 @@ const std::vector<KeySpec>& schema_rows() {
   return rows;
 }
 
+#undef FACECAP_MARKER_DEVICE_KEYS
 #undef FACECAP_KEY
 
 const SectionSpec kSections[] = {
@@ -210,6 +230,8 @@ const SectionSpec kSections[] = {
     {"source", "Where marker frames come from."},
     {"source.sim", "The simulated capture system (source.driver = \"sim\")."},
     {"source.replay", "Playing a recorded take (source.driver = \"replay\")."},
+    {"source.usb", "A marker device on USB bulk transfers (source.driver = \"usb\", docs/usb-hid-protocol.md)."},
+    {"source.hid", "A marker device sending HID reports (source.driver = \"hid\", docs/usb-hid-protocol.md)."},
     {"rig", "The blendshape rig the markers are solved onto."},
     {"calibration", "How markers relate to the rig."},
     {"solver", "The per-frame face solve (the paper's Eq. 2-5)."},
