@@ -18,6 +18,9 @@
 #if FACECAP_WITH_USB
 #include "drivers/usb/usb_source.hpp"
 #endif
+#if FACECAP_WITH_V4L2
+#include "drivers/v4l2/v4l2_source.hpp"
+#endif
 
 namespace facecap::drivers {
 namespace {
@@ -47,6 +50,12 @@ std::unique_ptr<MarkerSource> make_hid(const SourceConfig& config, const SourceC
 }
 #endif
 
+#if FACECAP_WITH_V4L2
+std::unique_ptr<MarkerSource> make_v4l2(const SourceConfig& config, const SourceContext&) {
+  return std::make_unique<V4l2Source>(config.v4l2);
+}
+#endif
+
 const DriverEntry kDrivers[] = {
 #if FACECAP_WITH_SIM
     {DriverId::kSim, "nothing: it samples the rig being solved", &make_sim},
@@ -61,6 +70,10 @@ const DriverEntry kDrivers[] = {
 #if FACECAP_WITH_HID
     {DriverId::kHid, "a HID device speaking docs/usb-hid-protocol.md (usage page 0xff46) and read-write access to its "
                      "/dev/hidraw node (a udev rule); hidapi (hidraw)", &make_hid},
+#endif
+#if FACECAP_WITH_V4L2
+    {DriverId::kV4l2, "two or more V4L2 cameras streaming GREY, YUYV or MJPEG (source.v4l2.devices) and their "
+                      "calibration (source.v4l2.calibration, docs/cameras.md); OpenCV", &make_v4l2},
 #endif
 };
 
