@@ -17,7 +17,8 @@ constexpr double kLabelMarginMm = 1.0;      // in favour of the label a point ca
 SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                              const SolveSettings& settings)
     : mapper_(calibration, source.labels, source.units, settings.mapper),
-      solver_(make_solver(settings.method, build_solver_model(rig, calibration.bindings(), settings.params))),
+      solver_(make_solver(settings.method,
+                          build_solver_model(rig, calibration.bindings(), settings.params))),
       mapped_(mapper_.make_output()),
       result_(solver_->make_result()),
       shape_count_(rig.shape_count()),
@@ -72,7 +73,7 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.stage_ns[std::size_t(SolveStage::kStabilise)] = mapped_ns - checked_ns;
   out.markers_used = result_.markers_used;
   out.collision_constraints = result_.collision_constraints;
-  out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | (result_.held ? kSolvedTooFewMarkers : 0u);
+  out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | result_.status;
   out.solve_end_ns = monotonic_now_ns();
 }
 
