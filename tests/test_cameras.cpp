@@ -171,6 +171,26 @@ TEST_CASE("blobs: sub-pixel centroids of Gaussian dots, and streaks, specks and 
   for (const Blob& b : blobs) CHECK(b.roundness > 0.9);
 }
 
+TEST_CASE("blobs: the run labelling finds the components OpenCV's connectedComponentsWithStats does") {
+  // Random speckle with touching, diagonal and U-shaped regions; every filter open.
+  cv::Mat grey(120, 160, CV_8UC1);
+  cv::RNG(9).fill(grey, cv::RNG::UNIFORM, 0, 256);
+  cv::Mat binary, labels, stats, centroids;
+  cv::threshold(grey, binary, 200, 255, cv::THRESH_BINARY);
+  const int count = cv::connectedComponentsWithStats(binary, labels, stats, centroids, 8, CV_32S);
+  BlobDetector detector({.threshold = 200, .min_area_px = 1, .max_area_px = 1 << 20, .min_roundness = 0, .max_blobs = 1 << 20});
+  std::vector<Blob> blobs;
+  detector.detect(grey, blobs);
+  REQUIRE(detector.components() == count - 1);
+  REQUIRE(int(blobs.size()) == count - 1);
+  std::vector<int> ours, theirs;
+  for (const Blob& b : blobs) ours.push_back(b.area_px);
+  for (int label = 1; label < count; ++label) theirs.push_back(stats.at<int>(label, cv::CC_STAT_AREA));
+  std::sort(ours.begin(), ours.end());
+  std::sort(theirs.begin(), theirs.end());
+  CHECK(ours == theirs);
+}
+
 TEST_CASE("the DLT agrees with cv::triangulatePoints on two views") {
   const CameraCalibration rig = test::face_cameras({0, 0, 0});
   Triangulator triangulator(rig);
