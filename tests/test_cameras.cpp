@@ -131,6 +131,9 @@ TEST_CASE("a bad calibration is refused naming the file and the line or the key"
                           "      dt: d\n      data: [1]\n"),
                     Contains("100000000x100000000 matrix is outside 1x1 to 16x16"));
   CHECK_THROWS_WITH(parse("units: inches\ncameras: []\n"), Contains("[units]"));
+  // A key with no name makes OpenCV's reader throw std::length_error (a fuzzer's find).
+  CHECK_THROWS_WITH(parse("cameras:\n  - name: left\n    :\n  - name: right\n"),
+                    Contains("cal.yaml") && Contains("OpenCV cannot read it"));
   CHECK_THROWS_WITH(read_camera_calibration("/nonexistent/cal.yaml"), Contains("/nonexistent/cal.yaml"));
 }
 

@@ -184,6 +184,10 @@ CameraCalibration parse_camera_calibration(std::string_view text, const std::str
     return parse(fs, name);
   } catch (const cv::Exception& e) {
     throw opencv_error(name, e, headed ? 0 : kYamlHeaderLines);
+  } catch (const std::exception& e) {
+    // OpenCV 4.6's YAML reader throws std::length_error on a key with no name ("    :"),
+    // found by fuzz/camera_calibration.cpp.
+    throw file_error(name, fmt::format("OpenCV cannot read it as YAML, XML or JSON ({})", e.what()));
   }
 }
 
