@@ -17,7 +17,11 @@ set(modules
   "drivers/api|core"
   "drivers/replay|drivers/api,formats,core"
   "drivers/sim|drivers/api,solver,solver/params.hpp,formats,core"
-  "drivers|drivers/api,drivers/sim,drivers/replay,solver,solver/params.hpp,formats,core"
+  "drivers/device|drivers/api,formats,core"
+  "drivers/usb|drivers/device,drivers/api,formats,core"
+  "drivers/hid|drivers/device,drivers/api,formats,core"
+  "drivers/v4l2|drivers/api,formats,core"
+  "drivers|drivers/api,drivers/sim,drivers/replay,drivers/device,drivers/usb,drivers/hid,drivers/v4l2,solver,solver/params.hpp,formats,core"
   "config|drivers/api,solver/params.hpp,client,core"
   "pipeline|config,solver,solver/params.hpp,formats,drivers/api,core"
   "outputs/api|formats,core"
@@ -28,7 +32,7 @@ set(modules
   "outputs/vmc|outputs/net,outputs/api,formats,core"
   "outputs/livelink|outputs/net,outputs/api,formats,core"
   "outputs|outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,config,drivers/api,solver/params.hpp,client,formats,core"
-  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,drivers,drivers/api,drivers/sim,drivers/replay,config,solver,solver/params.hpp,formats,client,core"
+  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,drivers,drivers/api,drivers/sim,drivers/replay,drivers/device,drivers/usb,drivers/hid,drivers/v4l2,config,solver,solver/params.hpp,formats,client,core"
 )
 
 if(NOT SOURCE_DIR)

@@ -121,6 +121,14 @@ class Loader {
       problem(where("source.driver"), fmt::format("the {} driver is not built into this facecapd", drivers::kDriverIds.name(c.source.driver)));
     if (c.source.driver == drivers::DriverId::kReplay && c.source.replay.file.empty())
       problem(where("source.replay.file"), "source.driver is \"replay\" but no file is given");
+    if (c.source.driver == drivers::DriverId::kV4l2 && c.source.v4l2.calibration.empty())
+      problem(where("source.v4l2.calibration"), "source.driver is \"v4l2\" but no camera calibration is given");
+    if (c.source.driver == drivers::DriverId::kV4l2 && c.source.v4l2.devices.empty())
+      problem(where("source.v4l2.devices"), "source.driver is \"v4l2\" but no camera devices are named");
+    if (c.source.v4l2.min_blob_area_px > c.source.v4l2.max_blob_area_px)
+      problem(where("source.v4l2.min_blob_area_px"),
+              fmt::format("{} is above source.v4l2.max_blob_area_px ({})", c.source.v4l2.min_blob_area_px,
+                          c.source.v4l2.max_blob_area_px));
     if (c.source.replay.end_s != 0.0 && c.source.replay.end_s <= c.source.replay.start_s)
       problem(where("source.replay.end_s"),
               fmt::format("{} must be after source.replay.start_s ({}) or 0 for the end of the take",

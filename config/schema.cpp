@@ -30,6 +30,22 @@ constexpr SolverParams kSolverDefaults{};
     +[] { return table.choices(); }                                                                    \
   }
 
+// The keys of a marker-device section ([source.usb], [source.hid]): the same options, one
+// struct (drivers::MarkerDeviceOptions), for either transport.
+#define FACECAP_MARKER_DEVICE_KEYS(section, transport)                                                         \
+  {FACECAP_KEY(section.vendor_id), .default_value = int64_t{0}, .min = 0, .max = 65535,                        \
+   .description = "Vendor id of the " transport " marker device (TOML takes hex: 0x1209); 0 for any vendor."}, \
+  {FACECAP_KEY(section.product_id), .default_value = int64_t{0}, .min = 0, .max = 65535,                       \
+   .description = "Product id of the device; 0 for any product."},                                            \
+  {FACECAP_KEY(section.serial), .default_value = std::string(),                                                \
+   .description = "Serial number of the device, to pick one of several alike; empty for any."},              \
+  {FACECAP_KEY(section.rate_hz), .default_value = 0.0, .unit = "Hz", .min = 0, .max = 2000,                    \
+   .description = "Frame rate to ask the device for; 0 keeps the rate it states in its info block."},          \
+  {FACECAP_KEY(section.wait_for_device), .default_value = false,                                              \
+   .description = "When no such device is plugged in at start, wait for it (STATUS says so, READY follows "   \
+                  "the first frame) instead of refusing to start. A device that goes away while running is "   \
+                  "always waited for and reopened."}
+
 const std::vector<KeySpec>& schema_rows() {
   static const std::vector<KeySpec> rows = {
       {FACECAP_KEY(version), .default_value = int64_t{1}, .min = 1, .max = 1,
@@ -72,6 +88,38 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(source.replay.source_timestamps), .default_value = true,
        .description = "Pace frames by the file's own timestamps (gaps stay gaps); false paces them at the take's "
                       "nominal rate."},
+
+      FACECAP_MARKER_DEVICE_KEYS(source.usb, "USB"),
+      FACECAP_MARKER_DEVICE_KEYS(source.hid, "HID"),
+
+      {FACECAP_KEY(source.v4l2.calibration), .default_value = std::string(), .names_input_file = true,
+       .description = "The cameras' calibration: an OpenCV-style YAML file with each camera's matrix, distortion "
+                      "coefficients, rotation and translation (docs/cameras.md). Required when source.driver is "
+                      "\"v4l2\"."},
+      {FACECAP_KEY(source.v4l2.devices), .default_value = std::string(),
+       .description = "The V4L2 device of each calibrated camera, in the calibration's order, comma-separated "
+                      "(\"/dev/v4l/by-id/usb-...-video-index0, ...\": by-id paths survive replugging)."},
+      {FACECAP_CHOICE_KEY(source.v4l2.pixel_format, drivers::kPixelFormats), .default_value = std::string("auto"),
+       .description = "The format asked of the cameras."},
+      {FACECAP_KEY(source.v4l2.frame_rate_hz), .default_value = 0.0, .unit = "Hz", .min = 0, .max = 1000,
+       .description = "Frame rate asked of the cameras; 0 keeps theirs."},
+      {FACECAP_KEY(source.v4l2.threshold), .default_value = int64_t{80}, .min = 1, .max = 254,
+       .description = "Grey level a marker's pixels exceed; the markers' own glow and the background's decide it "
+                      "(docs/cameras.md)."},
+      {FACECAP_KEY(source.v4l2.min_blob_area_px), .default_value = int64_t{4}, .unit = "pixels", .min = 1,
+       .max = 100000, .description = "Smaller blobs are noise, not markers."},
+      {FACECAP_KEY(source.v4l2.max_blob_area_px), .default_value = int64_t{400}, .unit = "pixels", .min = 1,
+       .max = 100000, .description = "Larger blobs are reflections or lamps, not markers."},
+      {FACECAP_KEY(source.v4l2.min_roundness), .default_value = 0.6, .min = 0, .max = 1,
+       .description = "Least minor/major axis ratio of a marker's blob: streaks and merged markers fall below it."},
+      {FACECAP_KEY(source.v4l2.epipolar_tolerance_px), .default_value = 1.0, .unit = "pixels", .min = 0.05, .max = 20,
+       .description = "How far two cameras' blobs may lie from each other's epipolar lines and still be one marker; "
+                      "points must reproject within 1.5 times this."},
+      {FACECAP_KEY(source.v4l2.sync_tolerance_ms), .default_value = 2.0, .unit = "ms", .min = 0, .max = 1000,
+       .description = "Frames of different cameras at most this far apart in time make one set (hardware-synced "
+                      "cameras: well under a period; free-running ones: half a period)."},
+      {FACECAP_KEY(source.v4l2.max_points), .default_value = int64_t{64}, .min = 1, .max = 1024,
+       .description = "3D points a frame carries at most (its unlabelled slots); more are dropped and counted."},
 
       {FACECAP_KEY(rig.path), .default_value = std::string("builtin"),
        .names_input_file = true,
@@ -240,6 +288,7 @@ const std::vector<KeySpec>& schema_rows() {
   return rows;
 }
 
+#undef FACECAP_MARKER_DEVICE_KEYS
 #undef FACECAP_KEY
 
 const SectionSpec kSections[] = {
@@ -247,6 +296,9 @@ const SectionSpec kSections[] = {
     {"source", "Where marker frames come from."},
     {"source.sim", "The simulated capture system (source.driver = \"sim\")."},
     {"source.replay", "Playing a recorded take (source.driver = \"replay\")."},
+    {"source.usb", "A marker device on USB bulk transfers (source.driver = \"usb\", docs/usb-hid-protocol.md)."},
+    {"source.hid", "A marker device sending HID reports (source.driver = \"hid\", docs/usb-hid-protocol.md)."},
+    {"source.v4l2", "Calibrated IR cameras over V4L2 (source.driver = \"v4l2\", docs/cameras.md)."},
     {"rig", "The blendshape rig the markers are solved onto."},
     {"calibration", "How markers relate to the rig."},
     {"solver", "The per-frame face solve (the paper's Eq. 2-5)."},

@@ -187,6 +187,8 @@ std::string Daemon::status_line(const Figures& w) const {
     line += fmt::format(", source frames lost {}", w.source_overwritten + w.source_late);
   if (w.outputs_dropped > 0) line += fmt::format(", outputs dropped {}", w.outputs_dropped);
   if (const std::string flagged = flagged_text(w); !flagged.empty()) line += ", " + flagged;
+  if (const drivers::SourceHealth source = source_->health(); !source.state.empty())
+    line += fmt::format(", source: {}", source.state.view());
   return line;
 }
 
@@ -309,7 +311,9 @@ void Daemon::supervise_once(int64_t now_ns) {
   if (now_ns >= next_status_ns_) {
     const Sample sample = take_sample();
     last_status_ = status_line(figures_between(*status_sample_, sample));
+    // Before READY (a device waited for), systemd shows why the service is still starting.
     if (ready_sent_) notifier_.status(last_status_);
+    else if (!sample.source.state.empty()) notifier_.status(fmt::format("starting: {}", sample.source.state.view()));
     *status_sample_ = sample;
     next_status_ns_ = now_ns + int64_t(c.control.status_interval_s * kNsPerSecond);
   }

@@ -6,11 +6,20 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#if FACECAP_WITH_HID
+#include "drivers/hid/hid_source.hpp"
+#endif
 #if FACECAP_WITH_REPLAY
 #include "drivers/replay/replay_source.hpp"
 #endif
 #if FACECAP_WITH_SIM
 #include "drivers/sim/sim_source.hpp"
+#endif
+#if FACECAP_WITH_USB
+#include "drivers/usb/usb_source.hpp"
+#endif
+#if FACECAP_WITH_V4L2
+#include "drivers/v4l2/v4l2_source.hpp"
 #endif
 
 namespace facecap::drivers {
@@ -29,12 +38,42 @@ std::unique_ptr<MarkerSource> make_replay(const SourceConfig& config, const Sour
 }
 #endif
 
+#if FACECAP_WITH_USB
+std::unique_ptr<MarkerSource> make_usb(const SourceConfig& config, const SourceContext& context) {
+  return std::make_unique<UsbSource>(config.usb, context.markers.labels());
+}
+#endif
+
+#if FACECAP_WITH_HID
+std::unique_ptr<MarkerSource> make_hid(const SourceConfig& config, const SourceContext& context) {
+  return std::make_unique<HidSource>(config.hid, context.markers.labels());
+}
+#endif
+
+#if FACECAP_WITH_V4L2
+std::unique_ptr<MarkerSource> make_v4l2(const SourceConfig& config, const SourceContext&) {
+  return std::make_unique<V4l2Source>(config.v4l2);
+}
+#endif
+
 const DriverEntry kDrivers[] = {
 #if FACECAP_WITH_SIM
     {DriverId::kSim, "nothing: it samples the rig being solved", &make_sim},
 #endif
 #if FACECAP_WITH_REPLAY
     {DriverId::kReplay, "a take file (source.replay.file)", &make_replay},
+#endif
+#if FACECAP_WITH_USB
+    {DriverId::kUsb, "a USB device speaking docs/usb-hid-protocol.md (interface class ff/46/01) and read-write "
+                     "access to its /dev/bus/usb node (a udev rule); libusb-1.0", &make_usb},
+#endif
+#if FACECAP_WITH_HID
+    {DriverId::kHid, "a HID device speaking docs/usb-hid-protocol.md (usage page 0xff46) and read-write access to its "
+                     "/dev/hidraw node (a udev rule); hidapi (hidraw)", &make_hid},
+#endif
+#if FACECAP_WITH_V4L2
+    {DriverId::kV4l2, "two or more V4L2 cameras streaming GREY, YUYV or MJPEG (source.v4l2.devices) and their "
+                      "calibration (source.v4l2.calibration, docs/cameras.md); OpenCV", &make_v4l2},
 #endif
 };
 

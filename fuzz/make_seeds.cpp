@@ -15,6 +15,7 @@
 #include "formats/arkit.hpp"
 #include "formats/c3d.hpp"
 #include "formats/livelinkface.hpp"
+#include "formats/marker_device.hpp"
 #include "formats/recording.hpp"
 #include "formats/trc.hpp"
 #include "formats/udp_stream.hpp"
@@ -200,6 +201,23 @@ int main(int argc, char** argv) {
     write(out / "facecapd_config/defaults.toml", config::render_documented_defaults());
     write(out / "facecapd_config/small.toml",
           "version = 1\n[loop]\nrate_hz = 240\n[source]\ndriver = \"sim\"\n[solver]\nmethod = \"ours\"\n");
+    // A marker device's info block and a frame cut into 64-byte chunks, back to back.
+    formats::device::DeviceFrame device_frame{.frame_no = 7, .device_time = 123456};
+    for (uint16_t k = 0; k < 5; ++k) device_frame.markers.push_back({.id = k, .position = {1.5f * k, -2.0f, 30.0f}});
+    std::string chunks;
+    for (const auto& chunk : formats::device::encode_frame_chunks(device_frame, 64)) chunks.append(chunk.begin(), chunk.end());
+    write(out / "marker_device_packet/frame.bin", chunks);
+    const auto info = formats::device::encode_info({.marker_capacity = 64, .rate_mhz = 120000, .max_rate_mhz = 240000, .max_chunk_bytes = 64, .clock_hz = 1000000});
+    write(out / "marker_device_packet/info.bin", std::string(info.begin(), info.end()));
+    // Two cameras in the `cameras:` layout and OpenCV's stereo layout.
+    const std::string matrix = "!!opencv-matrix\n    rows: 3\n    cols: 3\n    dt: d\n    data: [800, 0, 320, 0, 800, 240, 0, 0, 1]\n";
+    write(out / "camera_calibration/cameras.yaml",
+          "%YAML:1.0\n---\nunits: mm\ncameras:\n  - name: left\n    image_width: 640\n    image_height: 480\n"
+          "    camera_matrix: " + matrix + "    distortion_coefficients: [-0.1, 0.01, 0, 0, 0]\n"
+          "    rotation: [0, 0, 0]\n    translation: [0, 0, 0]\n  - name: right\n    camera_matrix: " + matrix +
+          "    rotation: [0, -0.5, 0]\n    translation: [-250, 0, 60]\n");
+    write(out / "camera_calibration/stereo.yml",
+          "M1: " + matrix + "D1: [0, 0, 0, 0]\nM2: " + matrix + "D2: [0, 0, 0, 0]\nR: [0, 0.5, 0]\nT: [-25, 0, 3]\n");
     const std::string profile = align::write_calibration_profile(small_calibration(rig));
     write(out / "calibration_profile/profile.toml", profile);
     // Without its checksum line, so that mutations are not all refused by the checksum.

@@ -17,6 +17,8 @@ packages=(
   libtomlplusplus-dev libtinygltf-dev nlohmann-json3-dev
   libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev libdtl-dev libpcap-dev
   catch2 libbenchmark-dev
+  libusb-1.0-0-dev libhidapi-dev libopencv-dev linux-libc-dev  # the usb, hid and v4l2 drivers
+  umockdev libumockdev-dev  # the usb and hid drivers' tests fake their devices
   clang libclang-rt-dev  # scripts/fuzz: libFuzzer with ASan and UBSan
   systemd  # systemd-analyze: the test that checks systemd/facecapd.service
   liblo-tools  # oscdump: the tests decode facecapd's VMC output with liblo

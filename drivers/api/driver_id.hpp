@@ -10,11 +10,14 @@
 
 namespace facecap::drivers {
 
-enum class DriverId : uint8_t { kSim, kReplay };
+enum class DriverId : uint8_t { kSim, kReplay, kUsb, kHid, kV4l2 };
 
 inline constexpr EnumTable kDriverIds{std::array{
     EnumEntry{DriverId::kSim, "sim", "simulated capture of the rig: built-in motion, noise, dropouts, head sway"},
     EnumEntry{DriverId::kReplay, "replay", "a recorded take: C3D, TRC or a facecapd recording (.fcrec)"},
+    EnumEntry{DriverId::kUsb, "usb", "a marker device on USB bulk transfers (docs/usb-hid-protocol.md), through libusb"},
+    EnumEntry{DriverId::kHid, "hid", "a marker device sending HID reports (docs/usb-hid-protocol.md), through hidapi"},
+    EnumEntry{DriverId::kV4l2, "v4l2", "calibrated IR cameras over V4L2: blobs triangulated into unlabelled 3D points"},
 }};
 
 // Whether the driver can hand every frame in order as fast as the loop asks for them
@@ -26,6 +29,9 @@ constexpr bool driver_built(DriverId id) noexcept {
   switch (id) {
     case DriverId::kSim: return FACECAP_WITH_SIM;
     case DriverId::kReplay: return FACECAP_WITH_REPLAY;
+    case DriverId::kUsb: return FACECAP_WITH_USB;
+    case DriverId::kHid: return FACECAP_WITH_HID;
+    case DriverId::kV4l2: return FACECAP_WITH_V4L2;
   }
   return false;
 }

@@ -10,6 +10,7 @@
 
 #include "core/frame.hpp"
 #include "core/rt/latest_mailbox.hpp"
+#include "drivers/api/state_line.hpp"
 
 namespace facecap::drivers {
 
@@ -28,7 +29,11 @@ struct SourceHealth {
   uint64_t frames_overwritten = 0;  // replaced by a newer frame before the loop took them
   uint64_t frames_late = 0;         // their time passed before they could be produced or taken
   uint64_t errors = 0;              // malformed input, device errors
+  uint64_t reconnects = 0;          // times a lost device or connection came back
   bool finished = false;            // no more frames will come (a replay that ended)
+  // What the source is doing when an operator should know (waiting for a device, the last
+  // gap in its frames); empty for sources that always just deliver.
+  StateLine state;
 };
 
 struct SourceStart {
@@ -80,7 +85,9 @@ class MailboxSource : public MarkerSource {
   std::atomic<uint64_t> delivered_{0};
   std::atomic<uint64_t> late_{0};
   std::atomic<uint64_t> errors_{0};
+  std::atomic<uint64_t> reconnects_{0};
   std::atomic<bool> finished_{false};
+  SharedStateLine state_;  // written by the source's own thread
 };
 
 }  // namespace facecap::drivers
