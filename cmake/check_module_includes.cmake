@@ -15,14 +15,15 @@ set(modules
   "drivers/api|core"
   "drivers/replay|drivers/api,formats,core"
   "drivers/sim|drivers/api,solver,formats,core"
-  "drivers|drivers/api,drivers/sim,drivers/replay,solver,formats,core"
+  "drivers/natnet|drivers/api,formats,core"
+  "drivers|drivers/api,drivers/sim,drivers/replay,drivers/natnet,solver,formats,core"
   "config|drivers/api,solver,client,core"
   "pipeline|config,solver,formats,drivers/api,core"
   "outputs/api|formats,core"
   "outputs/shm|outputs/api,client,formats,core"
   "outputs/recording|outputs/api,formats,core"
   "outputs|outputs/api,outputs/shm,outputs/recording,config,drivers/api,solver,client,formats,core"
-  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,drivers,drivers/api,drivers/sim,drivers/replay,config,solver,formats,client,core"
+  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,drivers,drivers/api,drivers/sim,drivers/replay,drivers/natnet,config,solver,formats,client,core"
 )
 
 if(NOT SOURCE_DIR)

@@ -30,6 +30,7 @@ struct CalibrationSection {
   int64_t face_markers = 0;
   int64_t head_markers = 0;
   bool stabilise_head = true;
+  bool label_markers = false;
 };
 
 struct SolverSection {

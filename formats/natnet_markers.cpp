@@ -247,7 +247,7 @@ MarkerTake capture_take(const NatNetCapture& capture, const MarkerSelection& sel
   take.format = TakeFormat::kNatNetCapture;
   take.labels = converter.labels();
   take.rate_hz = frame_rate_hz(capture);
-  take.units = std::string("m");  // (from a literal, GCC 12 warns falsely: bug 105329)
+  take.units = std::string(kPositionUnits);
   take.metadata = {{"capture", capture.file_format},
                    {"bitstream", capture.bitstream.major_minor()},
                    {"server", server},

@@ -15,10 +15,11 @@
 //     when no marker set is chosen, every labelled marker seen; a frame without labelled
 //     markers gives its legacy "other markers" instead. Points beyond the slots are
 //     counted and dropped.
-// Positions stay in metres, as NatNet sends them.
+// Positions stay in metres, as NatNet sends them (kPositionUnits).
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -28,6 +29,9 @@
 #include "formats/take.hpp"
 
 namespace facecap::formats::natnet {
+
+// The units of every NatNet position.
+inline constexpr std::string_view kPositionUnits = "m";
 
 struct MarkerSelection {
   std::string marker_set;             // whose markers are the labelled slots; "" for none

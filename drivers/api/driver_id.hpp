@@ -10,11 +10,13 @@
 
 namespace facecap::drivers {
 
-enum class DriverId : uint8_t { kSim, kReplay };
+enum class DriverId : uint8_t { kSim, kReplay, kNatNet };
 
 inline constexpr EnumTable kDriverIds{std::array{
     EnumEntry{DriverId::kSim, "sim", "simulated capture of the rig: built-in motion, noise, dropouts, head sway"},
-    EnumEntry{DriverId::kReplay, "replay", "a recorded take: C3D, TRC or a facecapd recording (.fcrec)"},
+    EnumEntry{DriverId::kReplay, "replay",
+              "a recorded take: C3D, TRC, a facecapd recording (.fcrec) or a NatNet capture (.pcap, .pcapng)"},
+    EnumEntry{DriverId::kNatNet, "natnet", "OptiTrack Motive (or facecap natnet-serve) streaming NatNet over UDP"},
 }};
 
 // Whether the driver can hand every frame in order as fast as the loop asks for them
@@ -26,6 +28,7 @@ constexpr bool driver_built(DriverId id) noexcept {
   switch (id) {
     case DriverId::kSim: return FACECAP_WITH_SIM;
     case DriverId::kReplay: return FACECAP_WITH_REPLAY;
+    case DriverId::kNatNet: return FACECAP_WITH_NATNET;
   }
   return false;
 }
