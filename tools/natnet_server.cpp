@@ -39,6 +39,7 @@ nn::Position position_of(const Eigen::Vector3d& metres) {
 NatNetServer::NatNetServer(ServeOptions options, formats::MarkerTake take)
     : options_(std::move(options)), take_(std::move(take)) {
   if (take_.frames.empty()) throw Error("natnet-serve: the take has no frames");
+  frame_number_ = options_.first_frame;
   rate_hz_ = options_.rate_hz > 0 ? options_.rate_hz : take_.rate_hz;
   if (!(rate_hz_ > 0)) throw Error("natnet-serve: the take states no frame rate: give one with --rate");
   const auto mm = millimetres_per_unit(take_.units);
@@ -289,11 +290,14 @@ int NatNetServer::run() {
   std::signal(SIGINT, on_stop_signal);
   std::signal(SIGTERM, on_stop_signal);
 
-  fmt::print("natnet-serve: {} markers in {} as {} at {:g} Hz, bitstream {}, {} ({}:{}), commands on {}:{}\n",
-             take_.labels.size(), options_.unlabelled ? "unlabelled points" : fmt::format("marker sets {}", fmt::join(set_names_, ", ")),
-             options_.mode == ServeMode::kMulticast ? "multicast" : "unicast", rate_hz_,
-             options_.bitstream.major_minor(), kServeModes.name(options_.mode), drivers::natnet::ipv4_string(group_),
-             options_.data_port, options_.address, options_.command_port);
+  const std::string destination =
+      options_.mode == ServeMode::kMulticast ? fmt::format("to {}:{}", drivers::natnet::ipv4_string(group_), options_.data_port)
+      : options_.mode == ServeMode::kUnicast ? std::string("to each client's command socket")
+                                              : fmt::format("to each client's host at port {}", options_.data_port);
+  fmt::print("natnet-serve: {} markers as {} at {:g} Hz, bitstream {}, {} {}; commands on {}:{}\n", take_.labels.size(),
+             options_.unlabelled ? "unlabelled points" : fmt::format("marker sets {}", fmt::join(set_names_, ", ")),
+             rate_hz_, options_.bitstream.major_minor(), kServeModes.name(options_.mode), destination, options_.address,
+             options_.command_port);
   std::fflush(stdout);
 
   const int64_t period_ns = int64_t(std::llround(double(kNsPerSecond) / rate_hz_));

@@ -60,6 +60,7 @@ struct ServeOptions {
   double seconds = 0.0;              // stop after this long; 0: at the take's end (or never, looping)
   double silence_at_s = 0.0, silence_for_s = 0.0;  // send and answer nothing in [at, at + for)
   double restart_at_s = 0.0;         // restart at this time (0: never)
+  int32_t first_frame = 1;           // the first frame number (Motive's count from its start)
 };
 
 // One datagram to send.
@@ -124,7 +125,7 @@ class NatNetServer {
   std::vector<Eigen::Vector3d> last_seen_;               // per take slot, metres (occluded markers stay there)
   std::map<std::pair<uint32_t, uint16_t>, Client> clients_;
   std::size_t next_index_ = 0;    // take frame streamed next
-  int32_t frame_number_ = 1;
+  int32_t frame_number_ = 1;  // of the next frame
   int models_changed_frames_ = 0;
   ServeCounts counts_;
 };
