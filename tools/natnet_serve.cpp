@@ -70,6 +70,9 @@ void add_natnet_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--silence-at", o->serve.silence_at_s, "Fall silent (send and answer nothing) at this time, s");
   cmd->add_option("--silence-for", o->serve.silence_for_s, "... for this long, s");
   cmd->add_option("--first-frame", o->serve.first_frame, "The first frame's number")->capture_default_str();
+  cmd->add_option("--garbage-rate", o->serve.garbage_rate,
+                  "Also send this many bad datagrams a second where the frames go: random bytes, cut and overlong "
+                  "packets, frames with impossible counts (robustness tests)");
   cmd->add_option("--restart-at", o->serve.restart_at_s,
                   "Restart at this time, s: frame numbers from 1, clients forgotten, \"models changed\"");
   cmd->callback([o, &exit_code] { exit_code = run_serve(*o); });

@@ -24,6 +24,7 @@ constexpr int64_t kHighResClockHz = kNsPerSecond;  // the stamps are CLOCK_MONOT
 constexpr int kModelsChangedFrames = 10;            // frames flagged "models changed" after a restart
 constexpr float kMarkerSize = 0.014f;               // metres: a 14 mm facial marker
 constexpr int32_t kFirstPointId = 50000;            // unlabelled points' ids, as Motive numbers them
+constexpr int64_t kGarbageSliceNs = kNsPerMs;       // bad datagrams go out at least this often
 // Labelled marker flags as Motive 2.1 streams a seen marker of a model (real traffic: 0x0a).
 constexpr int16_t kSeenFlags = int16_t(nn::LabelledMarkerFlag::kPointCloudSolved) | int16_t(nn::LabelledMarkerFlag::kHasModel);
 
@@ -274,6 +275,33 @@ std::vector<Outgoing> NatNetServer::next_frame(int64_t due_ns, int64_t now_ns) {
   return out;
 }
 
+std::vector<Outgoing> NatNetServer::garbage(std::size_t count) {
+  std::vector<Endpoint> destinations;
+  if (options_.mode == ServeMode::kMulticast) destinations.push_back({group_, options_.data_port});
+  for (const auto& [address, client] : clients_)
+    destinations.push_back({address.first, options_.mode == ServeMode::kUnicast ? address.second : options_.data_port});
+  std::vector<Outgoing> out;
+  std::uniform_int_distribution<int> byte(0, 255), length(0, 600);
+  for (std::size_t i = 0; i < count && !destinations.empty(); ++i) {
+    std::vector<char> bytes;
+    const auto payload = [&](std::size_t n) {
+      for (std::size_t j = 0; j < n; ++j) bytes.push_back(char(byte(garbage_rng_)));
+    };
+    const auto header = [&](nn::MessageId id, uint16_t size) {
+      bytes = {char(uint16_t(id) & 0xff), char(uint16_t(id) >> 8), char(size & 0xff), char(size >> 8)};
+    };
+    switch (counts_.garbage % 4) {
+      case 0: payload(std::size_t(length(garbage_rng_))); break;
+      case 1: header(nn::MessageId::kFrameOfData, 400), payload(100); break;
+      case 2: header(nn::MessageId::kKeepAlive, 0), payload(8); break;
+      case 3: header(nn::MessageId::kFrameOfData, 8), bytes.insert(bytes.end(), {1, 0, 0, 0, char(0xff), char(0xff), 0, 0}); break;
+    }
+    out.push_back({destinations[counts_.garbage % destinations.size()], std::move(bytes)});
+    ++counts_.garbage;
+  }
+  return out;
+}
+
 void NatNetServer::restart() {
   frame_number_ = 1;
   clients_.clear();
@@ -331,6 +359,10 @@ int NatNetServer::run() {
                  double(now - start_ns) / kNsPerSecond);
       std::fflush(stdout);
     }
+    if (options_.garbage_rate > 0 && !silent) {
+      const auto due = uint64_t(double(now - start_ns) / kNsPerSecond * options_.garbage_rate);
+      if (due > counts_.garbage) send_all(garbage(std::size_t(due - counts_.garbage)));
+    }
     if (now >= due_ns) {
       if (!options_.loop && next_index_ >= take_.frames.size()) break;
       if (!silent) send_all(next_frame(due_ns, now));
@@ -343,16 +375,16 @@ int NatNetServer::run() {
       }
     }
     now = monotonic_now_ns();
-    if (!drivers::natnet::wait_readable(socket, nullptr, std::max<int64_t>(0, std::min(due_ns, end_ns) - now)))
-      continue;
+    const int64_t wake_ns = std::min({due_ns, end_ns, options_.garbage_rate > 0 ? now + kGarbageSliceNs : INT64_MAX});
+    if (!drivers::natnet::wait_readable(socket, nullptr, std::max<int64_t>(0, wake_ns - now))) continue;
     while (const auto datagram = socket.receive(buffer)) {
       if (silent) continue;
       send_all(answer(std::span<const char>(buffer.data(), datagram->size), datagram->from, monotonic_now_ns()));
     }
   }
   fmt::print("natnet-serve: {} frames streamed ({} datagrams), {} requests answered, {} bad requests, {} frame times "
-             "skipped\n",
-             counts_.frames, counts_.packets, counts_.requests, counts_.bad_requests, counts_.late_frames);
+             "skipped, {} bad datagrams sent\n",
+             counts_.frames, counts_.packets, counts_.requests, counts_.bad_requests, counts_.late_frames, counts_.garbage);
   return 0;
 }
 

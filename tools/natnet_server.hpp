@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <map>
 #include <optional>
+#include <random>
 #include <span>
 #include <string>
 #include <vector>
@@ -61,6 +62,7 @@ struct ServeOptions {
   double silence_at_s = 0.0, silence_for_s = 0.0;  // send and answer nothing in [at, at + for)
   double restart_at_s = 0.0;         // restart at this time (0: never)
   int32_t first_frame = 1;           // the first frame number (Motive's count from its start)
+  double garbage_rate = 0.0;         // bad datagrams a second, sent where the frames go (robustness tests)
 };
 
 // One datagram to send.
@@ -75,6 +77,7 @@ struct ServeCounts {
   uint64_t requests = 0;       // datagrams answered
   uint64_t bad_requests = 0;   // datagrams that did not parse
   uint64_t late_frames = 0;    // frame times skipped to get back on schedule
+  uint64_t garbage = 0;        // bad datagrams sent (garbage_rate)
 };
 
 class NatNetServer {
@@ -92,6 +95,10 @@ class NatNetServer {
   std::vector<Outgoing> next_frame(int64_t due_ns, int64_t now_ns);
   // Restart: frame numbers from 1, clients forgotten, "models changed" on the next frames.
   void restart();
+  // `count` bad datagrams to where frames go, in turn: random bytes, a frame cut short of
+  // what its header says, a packet with bytes beyond what its header says, and a frame
+  // whose header is right but whose first count is not.
+  std::vector<Outgoing> garbage(std::size_t count);
 
   // Streams until the take ends (not looping), options.seconds pass, or SIGINT/SIGTERM;
   // prints what it does to stdout. Returns the exit status. Throws Error for socket setup.
@@ -127,6 +134,7 @@ class NatNetServer {
   std::size_t next_index_ = 0;    // take frame streamed next
   int32_t frame_number_ = 1;  // of the next frame
   int models_changed_frames_ = 0;
+  std::mt19937 garbage_rng_{17};
   ServeCounts counts_;
 };
 
