@@ -109,7 +109,10 @@ void Daemon::start() {
                                                    pipeline::solve_settings_toml(c));
   context.vertex_count = uint32_t(rig_->vertex_count());
   context.loop_rate_hz = c.loop.rate_hz;
+  io_ = std::make_unique<IoThread>();
+  context.io = &io_->context();
   sinks_ = outputs::make_outputs(c, context);
+  io_->start();
   std::vector<outputs::OutputSink*> sinks;
   for (const auto& sink : sinks_) {
     spdlog::info("output {}", sink->description());
@@ -292,7 +295,7 @@ void Daemon::adopt_rebuilt_pipeline() {
     Rebuilt rebuilt = rebuild_.get();
     calibration_ = std::move(rebuilt.calibration);
     loop_->offer_pipeline(std::move(rebuilt.pipeline));
-    spdlog::info("new solver handed to the loop ({}, calibration {})", config_.values.solver.method,
+    spdlog::info("new solver handed to the loop ({}, calibration {})", kSolverMethods.name(config_.values.solver.method),
                  calibration_.source_take);
   } catch (const std::exception& e) {
     spdlog::error("rebuilding the solver failed; the running one stays: {}", e.what());
@@ -407,7 +410,9 @@ void Daemon::shutdown(const std::string& reason) {
   if (const std::string flagged = flagged_text(run); !flagged.empty()) spdlog::info("frames flagged: {}", flagged);
   write_stats_file(run);
   loop_.reset();
+  io_->stop();  // after every sink stopped: none has work left on it
   sinks_.clear();
+  io_.reset();
   source_.reset();
   spdlog::info("stopped in {:.0f} ms", ms(monotonic_now_ns() - begin));
 }
@@ -420,7 +425,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["rate_hz"] = config_.values.loop.rate_hz;
   j["mode"] = config::kLoopModes.name(config_.values.loop.mode);
   j["rig"] = rig_->name;
-  j["solver"] = config_.values.solver.method;
+  j["solver"] = kSolverMethods.name(config_.values.solver.method);
   j["ticks"] = f.ticks;
   j["frames_solved"] = f.frames_solved;
   j["solved_fps"] = f.solved_fps;

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "config/config_file.hpp"
+#include "daemon/io_thread.hpp"
 #include "daemon/solve_loop.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "drivers/api/marker_source.hpp"
@@ -107,6 +108,7 @@ class Daemon {
   std::shared_ptr<const Rig> rig_;
   pipeline::Calibration calibration_;
   std::unique_ptr<drivers::MarkerSource> source_;
+  std::unique_ptr<IoThread> io_;  // before the sinks: they schedule work on it
   std::vector<std::unique_ptr<outputs::OutputSink>> sinks_;
   std::filesystem::path recording_file_;
   std::unique_ptr<SolveLoop> loop_;  // last: it borrows the members above

@@ -253,14 +253,16 @@ MarkerTake capture_take(const NatNetCapture& capture, const MarkerSelection& sel
                    {"server", server},
                    {"marker set", selection.marker_set}};
   if (capture.undecodable > 0)
-    take.warnings.push_back(fmt::format("{} datagrams did not parse as NatNet and were left out", capture.undecodable));
-  if (capture.damage) take.warnings.push_back(*capture.damage);
+    take.warnings.push_back(fmt::format("{}: {} datagrams did not parse as NatNet and were left out", name,
+                                        capture.undecodable));
+  if (capture.damage) take.warnings.push_back(*capture.damage);  // names the file already
   take.frames.reserve(frames);
   const MarkerFrame blank = make_marker_frame(take.labels);
   for (const CapturedMessage& m : capture.messages) {
     if (const auto* definitions = std::get_if<ModelDefinitions>(&m.message.body)) {
       if (definitions != first_definitions)
-        if (std::string note = converter.follow(*definitions); !note.empty()) take.warnings.push_back(std::move(note));
+        if (const std::string note = converter.follow(*definitions); !note.empty())
+          take.warnings.push_back(fmt::format("{}: {}", name, note));
       continue;
     }
     const auto* frame = std::get_if<FrameOfData>(&m.message.body);
@@ -270,6 +272,7 @@ MarkerTake capture_take(const NatNetCapture& capture, const MarkerSelection& sel
     out.source_time_ns = m.capture_time_ns;
   }
   take.first_frame = take.frames.front().frame_no;
+  finish_take(take, name);
   return take;
 }
 

@@ -6,12 +6,19 @@
 
 #include "formats/recording.hpp"
 
+namespace boost::asio {
+class io_context;
+}
+
 namespace facecap::outputs {
 
 struct SinkContext {
   formats::RecordingHeader header;  // pipeline::make_recording_header
   uint32_t vertex_count = 0;        // the rig's vertices (SolvedFrame::vertices when solved)
   double loop_rate_hz = 0.0;        // the solve loop's tick rate
+  // facecapd's one I/O thread (daemon/io_thread.hpp), where network outputs do their
+  // sending; it runs from before the loop's first frame until after every sink stopped.
+  boost::asio::io_context* io = nullptr;
 };
 
 }  // namespace facecap::outputs
