@@ -195,7 +195,7 @@ TEST_CASE("the pipeline labels AnimFace frames shuffled into unlabelled clouds a
   const Rig& rig = ict_rig(ict);
   std::mt19937 rng(17);
   pipeline::SolveSettings labelled_settings;
-  labelled_settings.method = "linear";  // the labelling is under test, not the solver: the fast one
+  labelled_settings.method = SolverMethod::kLinear;  // the labelling is under test, not the solver: the fast one
   labelled_settings.params.collision_region = CollisionRegion::kNone;
   pipeline::SolveSettings cloud_settings = labelled_settings;
   cloud_settings.label_markers = true;

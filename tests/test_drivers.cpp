@@ -64,7 +64,7 @@ ReplayOptions replay_options(const std::filesystem::path& file) {
 
 TEST_CASE("the driver table holds the built drivers in the order of their ids and knows which can lockstep") {
   const auto table = driver_table();
-  REQUIRE(table.size() == std::size_t(FACECAP_WITH_SIM + FACECAP_WITH_REPLAY));
+  REQUIRE(table.size() == std::size_t(FACECAP_WITH_SIM + FACECAP_WITH_REPLAY + FACECAP_WITH_NATNET));
   for (std::size_t i = 1; i < table.size(); ++i) CHECK(table[i - 1].id < table[i].id);
   for (const auto& entry : kDriverIds.entries()) {
     CHECK((find_driver(entry.value) != nullptr) == driver_built(entry.value));
@@ -73,7 +73,9 @@ TEST_CASE("the driver table holds the built drivers in the order of their ids an
   CHECK(kDriverIds.parse("sim") == DriverId::kSim);
   CHECK_FALSE(supports_lockstep(DriverId::kSim));
   CHECK(supports_lockstep(DriverId::kReplay));
-  CHECK_FALSE(kDriverIds.parse("natnet"));
+  CHECK(kDriverIds.parse("natnet") == DriverId::kNatNet);
+  CHECK_FALSE(supports_lockstep(DriverId::kNatNet));
+  CHECK_FALSE(kDriverIds.parse("motive"));
 }
 
 TEST_CASE("the sim is deterministic per frame and seed") {
