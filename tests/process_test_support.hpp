@@ -111,6 +111,16 @@ struct NotifyRecorder {
   void drain() {
     while (auto m = listener.receive(0)) messages.push_back(*m);
   }
+  // Waits for `process` to exit, taking its messages meanwhile (on a full notify socket its
+  // sd_notify would block): its exit status, or -1 after timeout_ns.
+  int wait_exit(ChildProcess& process, int64_t timeout_ns) {
+    const int64_t give_up = monotonic_now_ns() + timeout_ns;
+    for (;;) {
+      drain();
+      if (const int status = process.wait_exit(10 * kNsPerMs); status != -1) return status;
+      if (monotonic_now_ns() >= give_up) return -1;
+    }
+  }
   std::size_t count(const std::string& needle) const {
     std::size_t n = 0;
     for (const auto& m : messages) n += m.find(needle) != std::string::npos ? 1 : 0;

@@ -8,6 +8,7 @@
 // without ../shared/data; the multicast cases skip with a message where loopback
 // multicast does not work.
 #include <algorithm>
+#include <csignal>
 #include <fstream>
 
 #include <catch2/catch.hpp>
@@ -188,7 +189,7 @@ TEST_CASE("facecapd solves a real take from natnet-serve in each handshake style
         INFO(d.log() << serve.log());
         REQUIRE(notify.wait_for("READY=1", 60 * kSecond));
         REQUIRE(notify.wait_for("exposure->receive p50", 10 * kSecond));
-        CHECK(d.wait_exit(30 * kSecond) == 0);
+        CHECK(notify.wait_exit(d, 30 * kSecond) == 0);
         CHECK_THAT(d.log(), Contains(fmt::format("bitstream {}", bitstream)) &&
                                 Contains(std::string(mode) == "multicast" ? "multicast 239.255.42.99" : "unicast to port"));
 
@@ -305,8 +306,8 @@ TEST_CASE("a NatNet server that falls silent is reported in STATUS and followed 
   const Actor jaw = calibrated_actor(dir, animface / "JawMoCap.trc", "jaw");
   const uint16_t port = stage_port(12);
   ChildProcess serve("tools/facecap",
-                     serve_args(jaw.take, port, {"--seconds", "12", "--mode", "unicast", "--marker-set", "Anna",
-                                                 "--silence-at", "2.5", "--silence-for", "2.5"}),
+                     serve_args(jaw.take, port, {"--seconds", "20", "--mode", "unicast", "--marker-set", "Anna",
+                                                 "--silence-for", "2.5"}),
                      {}, dir / "serve.log");
   REQUIRE(serve.wait_for_log("commands on", 10 * kSecond));
   NotifyRecorder notify;
@@ -314,6 +315,8 @@ TEST_CASE("a NatNet server that falls silent is reported in STATUS and followed 
                   {"NOTIFY_SOCKET=" + notify.listener.address()}, dir / "silence.log");
   INFO(d.log() << serve.log());
   REQUIRE(notify.wait_for("READY=1", 60 * kSecond));
+  notify.wait_for("no such message", kSecond);  // a second of frames, then 2.5 s of silence
+  REQUIRE(::kill(serve.pid(), SIGUSR2) == 0);
   REQUIRE(notify.wait_for("no frames from 127.0.0.1 for", 10 * kSecond));
   const std::size_t silent_at = notify.index_of("no frames from 127.0.0.1 for");
   // Back: a STATUS with frames and without the complaint, after the one with it.
@@ -327,7 +330,7 @@ TEST_CASE("a NatNet server that falls silent is reported in STATUS and followed 
                  notify.messages[i].find("STATUS=0.0 fps") == std::string::npos;
   }
   CHECK(resumed);
-  CHECK(d.wait_exit(30 * kSecond) == 0);
+  CHECK(notify.wait_exit(d, 30 * kSecond) == 0);
   CHECK_THAT(d.log(), Contains("natnet: no frames from 127.0.0.1 for 1.0 s: connecting again every second") &&
                           Contains("natnet: frames from 127.0.0.1 again after"));
   const nlohmann::json stats = read_json(dir / "silence-stats.json");
@@ -342,14 +345,18 @@ TEST_CASE("a NatNet server that restarts is followed: frame numbers from 1, the 
   const uint16_t port = stage_port(13);
   // Unicast: the restarted server has forgotten its clients, so the driver must connect again.
   ChildProcess serve("tools/facecap",
-                     serve_args(jaw.take, port, {"--seconds", "12", "--mode", "unicast", "--marker-set", "Anna",
-                                                 "--first-frame", "5000", "--restart-at", "2"}),
+                     serve_args(jaw.take, port, {"--seconds", "20", "--mode", "unicast", "--marker-set", "Anna",
+                                                 "--first-frame", "5000"}),
                      {}, dir / "serve.log");
   REQUIRE(serve.wait_for_log("commands on", 10 * kSecond));
-  DaemonProcess d(facecapd_args(dir, port, "restart", jaw.profile, 5, {"--set", "source.natnet.marker_set=Anna"}), {},
-                  dir / "restart.log");
+  NotifyRecorder notify;
+  DaemonProcess d(facecapd_args(dir, port, "restart", jaw.profile, 5, {"--set", "source.natnet.marker_set=Anna"}),
+                  {"NOTIFY_SOCKET=" + notify.listener.address()}, dir / "restart.log");
   INFO(d.log() << serve.log());
-  CHECK(d.wait_exit(60 * kSecond) == 0);
+  REQUIRE(notify.wait_for("READY=1", 60 * kSecond));
+  notify.wait_for("no such message", kSecond);  // a second of frames before the restart
+  REQUIRE(::kill(serve.pid(), SIGUSR1) == 0);
+  CHECK(notify.wait_exit(d, 60 * kSecond) == 0);
   CHECK_THAT(d.log(), Contains("natnet: 127.0.0.1 restarted (frame numbers went back from"));
   CHECK_THAT(d.log(), Contains("natnet: new model definitions from 127.0.0.1 followed"));
   formats::RecordingReader reader(only_recording(dir / "restart-recordings"));

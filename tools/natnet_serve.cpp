@@ -68,13 +68,14 @@ void add_natnet_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--exposure-latency-ms", o->serve.exposure_latency_ms,
                   "Stamp each frame's camera mid-exposure this long before it is due (a simulated camera latency)");
   cmd->add_option("--silence-at", o->serve.silence_at_s, "Fall silent (send and answer nothing) at this time, s");
-  cmd->add_option("--silence-for", o->serve.silence_for_s, "... for this long, s");
+  cmd->add_option("--silence-for", o->serve.silence_for_s, "... for this long, s (also after SIGUSR2, which silences now)");
   cmd->add_option("--first-frame", o->serve.first_frame, "The first frame's number")->capture_default_str();
   cmd->add_option("--garbage-rate", o->serve.garbage_rate,
                   "Also send this many bad datagrams a second where the frames go: random bytes, cut and overlong "
                   "packets, frames with impossible counts (robustness tests)");
   cmd->add_option("--restart-at", o->serve.restart_at_s,
-                  "Restart at this time, s: frame numbers from 1, clients forgotten, \"models changed\"");
+                  "Restart at this time, s: frame numbers from 1, clients forgotten, \"models changed\" (SIGUSR1: "
+                  "restart now)");
   cmd->callback([o, &exit_code] { exit_code = run_serve(*o); });
 }
 

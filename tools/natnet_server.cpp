@@ -28,8 +28,10 @@ constexpr int64_t kGarbageSliceNs = kNsPerMs;       // bad datagrams go out at l
 // Labelled marker flags as Motive 2.1 streams a seen marker of a model (real traffic: 0x0a).
 constexpr int16_t kSeenFlags = int16_t(nn::LabelledMarkerFlag::kPointCloudSolved) | int16_t(nn::LabelledMarkerFlag::kHasModel);
 
-std::atomic<bool> g_stop{false};
+std::atomic<bool> g_stop{false}, g_restart{false}, g_silence{false};
 extern "C" void on_stop_signal(int) { g_stop.store(true); }
+extern "C" void on_restart_signal(int) { g_restart.store(true); }
+extern "C" void on_silence_signal(int) { g_silence.store(true); }
 
 nn::Position position_of(const Eigen::Vector3d& metres) {
   return {float(metres.x()), float(metres.y()), float(metres.z())};
@@ -317,6 +319,8 @@ int NatNetServer::run() {
   socket.enable_broadcast();  // discovery replies to broadcast senders
   std::signal(SIGINT, on_stop_signal);
   std::signal(SIGTERM, on_stop_signal);
+  std::signal(SIGUSR1, on_restart_signal);
+  std::signal(SIGUSR2, on_silence_signal);
 
   const std::string destination =
       options_.mode == ServeMode::kMulticast ? fmt::format("to {}:{}", drivers::natnet::ipv4_string(group_), options_.data_port)
@@ -332,8 +336,8 @@ int NatNetServer::run() {
   const int64_t start_ns = monotonic_now_ns();
   const auto at = [&](double s) { return start_ns + int64_t(s * kNsPerSecond); };
   const int64_t end_ns = options_.seconds > 0 ? at(options_.seconds) : INT64_MAX;
-  const int64_t silence_from = options_.silence_for_s > 0 ? at(options_.silence_at_s) : INT64_MAX;
-  const int64_t silence_until = options_.silence_for_s > 0 ? at(options_.silence_at_s + options_.silence_for_s) : 0;
+  int64_t silence_from = options_.silence_for_s > 0 && options_.silence_at_s > 0 ? at(options_.silence_at_s) : INT64_MAX;
+  int64_t silence_until = silence_from == INT64_MAX ? 0 : at(options_.silence_at_s + options_.silence_for_s);
   bool restarted = options_.restart_at_s <= 0;
   bool silent = false;
   int64_t due_ns = start_ns;
@@ -345,6 +349,10 @@ int NatNetServer::run() {
   while (!g_stop.load()) {
     int64_t now = monotonic_now_ns();
     if (now >= end_ns) break;
+    if (g_silence.exchange(false)) {
+      silence_from = now;
+      silence_until = now + int64_t(options_.silence_for_s * kNsPerSecond);
+    }
     const bool quiet = now >= silence_from && now < silence_until;
     if (quiet != silent) {
       silent = quiet;
@@ -352,7 +360,7 @@ int NatNetServer::run() {
                  double(now - start_ns) / kNsPerSecond);
       std::fflush(stdout);
     }
-    if (!restarted && now >= at(options_.restart_at_s)) {
+    if ((!restarted && now >= at(options_.restart_at_s)) || g_restart.exchange(false)) {
       restarted = true;
       restart();
       fmt::print("natnet-serve: restarted at {:.1f} s (frame numbers from 1, clients forgotten)\n",

@@ -59,7 +59,7 @@ struct ServeOptions {
   bool unlabelled = false;           // every marker as an unlabelled point (no marker sets)
   double exposure_latency_ms = 0.0;  // mid-exposure stamped this long before a frame is due
   double seconds = 0.0;              // stop after this long; 0: at the take's end (or never, looping)
-  double silence_at_s = 0.0, silence_for_s = 0.0;  // send and answer nothing in [at, at + for)
+  double silence_at_s = 0.0, silence_for_s = 0.0;  // send and answer nothing in [at, at + for) (at 0: on SIGUSR2)
   double restart_at_s = 0.0;         // restart at this time (0: never)
   int32_t first_frame = 1;           // the first frame number (Motive's count from its start)
   double garbage_rate = 0.0;         // bad datagrams a second, sent where the frames go (robustness tests)
@@ -101,7 +101,8 @@ class NatNetServer {
   std::vector<Outgoing> garbage(std::size_t count);
 
   // Streams until the take ends (not looping), options.seconds pass, or SIGINT/SIGTERM;
-  // prints what it does to stdout. Returns the exit status. Throws Error for socket setup.
+  // SIGUSR1 restarts it now and SIGUSR2 silences it now for options.silence_for_s (tests
+  // time these after their client is running). Prints what it does to stdout. Returns the exit status. Throws Error for socket setup.
   int run();
 
   const ServeCounts& counts() const noexcept { return counts_; }
