@@ -162,7 +162,7 @@ TEST_CASE("a 4.1 asset's markers are found by their ids, model-solved flagged, p
   CHECK(counts.unlabelled_dropped == 1);
 }
 
-TEST_CASE("new model definitions are followed by marker name; what changed is said", "[natnet]") {
+TEST_CASE("new model definitions are followed by marker name, and what changed is said", "[natnet]") {
   ModelDefinitions defs;
   defs.models = {MarkerSetDescription{"Face", {"Brow", "Chin", "Nose"}}, RigidBodyDescription{"Face", 4, -1, {}, {}, {}}};
   FrameConverter converter({.marker_set = "Face"}, defs, "10.0.0.5");
@@ -189,7 +189,7 @@ TEST_CASE("new model definitions are followed by marker name; what changed is sa
   CHECK(converter.follow(defs).empty());
 }
 
-TEST_CASE("without a marker set every marker seen is an unlabelled point; legacy other markers when none", "[natnet]") {
+TEST_CASE("without a marker set every marker seen is an unlabelled point, legacy other markers when none", "[natnet]") {
   FrameConverter converter({.unlabelled_slots = 3}, {}, "Motive");
   FrameOfData frame;
   frame.labelled_markers = {{2 << 16 | 1, {0.1f, 0.f, 0.f}, 0.01f, 0, 0.f},
