@@ -133,6 +133,19 @@ class Loader {
       problem(where("source.replay.end_s"),
               fmt::format("{} must be after source.replay.start_s ({}) or 0 for the end of the take",
                           format_value(c.source.replay.end_s), format_value(c.source.replay.start_s)));
+    const drivers::NatNetOptions& natnet = c.source.natnet;
+    for (const auto& [key, value] : {std::pair{"source.natnet.server_address", natnet.server_address},
+                                     std::pair{"source.natnet.discovery_address", natnet.discovery_address},
+                                     std::pair{"source.natnet.multicast_group", natnet.multicast_group}}) {
+      in_addr address{};
+      if (!value.empty() && inet_pton(AF_INET, value.c_str(), &address) != 1)
+        problem(where(key), fmt::format("\"{}\" is not an IPv4 address (like 10.0.0.5)", value));
+      else if (!value.empty() && std::string_view(key) == "source.natnet.multicast_group" && !IN_MULTICAST(ntohl(address.s_addr)))
+        problem(where(key), fmt::format("\"{}\" is not a multicast address (224.0.0.0 to 239.255.255.255)", value));
+    }
+    if (c.source.driver == drivers::DriverId::kNatNet && natnet.marker_set.empty() && natnet.unlabelled_markers == 0)
+      problem(where("source.natnet.marker_set"), "the natnet driver needs a marker set to take, or unlabelled points "
+                                                 "(source.natnet.unlabelled_markers > 0)");
     if (c.loop.mode == LoopMode::kLockstep && !drivers::supports_lockstep(c.source.driver))
       problem(where("loop.mode"), fmt::format("lockstep needs a source that can hand every frame on request; the {} "
                                               "driver runs on its own clock (use mode = \"fixed\")",

@@ -74,8 +74,9 @@ const std::vector<KeySpec>& schema_rows() {
 
       {FACECAP_KEY(source.replay.file), .default_value = std::string(),
        .names_input_file = true,
-       .description = "Take to play: .c3d, .trc or .fcrec (a facecapd recording). Required when source.driver is "
-                      "\"replay\"."},
+       .description = "Take to play: .c3d, .trc, .fcrec (a facecapd recording), or a .pcap/.pcapng capture of "
+                      "NatNet traffic (its markers chosen by source.natnet.marker_set and unlabelled_markers, played "
+                      "at their recorded timing). Required when source.driver is \"replay\"."},
       {FACECAP_KEY(source.replay.speed), .default_value = 1.0, .min = 0, .max = 100,
        .description = "Playback speed relative to real time; 0 hands frames as fast as the loop takes them."},
       {FACECAP_KEY(source.replay.loop), .default_value = false,
@@ -120,6 +121,51 @@ const std::vector<KeySpec>& schema_rows() {
                       "cameras: well under a period; free-running ones: half a period)."},
       {FACECAP_KEY(source.v4l2.max_points), .default_value = int64_t{64}, .min = 1, .max = 1024,
        .description = "3D points a frame carries at most (its unlabelled slots); more are dropped and counted."},
+      {FACECAP_KEY(source.natnet.server_address), .default_value = std::string(),
+       .description = "IPv4 address of the NatNet server (the Motive PC, or `facecap natnet-serve`) that commands "
+                      "go to. Empty: find it by broadcasting NAT_DISCOVERY to source.natnet.discovery_address and "
+                      "take the first server that answers."},
+      {FACECAP_KEY(source.natnet.discovery_address), .default_value = std::string("255.255.255.255"),
+       .description = "Where the discovery broadcast goes when no server_address is given (the subnet's broadcast "
+                      "address, such as 192.168.0.255, keeps it on one network)."},
+      {FACECAP_KEY(source.natnet.command_port), .default_value = int64_t{1510}, .min = 1, .max = 65535,
+       .description = "The server's command port: NAT_CONNECT, model definitions, requests, keep-alives."},
+      {FACECAP_KEY(source.natnet.data_port), .default_value = int64_t{1511}, .min = 1, .max = 65535,
+       .description = "Port frames arrive on when multicast, or unicast from a 3.x-style server (a 4.x unicast "
+                      "server sends them to the command socket instead; both are read). Several facecapd on one host "
+                      "share it."},
+      {FACECAP_KEY(source.natnet.local_interface), .default_value = std::string(),
+       .description = "The interface facing the capture network, by IPv4 address or name (\"eth1\", \"lo\"): "
+                      "commands are sent from it and the multicast group is joined on it. Empty: the system's choice."},
+      {FACECAP_CHOICE_KEY(source.natnet.transport, drivers::kNatNetTransports), .default_value = std::string("auto"),
+       .description = "How frames come: as the server says, or insist on one (a server that says otherwise is an "
+                      "error at start)."},
+      {FACECAP_KEY(source.natnet.multicast_group), .default_value = std::string(),
+       .description = "Multicast group to join; empty: the group the server announces (Motive's default is "
+                      "239.255.42.99)."},
+      {FACECAP_KEY(source.natnet.marker_set), .default_value = std::string(),
+       .description = "The marker set whose markers are solved (the actor's face, by its name in Motive): its "
+                      "labelled markers get Motive's marker names, and only they are taken from a stream that "
+                      "carries several actors. Empty: no labelled markers, only unlabelled points "
+                      "(source.natnet.unlabelled_markers). Also chooses the markers of a capture replayed with "
+                      "source.driver = \"replay\"."},
+      {FACECAP_KEY(source.natnet.unlabelled_markers), .default_value = int64_t{0}, .unit = "markers", .min = 0,
+       .max = 1024,
+       .description = "Slots for unlabelled points after the marker set's (points Motive has not labelled; without a "
+                      "marker set, every point seen); more in a frame are dropped and counted. Give them to the "
+                      "labeller with calibration.label_markers. Also applies to replayed captures."},
+      {FACECAP_CHOICE_KEY(source.natnet.bitstream, drivers::kNatNetBitstreams), .default_value = std::string("server"),
+       .description = "The frame layout: the server's NatNet version, or one asked for (a 4.x server streaming "
+                      "unicast is asked to send it; otherwise frames are only read as it)."},
+      {FACECAP_KEY(source.natnet.connect_timeout_s), .default_value = 5.0, .unit = "s", .min = 0.1, .max = 600,
+       .description = "At start, how long to wait for the server's NAT_SERVERINFO and model definitions; facecapd "
+                      "does not start without them, since the marker names come from them."},
+      {FACECAP_KEY(source.natnet.silence_timeout_s), .default_value = 1.0, .unit = "s", .min = 0.05, .max = 600,
+       .description = "No frame for this long: STATUS says so (\"no frames from 10.0.0.5 for 3.2 s\") and the driver "
+                      "reconnects every second until frames come again, the daemon running throughout."},
+      {FACECAP_KEY(source.natnet.timecode_rate_hz), .default_value = int64_t{30}, .unit = "Hz", .min = 1, .max = 1000,
+       .description = "Frame rate of the SMPTE timecode the server stamps (its timecode generator's); frames do not "
+                      "say it."},
 
       {FACECAP_KEY(rig.path), .default_value = std::string("builtin"),
        .names_input_file = true,
@@ -143,6 +189,12 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(calibration.stabilise_head), .default_value = true, .reload = Reload::kRebuild,
        .description = "Fit the head's rigid motion to the head markers every frame and solve the face in head space "
                       "(needs 3 head markers present; otherwise the last pose is held)."},
+
+      {FACECAP_KEY(calibration.label_markers), .default_value = false, .reload = Reload::kRebuild,
+       .description = "Label every frame afresh: its points go to the labeller, which matches them to the "
+                      "calibration's markers (tracking them from frame to frame, re-acquiring the set from the "
+                      "calibration's neutral shape when it loses it), so that a face is solved from an unlabelled "
+                      "point cloud (source.natnet.unlabelled_markers). The labels a source gives are ignored."},
 
       {FACECAP_CHOICE_KEY(solver.method, kSolverMethods), .default_value = std::string("nonlinear"),
        .reload = Reload::kRebuild,
@@ -299,6 +351,7 @@ const SectionSpec kSections[] = {
     {"source.usb", "A marker device on USB bulk transfers (source.driver = \"usb\", docs/usb-hid-protocol.md)."},
     {"source.hid", "A marker device sending HID reports (source.driver = \"hid\", docs/usb-hid-protocol.md)."},
     {"source.v4l2", "Calibrated IR cameras over V4L2 (source.driver = \"v4l2\", docs/cameras.md)."},
+    {"source.natnet", "OptiTrack NatNet over UDP (source.driver = \"natnet\"; docs/natnet.md)."},
     {"rig", "The blendshape rig the markers are solved onto."},
     {"calibration", "How markers relate to the rig."},
     {"solver", "The per-frame face solve (the paper's Eq. 2-5)."},

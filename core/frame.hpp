@@ -39,6 +39,7 @@ enum MarkerFlags : uint32_t {
   kMarkerUnlabelled = 1u << 1,   // the source gave no identity
   kMarkerRelabelled = 1u << 2,   // identity corrected by the labeller
   kMarkerOutlier = 1u << 3,      // rejected by a robust fit this frame
+  kMarkerModelSolved = 1u << 4,  // position filled in by the source's own model solve, not seen
 };
 
 struct Marker {
@@ -53,6 +54,9 @@ struct MarkerFrame {
   int64_t frame_no = 0;
   int64_t source_time_ns = 0;   // the source's own clock (file time, device time)
   int64_t receive_time_ns = 0;  // CLOCK_MONOTONIC when facecap received it
+  // CLOCK_MONOTONIC estimate of the cameras' mid-exposure (a NatNet stamp moved onto our
+  // clock); 0 when the source does not say.
+  int64_t exposure_time_ns = 0;
   Timecode timecode;
   std::vector<Marker> markers;  // reserved at configure time
 

@@ -22,6 +22,12 @@
 
 namespace facecap::daemon {
 
+// One latency histogram's figures over a window.
+struct LatencyFigures {
+  uint64_t frames = 0;
+  int64_t p50_ns = 0, p99_ns = 0, max_ns = 0;
+};
+
 // A window's or a whole run's figures.
 struct Figures {
   double seconds = 0.0;
@@ -35,9 +41,11 @@ struct Figures {
   int64_t latency_p50_ns = 0;  // source frame received -> slot published
   int64_t latency_p99_ns = 0;
   int64_t latency_max_ns = 0;
+  std::array<LatencyFigures, kLatencyStageCount> latency_chain{};  // by LatencyStage
   double cpu_percent = 0.0;    // whole process, of one CPU
   uint64_t source_overwritten = 0;
   uint64_t source_late = 0;
+  uint64_t source_errors = 0;
   uint64_t outputs_dropped = 0;  // over every output
   std::array<uint64_t, kSolvedFlagCount> flagged_frames{};  // solved frames with each SolvedFlags bit
 };
@@ -92,6 +100,7 @@ class Daemon {
   void write_stats_file(const Figures& run) const;
   void log_pipeline(const pipeline::SolvePipeline& solve, double build_seconds) const;
   static std::string flagged_text(const Figures& window);
+  static std::string latency_chain_text(const Figures& window);
 
   DaemonOptions options_;
   config::LoadedConfig config_;

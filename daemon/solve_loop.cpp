@@ -49,6 +49,16 @@ std::string_view loop_stage_name(LoopStage stage) noexcept {
   return "?";
 }
 
+std::string_view latency_stage_name(LatencyStage stage) noexcept {
+  switch (stage) {
+    case LatencyStage::kExposureToReceive: return "exposure_to_receive";
+    case LatencyStage::kReceiveToSolved: return "receive_to_solved";
+    case LatencyStage::kSolvedToSent: return "solved_to_sent";
+    case LatencyStage::kCount: break;
+  }
+  return "?";
+}
+
 namespace {
 bool any_wants_vertices(const std::vector<outputs::OutputSink*>& sinks) {
   return std::any_of(sinks.begin(), sinks.end(), [](const outputs::OutputSink* s) { return s->wants_vertices(); });
@@ -152,6 +162,11 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
   }
   record_stage(LoopStage::kOutputs, offered_ns - solved_ns);
   latency_.record(offered_ns - marker_frame_.receive_time_ns);
+  if (marker_frame_.exposure_time_ns != 0)
+    latency_chain_[std::size_t(LatencyStage::kExposureToReceive)].record(marker_frame_.receive_time_ns -
+                                                                          marker_frame_.exposure_time_ns);
+  latency_chain_[std::size_t(LatencyStage::kReceiveToSolved)].record(solved_ns - marker_frame_.receive_time_ns);
+  latency_chain_[std::size_t(LatencyStage::kSolvedToSent)].record(offered_ns - solved_ns);
 
   if (phase_lock_) follow_source_phase(now_ns - marker_frame_.receive_time_ns);
   counters_.frames_solved.store(counters_.frames_solved.load(std::memory_order_relaxed) + 1, std::memory_order_release);

@@ -39,6 +39,13 @@ enum class LoopStage : uint8_t { kTake, kSolve, kOutputs, kCount };
 inline constexpr std::size_t kLoopStageCount = std::size_t(LoopStage::kCount);
 std::string_view loop_stage_name(LoopStage stage) noexcept;
 
+// The latency chain of a solved frame, stage by stage: the cameras' mid-exposure (when the
+// source says, as NatNet does) -> received by facecapd -> solved -> offered to every output.
+enum class LatencyStage : uint8_t { kExposureToReceive, kReceiveToSolved, kSolvedToSent, kCount };
+inline constexpr std::size_t kLatencyStageCount = std::size_t(LatencyStage::kCount);
+// "exposure_to_receive", "receive_to_solved", "solved_to_sent".
+std::string_view latency_stage_name(LatencyStage stage) noexcept;
+
 // Written by the solve thread only; read by anyone.
 struct LoopCounters {
   std::atomic<uint64_t> ticks{0};
@@ -92,6 +99,9 @@ class SolveLoop {
 
   const LoopCounters& counters() const noexcept { return counters_; }
   LatencyHistogram::Snapshot latency() const noexcept { return latency_.snapshot(); }
+  LatencyHistogram::Snapshot latency(LatencyStage stage) const noexcept {
+    return latency_chain_[std::size_t(stage)].snapshot();
+  }
   // The outputs in offer order, and what each costs the solve thread.
   std::span<outputs::OutputSink* const> sinks() const noexcept { return sinks_; }
   const SinkTiming& sink_timing(std::size_t i) const noexcept { return sink_timing_[i]; }
@@ -135,7 +145,8 @@ class SolveLoop {
   rt::Handoff<pipeline::SolvePipeline> pipeline_handoff_;
 
   LoopCounters counters_;
-  LatencyHistogram latency_;
+  LatencyHistogram latency_;  // received -> offered to every output
+  std::array<LatencyHistogram, kLatencyStageCount> latency_chain_;
   RealtimeReport realtime_report_;
   std::atomic<bool> realtime_ready_{false};
   std::atomic<bool> stop_requested_{false};

@@ -9,6 +9,9 @@
 #if FACECAP_WITH_HID
 #include "drivers/hid/hid_source.hpp"
 #endif
+#if FACECAP_WITH_NATNET
+#include "drivers/natnet/natnet_source.hpp"
+#endif
 #if FACECAP_WITH_REPLAY
 #include "drivers/replay/replay_source.hpp"
 #endif
@@ -34,7 +37,13 @@ std::unique_ptr<MarkerSource> make_sim(const SourceConfig& config, const SourceC
 
 #if FACECAP_WITH_REPLAY
 std::unique_ptr<MarkerSource> make_replay(const SourceConfig& config, const SourceContext&) {
-  return std::make_unique<ReplaySource>(config.replay);
+  return std::make_unique<ReplaySource>(config.replay, config.natnet);
+}
+#endif
+
+#if FACECAP_WITH_NATNET
+std::unique_ptr<MarkerSource> make_natnet(const SourceConfig& config, const SourceContext&) {
+  return std::make_unique<NatNetSource>(config.natnet);
 }
 #endif
 
@@ -62,6 +71,9 @@ const DriverEntry kDrivers[] = {
 #endif
 #if FACECAP_WITH_REPLAY
     {DriverId::kReplay, "a take file (source.replay.file)", &make_replay},
+#endif
+#if FACECAP_WITH_NATNET
+    {DriverId::kNatNet, "a NatNet server on the network (source.natnet.server_address, or discovery)", &make_natnet},
 #endif
 #if FACECAP_WITH_USB
     {DriverId::kUsb, "a USB device speaking docs/usb-hid-protocol.md (interface class ff/46/01) and read-write "

@@ -86,6 +86,11 @@ Timecode decode_timecode(uint32_t timecode, uint32_t subframe) noexcept {
           int(timecode & 0xffu), subframe};
 }
 
+uint32_t encode_timecode(const Timecode& t) noexcept {
+  return (uint32_t(t.hours) & 0xffu) << 24 | (uint32_t(t.minutes) & 0xffu) << 16 | (uint32_t(t.seconds) & 0xffu) << 8 |
+         (uint32_t(t.frames) & 0xffu);
+}
+
 std::string format_timecode(uint32_t timecode, uint32_t subframe) {
   const Timecode t = decode_timecode(timecode, subframe);
   return fmt::format("{:02}:{:02}:{:02}:{:02}.{}", t.hours, t.minutes, t.seconds, t.frames, t.subframe);

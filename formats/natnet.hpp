@@ -375,6 +375,8 @@ struct Timecode {
   uint32_t subframe = 0;
 };
 Timecode decode_timecode(uint32_t timecode, uint32_t subframe) noexcept;
+// The packed SMPTE field of `t` (each part kept to its byte); its subframe travels apart.
+uint32_t encode_timecode(const Timecode& t) noexcept;
 // "HH:MM:SS:FF.S", as the SDK samples print it.
 std::string format_timecode(uint32_t timecode, uint32_t subframe);
 

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "formats/natnet_request.hpp"
 
 namespace facecap::formats::natnet {
 namespace {
@@ -50,12 +51,12 @@ void choose_bitstream(const std::vector<UdpDatagram>& datagrams, const std::stri
 
 // "Bitstream,3.1" asks a 4.x server for another layout.
 std::optional<Version> requested_bitstream(const Message& message) {
-  const auto* request = std::get_if<Text>(&message.body);
-  constexpr std::string_view kPrefix = "Bitstream,";
-  if (message.id != MessageId::kRequest || !request || !request->text.starts_with(kPrefix)) return std::nullopt;
-  const auto version = parse_version(std::string_view(request->text).substr(kPrefix.size()));
-  if (!version || !is_supported_bitstream(*version)) return std::nullopt;
-  return version;
+  const auto* text = std::get_if<Text>(&message.body);
+  if (message.id != MessageId::kRequest || !text) return std::nullopt;
+  const auto request = parse_request(text->text);
+  if (!request || request->kind != RequestKind::kSetBitstream || !is_supported_bitstream(request->bitstream))
+    return std::nullopt;
+  return request->bitstream;
 }
 
 NatNetCapture decode(UdpCapture& udp, const std::string& name, const CaptureOptions& options) {

@@ -14,6 +14,7 @@
 #include "core/error.hpp"
 #include "core/io.hpp"
 #include "formats/c3d.hpp"
+#include "formats/pcap.hpp"
 #include "formats/recording.hpp"
 #include "formats/text.hpp"
 #include "formats/trc.hpp"
@@ -26,6 +27,7 @@ std::string_view format_name(TakeFormat format) noexcept {
     case TakeFormat::kTrc: return "trc";
     case TakeFormat::kRecording: return "fcrec";
     case TakeFormat::kLiveLinkFace: return "livelinkface";
+    case TakeFormat::kNatNetCapture: return "pcap";
   }
   return "?";
 }
@@ -51,6 +53,7 @@ TakeFormat detect_format(std::span<const char> head, const std::filesystem::path
   if (starts_with_nocase(head, "FCREC\r\n\x1a")) return TakeFormat::kRecording;
   if (starts_with_nocase(head, "PathFileType")) return TakeFormat::kTrc;
   if (starts_with_nocase(head, "Timecode,")) return TakeFormat::kLiveLinkFace;
+  if (looks_like_capture(head)) return TakeFormat::kNatNetCapture;
   if (auto by_extension = format_from_extension(path)) return *by_extension;
   // C3D has no magic string, only 0x50 as its second byte.
   if (head.size() >= 2 && uint8_t(head[1]) == 0x50) return TakeFormat::kC3d;
@@ -179,6 +182,9 @@ MarkerTake read_take(std::span<const char> bytes, const std::string& name) {
     case TakeFormat::kRecording: return take_from_recording(RecordingReader(bytes, name));
     case TakeFormat::kLiveLinkFace:
       throw file_error(name, "a Live Link Face CSV holds blendshape weights, not markers");
+    case TakeFormat::kNatNetCapture:
+      throw file_error(name, "a packet capture: its NatNet frames become markers only for a chosen marker set "
+                             "(the replay driver takes source.natnet.marker_set); facecap inspect shows what it holds");
   }
   throw file_error(name, "unknown format");
 }
@@ -234,6 +240,7 @@ void write_take(const std::filesystem::path& path, const MarkerTake& take, const
     }
     case TakeFormat::kLiveLinkFace:
       throw file_error(path.string(), "markers cannot be written as Live Link Face CSV (it holds blendshape weights)");
+    case TakeFormat::kNatNetCapture: throw file_error(path.string(), "takes are not written as packet captures");
   }
 }
 

@@ -18,9 +18,11 @@
 
 namespace facecap::formats {
 
-enum class TakeFormat : uint8_t { kC3d, kTrc, kRecording, kLiveLinkFace };
+// kNatNetCapture: a packet capture of NatNet traffic (.pcap, .pcapng), whose frames become
+// a take only with a marker selection (natnet_markers.hpp capture_take; the replay driver).
+enum class TakeFormat : uint8_t { kC3d, kTrc, kRecording, kLiveLinkFace, kNatNetCapture };
 
-// "c3d", "trc", "fcrec", "livelinkface".
+// "c3d", "trc", "fcrec", "livelinkface", "pcap".
 std::string_view format_name(TakeFormat format) noexcept;
 
 // By file extension (case-insensitive): .c3d, .trc, .fcrec, .csv.
@@ -90,7 +92,7 @@ void report_progress(const ProgressFn& progress, std::size_t done, std::size_t t
 
 // Reads a marker take in any supported format (chosen by content, then extension).
 // Live Link Face CSV holds blendshape weights, not markers, and is refused here (read it
-// with read_livelinkface). Throws Error.
+// with read_livelinkface), as is a NatNet capture (capture_take). Throws Error.
 MarkerTake read_take(const std::filesystem::path& path);
 MarkerTake read_take(std::span<const char> bytes, const std::string& name);
 

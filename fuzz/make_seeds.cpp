@@ -16,6 +16,8 @@
 #include "formats/c3d.hpp"
 #include "formats/livelinkface.hpp"
 #include "formats/marker_device.hpp"
+#include "formats/natnet.hpp"
+#include "formats/natnet_request.hpp"
 #include "formats/recording.hpp"
 #include "formats/trc.hpp"
 #include "formats/udp_stream.hpp"
@@ -145,6 +147,30 @@ void write_udp_stream(const fs::path& dir) {
   udp_stream::encode_frame(frame, {.schema_id = schema_id, .rig_hash = 0x1234, .publish_time_ns = 1000}, true, message);
   append(udp_stream::datagrams(udp::kFrameMessage, 7, 1, message));
   write(dir / "schema_and_frame.bin", stream);
+// A client's conversation with natnet-serve as the natnet_serve_requests target reads it
+// (each datagram after its 2-byte little-endian length): connect asking for 4.1, the
+// requests, the model definitions, a keep-alive, disconnect.
+std::string natnet_conversation() {
+  namespace nn = natnet;
+  nn::Connect connect;
+  connect.sender.name = nn::NameField::from_text("fuzz seed");
+  connect.sender.natnet_version = {4, 1, 0, 0};
+  connect.options = nn::ConnectOptions{};
+  connect.options->bitstream = {4, 1, 0, 0};
+  std::vector<nn::Message> messages = {{nn::MessageId::kConnect, connect}};
+  for (const char* text : {"Bitstream", "Bitstream,3.1", "FrameRate", "AnalogSamplesPerMocapFrame", "Nonsense"})
+    messages.push_back({nn::MessageId::kRequest, nn::Text{text}});
+  messages.push_back({nn::MessageId::kRequestModelDef, nn::RawPayload{}});
+  messages.push_back({nn::MessageId::kKeepAlive, nn::RawPayload{}});
+  messages.push_back({nn::MessageId::kDisconnect, nn::RawPayload{}});
+  std::string out;
+  for (const nn::Message& m : messages) {
+    const std::vector<char> bytes = nn::encode_message(m, nn::kBitstream41);
+    out += char(bytes.size() & 0xff);
+    out += char(bytes.size() >> 8);
+    out.append(bytes.begin(), bytes.end());
+  }
+  return out;
 }
 
 void write_dictionaries(const fs::path& dir) {
@@ -225,6 +251,7 @@ int main(int argc, char** argv) {
     write(out / "calibration_profile/unchecked.toml",
           profile.substr(0, checksum_at) + profile.substr(profile.find('\n', checksum_at) + 1));
     write_udp_stream(out / "udp_stream_reassembly");
+    write(out / "natnet_serve_requests/conversation.bin", natnet_conversation());
     write_dictionaries(out / "dict");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "fuzz_seeds: %s\n", e.what());

@@ -12,31 +12,45 @@ constexpr double kLabelGateGrowthMm = 1.0;  // per frame a marker stays lost
 constexpr double kLabelMaxGateMm = 20.0;
 constexpr double kLabelMarginMm = 1.0;      // in favour of the label a point came with
 
+// The markers the labeller gives frames to the mapper in: every marker of the calibration
+// with a neutral position, bound ones first.
+std::vector<std::string> calibration_labels(const align::Calibration& calibration) {
+  std::vector<std::string> labels;
+  for (const auto& m : calibration.markers) labels.push_back(m.label);
+  for (const auto& h : calibration.head_markers) labels.push_back(h.label);
+  return labels;
+}
+
 }  // namespace
 
 SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                              const SolveSettings& settings)
-    : mapper_(calibration, source.labels, source.units, settings.mapper),
-      solver_(make_solver(settings.method,
-                          build_solver_model(rig, calibration.bindings(), settings.params))),
+    : mapper_(calibration, settings.label_markers ? calibration_labels(calibration) : source.labels, source.units,
+              settings.mapper),
+      solver_(make_solver(settings.method, build_solver_model(rig, calibration.bindings(), settings.params))),
       mapped_(mapper_.make_output()),
       result_(solver_->make_result()),
       shape_count_(rig.shape_count()),
       vertex_count_(rig.vertex_count()) {
-  if (settings.check_labels) {
-    // Predictions start from the calibration frame, in the source's units.
+  label_markers_ = settings.label_markers;
+  if (settings.check_labels || label_markers_) {
+    // The labeller's markers: the source's slots for the check, the calibration's when
+    // labelling. Predictions start from the calibration frame, in the source's units.
+    const std::vector<std::string> labels = label_markers_ ? calibration_labels(calibration) : source.labels;
     const double mm = calibration.take_mm_per_unit * mapper_.source_to_take();  // per source unit
-    Eigen::Matrix3Xd reference = Eigen::Matrix3Xd::Zero(3, Eigen::Index(source.labels.size()));
-    for (std::size_t s = 0; s < source.labels.size(); ++s)
-      if (const Eigen::Vector3d* neutral = calibration.neutral_of(source.labels[s]))
+    Eigen::Matrix3Xd reference = Eigen::Matrix3Xd::Zero(3, Eigen::Index(labels.size()));
+    for (std::size_t s = 0; s < labels.size(); ++s)
+      if (const Eigen::Vector3d* neutral = calibration.neutral_of(labels[s]))
         reference.col(Eigen::Index(s)) = *neutral / mapper_.source_to_take();
     align::LabellerParams params;
     params.gate = kLabelGateMm / mm;
     params.gate_growth = kLabelGateGrowthMm / mm;
     params.max_gate = kLabelMaxGateMm / mm;
     params.label_margin = kLabelMarginMm / mm;
-    labeller_.emplace(source.labels, std::move(reference), params);
-    checked_.markers.resize(source.labels.size());
+    params.max_points = std::max<int>(1, int(source.labels.size()));
+    labeller_.emplace(labels, std::move(reference), params);
+    checked_ = make_marker_frame(labels);
+    points_.resize(source.labels.size());
   }
 }
 
@@ -54,7 +68,13 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.solve_start_ns = monotonic_now_ns();
 
   const MarkerFrame* frame = &markers;
-  if (labeller_ && markers.markers.size() == checked_.markers.size()) {
+  if (labeller_ && label_markers_) {
+    std::size_t n = 0;
+    for (const Marker& m : markers.markers)
+      if (m.present() && n < points_.size()) points_[n++] = m.position;
+    label_stats_ = labeller_->label(std::span<const Eigen::Vector3d>(points_.data(), n), checked_);
+    frame = &checked_;
+  } else if (labeller_ && markers.markers.size() == checked_.markers.size()) {
     checked_ = markers;  // same marker count: the copy reuses checked_'s storage
     label_stats_ = labeller_->check(checked_);
     frame = &checked_;

@@ -34,6 +34,10 @@ struct SolveSettings {
   // Check each frame's labels against the markers' predicted positions and correct
   // swaps before mapping (align::MarkerLabeller::check).
   bool check_labels = false;
+  // Label every frame afresh (align::MarkerLabeller::label): its present points, whatever
+  // labels they came with, are matched to the calibration's markers, so that a face is
+  // solved from an unlabelled point cloud. Implies the check.
+  bool label_markers = false;
 };
 
 class SolvePipeline {
@@ -56,7 +60,7 @@ class SolvePipeline {
   // The last frame's mapping and solve, for tools that report more than a SolvedFrame.
   const MappedFrame& mapped() const noexcept { return mapped_; }
   const SolveResult& result() const noexcept { return result_; }
-  // The last frame's label check (zeros without check_labels).
+  // The last frame's label check or labelling (zeros without either).
   const align::LabelStats& label_stats() const noexcept { return label_stats_; }
   std::string_view method() const noexcept { return solver_->name(); }
 
@@ -64,7 +68,9 @@ class SolvePipeline {
   MarkerMapper mapper_;
   std::unique_ptr<FaceSolver> solver_;
   std::optional<align::MarkerLabeller> labeller_;
-  MarkerFrame checked_;  // the frame after the label check, sized at construction
+  bool label_markers_ = false;
+  MarkerFrame checked_;  // the frame after the label check or labelling, sized at construction
+  std::vector<Eigen::Vector3d> points_;  // label_markers: a frame's present points, sized to its slots
   MappedFrame mapped_;
   SolveResult result_;
   align::LabelStats label_stats_;

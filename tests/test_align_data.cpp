@@ -11,6 +11,7 @@
 #include "solver/align/calibrate.hpp"
 #include "solver/align/label.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/solve_pipeline.hpp"
 #include "solver/align/neutral.hpp"
 #include "solver/align/calibrate_take.hpp"
 #include "solver/align/stabilise.hpp"
@@ -185,4 +186,52 @@ TEST_CASE("AnimFace swapped labels are corrected by the label check", "[data]") 
                                            << flagged << " of " << swapped_frames << " swapped frames flagged");
   CHECK(double(correct) / double(c.take.frames.size()) >= 0.99);
   CHECK(flagged == swapped_frames);
+}
+
+TEST_CASE("the pipeline labels AnimFace frames shuffled into unlabelled clouds and solves them as the labelled take",
+          "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
+  const Rig& rig = ict_rig(ict);
+  std::mt19937 rng(17);
+  pipeline::SolveSettings labelled_settings;
+  labelled_settings.method = SolverMethod::kLinear;  // the labelling is under test, not the solver: the fast one
+  labelled_settings.params.collision_region = CollisionRegion::kNone;
+  pipeline::SolveSettings cloud_settings = labelled_settings;
+  cloud_settings.label_markers = true;
+  for (const char* name : kTakes) {
+    const Calibrated c = calibrate_file(rig, animface / (std::string(name) + ".trc"));
+    pipeline::SolvePipeline labelled(rig, c.calibration, {c.take.labels, c.take.units}, labelled_settings);
+    // The cloud source: as many unlabelled slots as the take has markers, points in random order.
+    std::vector<std::string> slots;
+    for (std::size_t k = 0; k < c.take.labels.size(); ++k) slots.push_back("unlabelled_" + std::to_string(k + 1));
+    pipeline::SolvePipeline cloud(rig, c.calibration, {slots, c.take.units}, cloud_settings);
+    SolvedFrame from_labels = labelled.make_solved_frame(false), from_cloud = cloud.make_solved_frame(false);
+    MarkerFrame shuffled = make_marker_frame(slots);
+    std::size_t same = 0, all_assigned = 0;
+    double worst = 0.0;
+    for (const MarkerFrame& f : c.take.frames) {
+      std::vector<Eigen::Vector3d> points;
+      for (const Marker& m : f.markers)
+        if (m.present()) points.push_back(m.position);
+      std::shuffle(points.begin(), points.end(), rng);
+      for (std::size_t k = 0; k < slots.size(); ++k) {
+        Marker& m = shuffled.markers[k];
+        m.flags = k < points.size() ? kMarkerUnlabelled : kMarkerUnlabelled | kMarkerMissing;
+        m.position = k < points.size() ? points[k] : Eigen::Vector3d::Constant(std::nan(""));
+      }
+      labelled.process(f, from_labels);
+      cloud.process(shuffled, from_cloud);
+      all_assigned += cloud.label_stats().assigned == int(points.size());
+      const double difference = (from_labels.weights - from_cloud.weights).cwiseAbs().maxCoeff();
+      same += difference == 0.0;
+      worst = std::max(worst, difference);
+    }
+    const double n = double(c.take.frames.size());
+    WARN(name << ": every point labelled in " << all_assigned << " of " << c.take.frames.size()
+              << " frames; weights identical to the labelled take's in " << same << ", largest difference " << worst);
+    CHECK(double(all_assigned) / n >= 0.99);
+    CHECK(double(same) / n >= 0.99);
+    CHECK(worst < 0.05);
+  }
 }

@@ -64,7 +64,7 @@ ReplayOptions replay_options(const std::filesystem::path& file) {
 
 TEST_CASE("the driver table holds the built drivers in the order of their ids and knows which can lockstep") {
   const auto table = driver_table();
-  REQUIRE(table.size() == std::size_t(FACECAP_WITH_SIM + FACECAP_WITH_REPLAY + FACECAP_WITH_USB + FACECAP_WITH_HID +
+  REQUIRE(table.size() == std::size_t(FACECAP_WITH_SIM + FACECAP_WITH_REPLAY + FACECAP_WITH_NATNET + FACECAP_WITH_USB + FACECAP_WITH_HID +
                                       FACECAP_WITH_V4L2));
   for (std::size_t i = 1; i < table.size(); ++i) CHECK(table[i - 1].id < table[i].id);
   for (const auto& entry : kDriverIds.entries()) {
@@ -74,9 +74,11 @@ TEST_CASE("the driver table holds the built drivers in the order of their ids an
   CHECK(kDriverIds.parse("sim") == DriverId::kSim);
   CHECK_FALSE(supports_lockstep(DriverId::kSim));
   CHECK(supports_lockstep(DriverId::kReplay));
+  CHECK(kDriverIds.parse("natnet") == DriverId::kNatNet);
+  CHECK_FALSE(supports_lockstep(DriverId::kNatNet));
+  CHECK_FALSE(kDriverIds.parse("motive"));
   CHECK_FALSE(supports_lockstep(DriverId::kUsb));
   CHECK(kDriverIds.parse("v4l2") == DriverId::kV4l2);
-  CHECK_FALSE(kDriverIds.parse("natnet"));
 }
 
 TEST_CASE("the sim is deterministic per frame and seed") {

@@ -1,121 +1,23 @@
 // facecapd as a process, the way systemd runs it: NOTIFY_SOCKET and WATCHDOG_USEC from a
 // socket this test owns, frames read through the client library, SIGTERM and SIGHUP.
 #include <csignal>
-#include <fstream>
-#include <sstream>
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include "client/facecap_client.hpp"
 #include "core/time.hpp"
-#include "daemon/notify_listener.hpp"
 #include "formats/recording.hpp"
 #include "solver/builtin_face.hpp"
-#include "tests/test_support.hpp"
-
-extern char** environ;
+#include "tests/process_test_support.hpp"
 
 using namespace facecap;
+using namespace facecap::test;
 using Catch::Contains;
 namespace fs = std::filesystem;
 
 namespace {
-
-const std::string kFacecapd = std::string(FACECAP_BINARY_DIR) + "/daemon/facecapd";
-
-std::string read_text(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-// facecapd started with extra environment, its output in a log file.
-class DaemonProcess {
- public:
-  DaemonProcess(const std::vector<std::string>& args, const std::vector<std::string>& env, const fs::path& log)
-      : log_(log) {
-    std::vector<std::string> argv_storage = {kFacecapd};
-    argv_storage.insert(argv_storage.end(), args.begin(), args.end());
-    std::vector<char*> argv;
-    for (auto& a : argv_storage) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    std::vector<std::string> env_storage = env;
-    for (char** e = environ; *e; ++e) env_storage.emplace_back(*e);
-    std::vector<char*> envp;
-    for (auto& e : env_storage) envp.push_back(e.data());
-    envp.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
-    const int rc = posix_spawn(&pid_, kFacecapd.c_str(), &actions, nullptr, argv.data(), envp.data());
-    posix_spawn_file_actions_destroy(&actions);
-    REQUIRE(rc == 0);
-  }
-  ~DaemonProcess() {
-    if (!exited_) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  pid_t pid() const { return pid_; }
-  // Exit status, or -1 if still running after timeout_ns.
-  int wait_exit(int64_t timeout_ns) {
-    const int64_t give_up = monotonic_now_ns() + timeout_ns;
-    for (;;) {
-      int status = 0;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-        exited_ = true;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-      }
-      if (monotonic_now_ns() >= give_up) return -1;
-      usleep(1000);
-    }
-  }
-  std::string log() const { return read_text(log_); }
-
- private:
-  pid_t pid_ = 0;
-  bool exited_ = false;
-  fs::path log_;
-};
-
-// Collects sd_notify messages and waits for particular ones.
-struct NotifyRecorder {
-  daemon::NotifyListener listener;
-  std::vector<std::string> messages;
-
-  bool wait_for(const std::string& needle, int64_t timeout_ns, std::size_t from = 0) {
-    const int64_t give_up = monotonic_now_ns() + timeout_ns;
-    for (;;) {
-      for (std::size_t i = from; i < messages.size(); ++i)
-        if (messages[i].find(needle) != std::string::npos) return true;
-      const int64_t left = give_up - monotonic_now_ns();
-      if (left <= 0) return false;
-      if (auto m = listener.receive(std::min<int64_t>(left, 50 * kNsPerMs))) messages.push_back(*m);
-    }
-  }
-  void drain() {
-    while (auto m = listener.receive(0)) messages.push_back(*m);
-  }
-  std::size_t count(const std::string& needle) const {
-    std::size_t n = 0;
-    for (const auto& m : messages) n += m.find(needle) != std::string::npos ? 1 : 0;
-    return n;
-  }
-  std::size_t index_of(const std::string& needle) const {
-    for (std::size_t i = 0; i < messages.size(); ++i)
-      if (messages[i].find(needle) != std::string::npos) return i;
-    return messages.size();
-  }
-};
 
 std::string unique_shm(const std::string& what) { return fmt::format("facecap-test-{}-{}", ::getpid(), what); }
 

@@ -19,5 +19,8 @@ void add_subscribe_command(CLI::App& app, int& exit_code);
 void add_daemon_demo_command(CLI::App& app, int& exit_code);
 void add_loopcheck_command(CLI::App& app, int& exit_code);
 void add_diff_command(CLI::App& app, int& exit_code);
+#if FACECAP_WITH_NATNET
+void add_natnet_serve_command(CLI::App& app, int& exit_code);
+#endif
 
 }  // namespace facecap::tools

@@ -3,7 +3,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <optional>
 
 #include <fmt/format.h>
@@ -30,17 +29,12 @@ struct LoadedFile {
   std::optional<formats::natnet::NatNetCapture> capture;
 };
 
-bool is_capture(const std::filesystem::path& path) {
-  char head[4] = {};
-  std::ifstream(path, std::ios::binary).read(head, sizeof head);
-  return formats::looks_like_capture(head);
-}
-
 LoadedFile load(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options) {
   LoadedFile loaded;
-  if (is_capture(path)) {
+  const TakeFormat format = formats::detect_file_format(path);
+  if (format == TakeFormat::kNatNetCapture) {
     loaded.capture = formats::natnet::read_natnet_capture(path, capture_options);
-  } else if (formats::detect_file_format(path) == TakeFormat::kLiveLinkFace) {
+  } else if (format == TakeFormat::kLiveLinkFace) {
     loaded.face = formats::read_livelinkface(path);
   } else {
     loaded.markers = formats::read_take(path);

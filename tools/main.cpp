@@ -30,6 +30,9 @@ int main(int argc, char** argv) {
   facecap::tools::add_daemon_demo_command(app, exit_code);
   facecap::tools::add_loopcheck_command(app, exit_code);
   facecap::tools::add_diff_command(app, exit_code);
+#if FACECAP_WITH_NATNET
+  facecap::tools::add_natnet_serve_command(app, exit_code);
+#endif
 
   try {
     app.parse(argc, argv);

@@ -10,11 +10,13 @@
 
 namespace facecap::drivers {
 
-enum class DriverId : uint8_t { kSim, kReplay, kUsb, kHid, kV4l2 };
+enum class DriverId : uint8_t { kSim, kReplay, kNatNet, kUsb, kHid, kV4l2 };
 
 inline constexpr EnumTable kDriverIds{std::array{
     EnumEntry{DriverId::kSim, "sim", "simulated capture of the rig: built-in motion, noise, dropouts, head sway"},
-    EnumEntry{DriverId::kReplay, "replay", "a recorded take: C3D, TRC or a facecapd recording (.fcrec)"},
+    EnumEntry{DriverId::kReplay, "replay",
+              "a recorded take: C3D, TRC, a facecapd recording (.fcrec) or a NatNet capture (.pcap, .pcapng)"},
+    EnumEntry{DriverId::kNatNet, "natnet", "OptiTrack Motive (or facecap natnet-serve) streaming NatNet over UDP"},
     EnumEntry{DriverId::kUsb, "usb", "a marker device on USB bulk transfers (docs/usb-hid-protocol.md), through libusb"},
     EnumEntry{DriverId::kHid, "hid", "a marker device sending HID reports (docs/usb-hid-protocol.md), through hidapi"},
     EnumEntry{DriverId::kV4l2, "v4l2", "calibrated IR cameras over V4L2: blobs triangulated into unlabelled 3D points"},
@@ -29,6 +31,7 @@ constexpr bool driver_built(DriverId id) noexcept {
   switch (id) {
     case DriverId::kSim: return FACECAP_WITH_SIM;
     case DriverId::kReplay: return FACECAP_WITH_REPLAY;
+    case DriverId::kNatNet: return FACECAP_WITH_NATNET;
     case DriverId::kUsb: return FACECAP_WITH_USB;
     case DriverId::kHid: return FACECAP_WITH_HID;
     case DriverId::kV4l2: return FACECAP_WITH_V4L2;

@@ -8,14 +8,22 @@
 
 #include "core/error.hpp"
 #include "core/time.hpp"
+#include "formats/natnet_markers.hpp"
 
 namespace facecap::drivers {
 
-ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options)) {}
+ReplaySource::ReplaySource(ReplayOptions options, NatNetOptions natnet)
+    : options_(std::move(options)), natnet_(std::move(natnet)) {}
 
 void ReplaySource::open() {
   if (options_.file.empty()) throw Error("replay needs a file (source.replay.file)");
-  take_ = formats::read_take(options_.file);
+  if (formats::detect_file_format(options_.file) == formats::TakeFormat::kNatNetCapture) {
+    const formats::natnet::MarkerSelection selection{natnet_.marker_set, std::size_t(natnet_.unlabelled_markers),
+                                                     uint16_t(natnet_.timecode_rate_hz)};
+    take_ = formats::natnet::capture_take(formats::natnet::read_natnet_capture(options_.file), selection, options_.file);
+  } else {
+    take_ = formats::read_take(options_.file);
+  }
   for (const auto& warning : take_.warnings) spdlog::warn("{}", warning);
   if (take_.frames.empty()) throw file_error(options_.file, "the take has no frames");
   formats::check_take_shape(take_, options_.file);

@@ -1,7 +1,10 @@
 #pragma once
-// Plays a recorded take (C3D, TRC or a facecapd recording) as a marker source. The take
-// is read whole at open(); the loop then pulls frames by time (speed, window, loop,
-// source timestamps) or, in lockstep, one after another as fast as it solves them.
+// Plays a recorded take (C3D, TRC or a facecapd recording) as a marker source, or a
+// packet capture of NatNet traffic: its datagrams through the NatNet parser and the
+// driver's frame conversion (formats/natnet_markers.hpp) with the NatNet options' marker
+// selection, each frame at its capture time. The take is read whole at open(); the loop
+// then pulls frames by time (speed, window, loop, source timestamps) or, in lockstep, one
+// after another as fast as it solves them.
 #include <atomic>
 #include <vector>
 
@@ -13,7 +16,8 @@ namespace facecap::drivers {
 
 class ReplaySource final : public MarkerSource {
  public:
-  explicit ReplaySource(ReplayOptions options);
+  // `natnet`: which markers of a NatNet capture to take (marker set, unlabelled slots).
+  ReplaySource(ReplayOptions options, NatNetOptions natnet = {});
 
   void open() override;
   const SourceInfo& info() const noexcept override { return info_; }
@@ -31,6 +35,7 @@ class ReplaySource final : public MarkerSource {
   bool hand_out(std::size_t index, int64_t cycle, int64_t now_ns, MarkerFrame& out) noexcept;
 
   ReplayOptions options_;
+  NatNetOptions natnet_;
   formats::MarkerTake take_;
   SourceInfo info_;
   std::size_t begin_ = 0, end_ = 0;  // the window, [begin_, end_) into take_.frames
