@@ -147,6 +147,8 @@ void write_udp_stream(const fs::path& dir) {
   udp_stream::encode_frame(frame, {.schema_id = schema_id, .rig_hash = 0x1234, .publish_time_ns = 1000}, true, message);
   append(udp_stream::datagrams(udp::kFrameMessage, 7, 1, message));
   write(dir / "schema_and_frame.bin", stream);
+}
+
 // A client's conversation with natnet-serve as the natnet_serve_requests target reads it
 // (each datagram after its 2-byte little-endian length): connect asking for 4.1, the
 // requests, the model definitions, a keep-alive, disconnect.

@@ -60,6 +60,8 @@ struct V4l2Options {
   double epipolar_tolerance_px = 0.0;
   double sync_tolerance_ms = 0.0;   // cameras' frames this close in time make one set
   int64_t max_points = 0;           // 3D points per frame at most (the frame's slots)
+};
+
 enum class NatNetTransport : uint8_t { kAuto, kMulticast, kUnicast };
 inline constexpr EnumTable kNatNetTransports{std::array{
     EnumEntry{NatNetTransport::kAuto, "auto", "as the server's NAT_SERVERINFO says"},
