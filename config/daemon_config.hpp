@@ -31,6 +31,7 @@ struct CalibrationSection {
   int64_t face_markers = 0;
   int64_t head_markers = 0;
   bool stabilise_head = true;
+  double max_marker_speed_mm_s = 0.0;
 };
 
 // The solver's parameters as the solver takes them (their initialisers are the defaults),
