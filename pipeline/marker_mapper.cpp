@@ -13,6 +13,9 @@ namespace facecap::pipeline {
 namespace {
 
 constexpr int64_t kNeverAccepted = std::numeric_limits<int64_t>::min();
+// Before its first acceptance a marker is compared with its rest target (its bound point),
+// as if accepted there this long ago: any face reaches, a glitch in the first frame does not.
+constexpr int64_t kFirstReachNs = kNsPerSecond;
 
 int find_label(std::span<const std::string> labels, const std::string& label) {
   const auto it = std::find(labels.begin(), labels.end(), label);
@@ -64,13 +67,19 @@ MarkerMapper::MarkerMapper(const align::Calibration& calibration, std::span<cons
   }
   if (options.max_marker_speed_mm_s > 0.0 && calibration_.rig_mm_per_unit > 0.0)
     max_speed_rig_per_ns_ = options.max_marker_speed_mm_s / calibration_.rig_mm_per_unit / double(kNsPerSecond);
-  accepted_targets_ = Eigen::Matrix3Xd::Zero(3, marker_count());
-  accepted_ns_.assign(slots_.size(), kNeverAccepted);
+  accepted_targets_.resize(3, marker_count());
+  accepted_ns_.resize(slots_.size());
+  forget_accepted();
+}
+
+void MarkerMapper::forget_accepted() noexcept {
+  for (std::size_t k = 0; k < slots_.size(); ++k) accepted_targets_.col(Eigen::Index(k)) = calibration_.markers[k].bound_point;
+  std::fill(accepted_ns_.begin(), accepted_ns_.end(), kNeverAccepted);
 }
 
 void MarkerMapper::reset() noexcept {
   if (stabiliser_) stabiliser_->reset();
-  std::fill(accepted_ns_.begin(), accepted_ns_.end(), kNeverAccepted);
+  forget_accepted();
 }
 
 MappedFrame MarkerMapper::make_output() const {
@@ -125,12 +134,13 @@ void MarkerMapper::process(const MarkerFrame& frame, MappedFrame& out, std::span
 }
 
 bool MarkerMapper::plausible(std::size_t k, const Eigen::Vector3d& target, int64_t time_ns) noexcept {
-  const int64_t since_ns = time_ns - accepted_ns_[k];
-  // Written as "not within reach" so that a NaN or infinite distance is refused too.
-  if (max_speed_rig_per_ns_ > 0.0 && accepted_ns_[k] != kNeverAccepted && since_ns > 0 &&
-      !((target - accepted_targets_.col(Eigen::Index(k))).norm() <= max_speed_rig_per_ns_ * double(since_ns)))
-    return false;
   if (!target.allFinite()) return false;  // NaN or infinite coordinates, or 1e300 overflowing on the way
+  if (max_speed_rig_per_ns_ > 0.0) {
+    const int64_t since_ns = accepted_ns_[k] == kNeverAccepted ? kFirstReachNs : time_ns - accepted_ns_[k];
+    // Written as "not within reach" so that an infinite distance (1e300 - x) is refused too.
+    if (since_ns > 0 && !((target - accepted_targets_.col(Eigen::Index(k))).norm() <= max_speed_rig_per_ns_ * double(since_ns)))
+      return false;
+  }
   accepted_targets_.col(Eigen::Index(k)) = target;
   accepted_ns_[k] = time_ns;
   return true;

@@ -102,11 +102,14 @@ class MarkerMapper {
   // Whether marker k's new target is within reach of where it was last accepted (and
   // finite); if so it becomes the last accepted. RT-safe.
   bool plausible(std::size_t k, const Eigen::Vector3d& target, int64_t time_ns) noexcept;
+  // Every marker back to "never accepted", at its rest target. RT-safe.
+  void forget_accepted() noexcept;
 
   std::optional<align::HeadStabiliser> stabiliser_;  // when stabilising
   align::HeadPoseResult pose_;
   // The plausibility gate: per calibration marker, its last accepted target (rig units)
-  // and that frame's source time (kNeverAccepted before the first).
+  // and that frame's source time (kNeverAccepted before the first, the target then being
+  // the marker's bound point).
   double max_speed_rig_per_ns_ = 0.0;  // 0: no gate
   Eigen::Matrix3Xd accepted_targets_;
   std::vector<int64_t> accepted_ns_;
