@@ -25,6 +25,7 @@
 
 #include "facecap_shm_layout.hpp"
 #include "udp_stream_reader.hpp"
+#include "facecap_shm_lock.hpp"
 
 namespace {
 
@@ -76,12 +77,14 @@ void copy_frame_fields(const LayoutHeader& h, facecap_frame& out) noexcept {
   out.timecode_subframe = h.timecode_subframe;
 }
 
-// One read-only mapping of a segment, validated.
+// One read-only mapping of a segment, validated, and the descriptor kept open to test the
+// writer's lock.
 struct Mapping {
   const unsigned char* base = nullptr;
   std::size_t size = 0;
   dev_t device = 0;
   ino_t inode = 0;
+  int fd = -1;
 
   const Header& header() const noexcept { return *reinterpret_cast<const Header*>(base); }
   const SlotHeader& slot(uint64_t sequence) const noexcept {
@@ -90,7 +93,9 @@ struct Mapping {
   }
   void unmap() noexcept {
     if (base) munmap(const_cast<unsigned char*>(base), size);
+    if (fd >= 0) close(fd);
     base = nullptr;
+    fd = -1;
   }
 };
 
@@ -108,9 +113,12 @@ int map_segment(const std::string& name, Mapping& out) {
     return FACECAP_ERR_LAYOUT;
   }
   void* p = mmap(nullptr, std::size_t(st.st_size), PROT_READ, MAP_SHARED, fd, 0);
-  close(fd);
-  if (p == MAP_FAILED) return errno == EACCES ? FACECAP_ERR_ACCESS : FACECAP_ERR_SYSTEM;
-  Mapping m{static_cast<const unsigned char*>(p), std::size_t(st.st_size), st.st_dev, st.st_ino};
+  if (p == MAP_FAILED) {
+    const int status = errno == EACCES ? FACECAP_ERR_ACCESS : FACECAP_ERR_SYSTEM;
+    close(fd);
+    return status;
+  }
+  Mapping m{static_cast<const unsigned char*>(p), std::size_t(st.st_size), st.st_dev, st.st_ino, fd};
   const Header& h = m.header();
   // The writer stores the magic last (release) once every other header field is set.
   if (__atomic_load_n(&h.magic, __ATOMIC_ACQUIRE) != kMagic) {
@@ -304,6 +312,8 @@ struct facecap_client {
     const int64_t heartbeat = h.heartbeat_ns.load(std::memory_order_acquire);
     const bool beating = now_ns() - heartbeat < stale_after_ns;
     if (state != kWriterStopped && beating) return FACECAP_OK;
+    // Not beating, yet its process still holds the writer lock: stopped or hung, not gone.
+    if (state != kWriterStopped && writer_lock_held(shm->mapping.fd)) return FACECAP_WRITER_STALLED;
     // The writer is gone; has a new one created a segment under the same name?
     Mapping fresh;
     if (map_segment(shm->name, fresh) != FACECAP_OK) return FACECAP_ERR_WRITER_GONE;
@@ -602,6 +612,7 @@ const char* facecap_status_string(int status) {
     case FACECAP_OK: return "ok";
     case FACECAP_NO_FRAME: return "no new frame";
     case FACECAP_RESTARTED: return "the writer restarted or its schema arrived (shapes may have changed)";
+    case FACECAP_WRITER_STALLED: return "the writer is alive but has stopped beating (stopped or hung)";
     case FACECAP_ERR_ARGUMENT: return "invalid argument";
     case FACECAP_ERR_NOT_FOUND: return "no such shared-memory segment (is facecapd running?)";
     case FACECAP_ERR_ACCESS: return "permission denied (is this user in the facecap group?)";

@@ -33,6 +33,8 @@ typedef enum facecap_status {
   FACECAP_OK = 0,
   FACECAP_NO_FRAME = 1,         /* nothing new yet (or the wait timed out) */
   FACECAP_RESTARTED = 2,        /* a new writer (or, over UDP, a first or changed schema): re-query the shapes */
+  FACECAP_WRITER_STALLED = 3,   /* the writer's process lives and holds the segment but stopped beating
+                                   (stopped, hung); frames may resume */
   FACECAP_ERR_ARGUMENT = -1,    /* NULL pointer, bad name or bad address */
   FACECAP_ERR_NOT_FOUND = -2,   /* no segment of that name (is facecapd running?) */
   FACECAP_ERR_ACCESS = -3,      /* permission denied (join the facecap group) */
@@ -104,12 +106,14 @@ FACECAP_CLIENT_API int facecap_client_read_latest(facecap_client* client, faceca
  * frame still in the ring, with out_frame->dropped saying how many were lost. */
 FACECAP_CLIENT_API int facecap_client_read_next(facecap_client* client, facecap_frame* out_frame);
 /* read_next, waiting up to timeout_ns. While nothing arrives it checks whether the writer
- * is gone or was replaced (FACECAP_ERR_WRITER_GONE, FACECAP_RESTARTED). */
+ * is gone, was replaced or is stalled (FACECAP_ERR_WRITER_GONE, FACECAP_RESTARTED,
+ * FACECAP_WRITER_STALLED: each returned at once). */
 FACECAP_CLIENT_API int facecap_client_wait_next(facecap_client* client, facecap_frame* out_frame, int64_t timeout_ns);
 
 /* FACECAP_OK while the writer runs and beats; FACECAP_RESTARTED after following a new
- * writer; FACECAP_ERR_WRITER_GONE when it stopped or has been silent for stale_after_ns
- * (UDP: three schema intervals, whatever stale_after_ns says). */
+ * writer; when it has not beaten for stale_after_ns, FACECAP_WRITER_STALLED if its process
+ * still holds the segment's writer lock (shared memory only), else FACECAP_ERR_WRITER_GONE
+ * (also after a clean stop; UDP: three schema intervals, whatever stale_after_ns says). */
 FACECAP_CLIENT_API int facecap_client_check_writer(facecap_client* client, int64_t stale_after_ns);
 
 FACECAP_CLIENT_API const char* facecap_status_string(int status);

@@ -32,6 +32,7 @@ struct CalibrationSection {
   int64_t head_markers = 0;
   bool stabilise_head = true;
   bool label_markers = false;
+  double max_marker_speed_mm_s = 0.0;
 };
 
 // The solver's parameters as the solver takes them (their initialisers are the defaults),

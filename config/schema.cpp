@@ -189,6 +189,12 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(calibration.stabilise_head), .default_value = true, .reload = Reload::kRebuild,
        .description = "Fit the head's rigid motion to the head markers every frame and solve the face in head space "
                       "(needs 3 head markers present; otherwise the last pose is held)."},
+      {FACECAP_KEY(calibration.max_marker_speed_mm_s), .default_value = 1000.0, .unit = "mm/s", .min = 0, .max = 1e6,
+       .reload = Reload::kRebuild,
+       .description = "A marker whose target (rig space, head stabilised) moved faster than this since it was last "
+                      "accepted is left out of that frame and the frame is flagged implausible_marker: one glitch "
+                      "costs one frame. The fastest marker in the real takes tried (AnimFace, 60 Hz) moved 229 mm/s; "
+                      "a 10 cm jump in one frame is 6000 mm/s at 60 Hz. 0 turns the check off."},
 
       {FACECAP_KEY(calibration.label_markers), .default_value = false, .reload = Reload::kRebuild,
        .description = "Label every frame afresh: its points go to the labeller, which matches them to the "

@@ -47,7 +47,8 @@ std::string_view solve_stage_name(SolveStage stage) noexcept {
 
 std::string_view solved_flag_name(std::size_t bit) noexcept {
   static constexpr std::string_view kNames[kSolvedFlagCount] = {
-      "head_pose_held", "too_few_markers", "qp_iteration_cap", "pins_beyond_capacity", "singular_correction"};
+      "head_pose_held", "too_few_markers", "qp_iteration_cap", "pins_beyond_capacity", "singular_correction",
+      "implausible_marker"};
   return bit < kSolvedFlagCount ? kNames[bit] : "?";
 }
 

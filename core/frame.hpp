@@ -87,8 +87,9 @@ enum SolvedFlags : uint32_t {
   kSolvedQpIterationCap = 1u << 2,      // Eq. 2's box QP stopped at its iteration cap unconverged
   kSolvedPinsBeyondCapacity = 1u << 3,  // the collision stage needed more pins than collision_max_pins
   kSolvedSingularCorrection = 1u << 4,  // a low-rank pin correction was singular: solved without it
+  kSolvedImplausibleMarker = 1u << 5,   // a marker moved implausibly fast (or was not finite): left out of this frame
 };
-inline constexpr std::size_t kSolvedFlagCount = 5;
+inline constexpr std::size_t kSolvedFlagCount = 6;
 // "head_pose_held", "too_few_markers", ... for bit 0, 1, ...; "?" beyond. RT-safe.
 std::string_view solved_flag_name(std::size_t bit) noexcept;
 

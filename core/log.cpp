@@ -1,6 +1,54 @@
 #include "core/log.hpp"
 
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+
+#include <spdlog/pattern_formatter.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 namespace facecap {
+namespace {
+
+// "%*": the sd-daemon priority prefix of the message's level.
+class JournalPriorityFlag final : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&, spdlog::memory_buf_t& dest) override {
+    const std::string_view prefix = priority_prefix(msg.level);
+    dest.append(prefix.data(), prefix.data() + prefix.size());
+  }
+  std::unique_ptr<custom_flag_formatter> clone() const override { return std::make_unique<JournalPriorityFlag>(); }
+
+ private:
+  // LOG_ERR is 3, LOG_WARNING 4, ... (syslog.h), as SD_ERR ("<3>") etc. spell them.
+  static std::string_view priority_prefix(spdlog::level::level_enum level) {
+    switch (level) {
+      case spdlog::level::critical: return "<2>";
+      case spdlog::level::err: return "<3>";
+      case spdlog::level::warn: return "<4>";
+      case spdlog::level::info: return "<6>";
+      default: return "<7>";
+    }
+  }
+};
+
+}  // namespace
+
+bool is_journal_stream(int fd) {
+  const char* stream = std::getenv("JOURNAL_STREAM");
+  struct stat st {};
+  if (!stream || fstat(fd, &st) != 0) return false;
+  unsigned long long device = 0, inode = 0;
+  return std::sscanf(stream, "%llu:%llu", &device, &inode) == 2 && device == st.st_dev && inode == st.st_ino;
+}
+
+void configure_log_output() {
+  if (!is_journal_stream(STDOUT_FILENO)) return;
+  auto formatter = std::make_unique<spdlog::pattern_formatter>();
+  formatter->add_flag<JournalPriorityFlag>('*').set_pattern("%*%l: %v");
+  spdlog::set_formatter(std::move(formatter));
+}
 
 void set_log_level(LogLevel level) {
   switch (level) {

@@ -24,4 +24,15 @@ inline constexpr EnumTable kLogLevels{std::array{
 // Sets the default logger's level.
 void set_log_level(LogLevel level);
 
+// Whether `fd` is the stream systemd connected to the journal: $JOURNAL_STREAM holds that
+// stream's "device:inode", which a redirected or inherited descriptor does not match
+// (the check sd_journal's documentation gives).
+bool is_journal_stream(int fd);
+
+// Shapes the default logger's lines for where they go (it writes to standard output).
+// Under journald each line starts with its sd-daemon priority ("<3>" error, "<4>"
+// warning, "<6>" info, <sd-daemon.h>), so that `journalctl -p err` finds errors, and
+// carries no time (journald adds it); elsewhere spdlog's default pattern is kept.
+void configure_log_output();
+
 }  // namespace facecap

@@ -62,6 +62,14 @@ std::shared_ptr<const Rig> load_configured_rig(const config::RigSection& section
 
 }  // namespace
 
+std::string check_rig_and_calibration(const config::DaemonConfig& config) {
+  const std::shared_ptr<const Rig> rig = load_configured_rig(config.rig);
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(config), *rig);
+  return fmt::format("rig {} ({} vertices, {} shapes), calibration {} ({} markers)", config.rig.path, rig->vertex_count(),
+                     rig->shape_count(), config.calibration.file.empty() ? "default marker set" : config.calibration.file,
+                     calibration.markers.size());
+}
+
 // Counters at one moment, for figures over a window.
 struct Daemon::Sample {
   int64_t time_ns = 0;

@@ -50,6 +50,11 @@ struct Figures {
   std::array<uint64_t, kSolvedFlagCount> flagged_frames{};  // solved frames with each SolvedFlags bit
 };
 
+// What `facecapd --check-config` checks beyond the file itself: loads the configured rig
+// and the calibration, checked against it (pipeline::load_calibration), as start() would.
+// Returns a one-line summary; throws Error naming the file at fault. Not RT-safe.
+std::string check_rig_and_calibration(const config::DaemonConfig& config);
+
 struct DaemonOptions {
   std::string config_file;                // re-read on SIGHUP; empty: defaults
   std::vector<std::string> overrides;     // --set key=value, re-applied on reload

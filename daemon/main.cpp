@@ -3,6 +3,8 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
@@ -33,7 +35,7 @@ int main(int argc, char** argv) {
   CLI::App app{"facecapd: solves facial markers onto a blendshape rig in real time and publishes the face"};
   std::string config_file, check_file;
   std::vector<std::string> overrides;
-  bool print_config = false, print_defaults = false, print_reference = false, list_drivers = false;
+  bool print_config = false, print_defaults = false, print_reference = false, list_drivers = false, allow_root = false;
   app.add_option("-c,--config", config_file, "Configuration file (TOML); without one, every key has its default")
       ->check(CLI::ExistingFile);
   app.add_option("--set", overrides, "Override one key, e.g. --set loop.rate_hz=240 (repeatable)");
@@ -42,9 +44,10 @@ int main(int argc, char** argv) {
   app.add_flag("--print-default-config", print_defaults, "Print the documented default configuration file");
   app.add_flag("--print-config-reference", print_reference, "Print the key reference (Markdown, as in docs/config.md)");
   app.add_flag("--list-drivers", list_drivers, "List the marker source drivers");
+  app.add_flag("--allow-root", allow_root, "Run even as root (not recommended: see docs/daemon.md)");
   CLI11_PARSE(app, argc, argv);
 
-  if (std::getenv("JOURNAL_STREAM")) spdlog::set_pattern("%l: %v");  // journald adds time and unit
+  configure_log_output();
 
   if (print_defaults) {
     std::fputs(config::render_documented_defaults().c_str(), stdout);
@@ -67,7 +70,8 @@ int main(int argc, char** argv) {
     try {
       const config::LoadedConfig checked = config::load_config(check_file, overrides);
       for (const std::string& warning : checked.warnings) fmt::print(stderr, "warning: {}\n", warning);
-      fmt::print("{}: valid\n", check_file);
+      // What the daemon would load next: the rig, and the calibration checked against it.
+      fmt::print("{}: valid; {}\n", check_file, daemon::check_rig_and_calibration(checked.values));
       return 0;
     } catch (const Error& e) {
       fmt::print(stderr, "{}\n", e.what());
@@ -85,6 +89,14 @@ int main(int argc, char** argv) {
   if (print_config) {
     std::fputs(config::render_effective_config(loaded).c_str(), stdout);
     return 0;
+  }
+
+  if (::geteuid() == 0 && !allow_root) {
+    fmt::print(stderr,
+               "facecapd: refusing to run as root. It parses files and network input and needs none of root's "
+               "privileges (only CAP_SYS_NICE and CAP_IPC_LOCK for real-time scheduling); run it as the facecap "
+               "user, as facecapd.service does, or pass --allow-root if you must (a throwaway container).\n");
+    return 1;
   }
 
   try {

@@ -6,10 +6,16 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "core/time.hpp"
 #include "core/units.hpp"
 
 namespace facecap::pipeline {
 namespace {
+
+constexpr int64_t kNeverAccepted = std::numeric_limits<int64_t>::min();
+// Before its first acceptance a marker is compared with its rest target (its bound point),
+// as if accepted there this long ago: any face reaches, a glitch in the first frame does not.
+constexpr int64_t kFirstReachNs = kNsPerSecond;
 
 int find_label(std::span<const std::string> labels, const std::string& label) {
   const auto it = std::find(labels.begin(), labels.end(), label);
@@ -59,6 +65,21 @@ MarkerMapper::MarkerMapper(const align::Calibration& calibration, std::span<cons
     stabiliser_.emplace(std::move(stable_slots), std::move(ref),
                         align::StabiliserParams{.outlier_floor = options.outlier_floor_mm / source_mm_});
   }
+  if (options.max_marker_speed_mm_s > 0.0 && calibration_.rig_mm_per_unit > 0.0)
+    max_speed_rig_per_ns_ = options.max_marker_speed_mm_s / calibration_.rig_mm_per_unit / double(kNsPerSecond);
+  accepted_targets_.resize(3, marker_count());
+  accepted_ns_.resize(slots_.size());
+  forget_accepted();
+}
+
+void MarkerMapper::forget_accepted() noexcept {
+  for (std::size_t k = 0; k < slots_.size(); ++k) accepted_targets_.col(Eigen::Index(k)) = calibration_.markers[k].bound_point;
+  std::fill(accepted_ns_.begin(), accepted_ns_.end(), kNeverAccepted);
+}
+
+void MarkerMapper::reset() noexcept {
+  if (stabiliser_) stabiliser_->reset();
+  forget_accepted();
 }
 
 MappedFrame MarkerMapper::make_output() const {
@@ -80,19 +101,28 @@ void MarkerMapper::process(const MarkerFrame& frame, MappedFrame& out, std::span
   const align::Similarity& T = calibration_.take_to_rig;
   const Eigen::Matrix3d R_head_inv = R_head.transpose();
   out.markers_present = 0;
+  out.markers_implausible = 0;
   for (std::size_t k = 0; k < slots_.size(); ++k) {
     const int slot = slots_[k];
-    const bool ok = slot >= 0 && std::size_t(slot) < frame.markers.size() && frame.markers[std::size_t(slot)].present() &&
-                    frame.markers[std::size_t(slot)].position.allFinite();
+    // Non-finite coordinates are refused by the plausibility gate below, the one place.
+    const bool ok = slot >= 0 && std::size_t(slot) < frame.markers.size() && frame.markers[std::size_t(slot)].present();
     out.present[k] = ok;
     if (!ok) {
       out.targets.col(Eigen::Index(k)).setConstant(std::numeric_limits<double>::quiet_NaN());
       continue;
     }
-    ++out.markers_present;
     const align::MarkerCalibration& m = calibration_.markers[k];
     const Eigen::Vector3d stabilised = source_to_take_ * (R_head_inv * (frame.markers[std::size_t(slot)].position - t_head));
-    out.targets.col(Eigen::Index(k)) = m.bound_point + T.apply_vector(stabilised - m.neutral);
+    const Eigen::Vector3d target = m.bound_point + T.apply_vector(stabilised - m.neutral);
+    if (!plausible(k, target, frame.source_time_ns)) {
+      out.present[k] = 0;
+      out.targets.col(Eigen::Index(k)).setConstant(std::numeric_limits<double>::quiet_NaN());
+      ++out.markers_implausible;
+      if (std::size_t(slot) < marker_flags.size()) marker_flags[std::size_t(slot)] |= kMarkerOutlier;
+      continue;
+    }
+    ++out.markers_present;
+    out.targets.col(Eigen::Index(k)) = target;
   }
   // Head pose in rig axes: T o H o T^-1 with H in take units (the scale cancels).
   const Eigen::Matrix3d Rh = T.rotation * R_head * T.rotation.transpose();
@@ -101,6 +131,19 @@ void MarkerMapper::process(const MarkerFrame& frame, MappedFrame& out, std::span
   out.head_held = stabiliser_ && pose_.held;
   out.stable_inliers = stabiliser_ ? pose_.inliers : 0;
   out.stable_rms_mm = stabiliser_ ? pose_.rms * source_mm_ : 0.0;
+}
+
+bool MarkerMapper::plausible(std::size_t k, const Eigen::Vector3d& target, int64_t time_ns) noexcept {
+  if (!target.allFinite()) return false;  // NaN or infinite coordinates, or 1e300 overflowing on the way
+  if (max_speed_rig_per_ns_ > 0.0) {
+    const int64_t since_ns = accepted_ns_[k] == kNeverAccepted ? kFirstReachNs : time_ns - accepted_ns_[k];
+    // Written as "not within reach" so that an infinite distance (1e300 - x) is refused too.
+    if (since_ns > 0 && !((target - accepted_targets_.col(Eigen::Index(k))).norm() <= max_speed_rig_per_ns_ * double(since_ns)))
+      return false;
+  }
+  accepted_targets_.col(Eigen::Index(k)) = target;
+  accepted_ns_[k] = time_ns;
+  return true;
 }
 
 }  // namespace facecap::pipeline

@@ -5,7 +5,10 @@
 //      calibration-frame positions to this frame (align::HeadStabiliser);
 //   2. each bound marker's offset from its own calibration-frame position, in the
 //      stabilised head frame, mapped into rig space by the calibration's similarity;
-//   3. target = the marker's bound surface point + that offset.
+//   3. target = the marker's bound surface point + that offset;
+//   4. plausibility gate: a target that moved faster than options.max_marker_speed_mm_s
+//      (rig space, after stabilisation) from where that marker was last accepted is left
+//      out of this frame, so that one glitch costs one frame.
 // Steps 2-3 handle identity mismatch: the actor at rest gives exactly the bound points,
 // so the rig's neutral, whatever the actor's face looks like. Frames in other units than
 // the calibration's are converted on the way in.
@@ -29,6 +32,7 @@ struct MappedFrame {
   Eigen::Matrix3Xd targets;      // 3 x K (calibration marker order), rig space; NaN when missing
   std::vector<uint8_t> present;  // K
   uint32_t markers_present = 0;
+  uint32_t markers_implausible = 0;  // left out by the plausibility gate this frame
   // Head pose relative to the calibration frame, in rig axes and rig units: a point
   // fixed to the head at x (rig space, calibration frame) is at R x + t now.
   Eigen::Quaterniond head_rotation = Eigen::Quaterniond::Identity();
@@ -45,6 +49,11 @@ struct MapperOptions {
   // A stable marker off the rigid fit by more than this (and 4x the others' median) is
   // left out of the head pose.
   double outlier_floor_mm = 1.0;
+  // A marker target (rig space, head stabilised) that moved faster than this since the
+  // marker was last accepted is left out of the frame; 0 turns the gate off. The allowed
+  // distance grows with the time since that acceptance, so a marker back from an
+  // occlusion (or rejected a while) is taken again once it is within reach.
+  double max_marker_speed_mm_s = 1000.0;
 };
 
 class MarkerMapper {
@@ -58,12 +67,13 @@ class MarkerMapper {
 
   MappedFrame make_output() const;
   // marker_flags (one per frame slot, may be empty) gains kMarkerOutlier for stable
-  // markers the stabiliser rejected. RT-safe.
+  // markers the stabiliser rejected and for markers the plausibility gate left out
+  // (timed by frame.source_time_ns; a frame whose time does not advance is not gated).
+  // RT-safe.
   void process(const MarkerFrame& frame, MappedFrame& out, std::span<uint32_t> marker_flags = {}) noexcept;
-  // Forgets the head pose held from earlier frames. RT-safe.
-  void reset() noexcept {
-    if (stabiliser_) stabiliser_->reset();
-  }
+  // Forgets the head pose held from earlier frames and where markers were last accepted.
+  // RT-safe.
+  void reset() noexcept;
 
   Eigen::Index marker_count() const { return Eigen::Index(slots_.size()); }
   std::span<const int> slots() const { return slots_; }          // per calibration marker: frame slot or -1
@@ -89,8 +99,20 @@ class MarkerMapper {
   bool stabilising_ = false;
   double source_to_take_ = 1.0;
   double source_mm_ = 1.0;  // millimetres per source unit
+  // Whether marker k's new target is within reach of where it was last accepted (and
+  // finite); if so it becomes the last accepted. RT-safe.
+  bool plausible(std::size_t k, const Eigen::Vector3d& target, int64_t time_ns) noexcept;
+  // Every marker back to "never accepted", at its rest target. RT-safe.
+  void forget_accepted() noexcept;
+
   std::optional<align::HeadStabiliser> stabiliser_;  // when stabilising
   align::HeadPoseResult pose_;
+  // The plausibility gate: per calibration marker, its last accepted target (rig units)
+  // and that frame's source time (kNeverAccepted before the first, the target then being
+  // the marker's bound point).
+  double max_speed_rig_per_ns_ = 0.0;  // 0: no gate
+  Eigen::Matrix3Xd accepted_targets_;
+  std::vector<int64_t> accepted_ns_;
 };
 
 }  // namespace facecap::pipeline

@@ -12,6 +12,7 @@ SolveSettings solve_settings(const config::DaemonConfig& config) {
   settings.params = config.solver;  // the section is the solver's parameters
   settings.mapper.stabilise_head = config.calibration.stabilise_head;
   settings.label_markers = config.calibration.label_markers;
+  settings.mapper.max_marker_speed_mm_s = config.calibration.max_marker_speed_mm_s;
   return settings;
 }
 
@@ -23,7 +24,8 @@ CalibrationSpec calibration_spec(const config::DaemonConfig& config) {
 
 bool is_solve_setting(std::string_view key_path) {
   return key_path.starts_with("solver.") || key_path == "calibration.stabilise_head" ||
-         key_path == "calibration.label_markers";
+         key_path == "calibration.label_markers" ||
+         key_path == "calibration.max_marker_speed_mm_s";
 }
 
 std::string solve_settings_toml(const config::DaemonConfig& config) {

@@ -14,8 +14,9 @@ namespace facecap::pipeline {
 SolveSettings solve_settings(const config::DaemonConfig& config);
 CalibrationSpec calibration_spec(const config::DaemonConfig& config);
 
-// Whether a configuration key is one a solve depends on: the [solver] section,
-// calibration.stabilise_head and calibration.label_markers. Only these matter to `facecap solve` and `eval`.
+// Whether a configuration key is one a solve depends on: the [solver] section and
+// calibration.stabilise_head, label_markers and max_marker_speed_mm_s. Only these matter to
+// `facecap solve` and `eval`.
 bool is_solve_setting(std::string_view key_path);
 
 // The solve settings' keys at their values in `config`, as TOML: what a recording stores

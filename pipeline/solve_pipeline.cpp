@@ -93,7 +93,8 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.stage_ns[std::size_t(SolveStage::kStabilise)] = mapped_ns - checked_ns;
   out.markers_used = result_.markers_used;
   out.collision_constraints = result_.collision_constraints;
-  out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | result_.status;
+  out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | (mapped_.markers_implausible > 0 ? kSolvedImplausibleMarker : 0u) |
+              result_.status;
   out.solve_end_ns = monotonic_now_ns();
 }
 

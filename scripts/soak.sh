@@ -44,7 +44,9 @@ trap 'rm -rf "$work"' EXIT
   -o "$work/ict-240.fcrec" >/dev/null
 
 echo "soak: ICT rig at 240 Hz from a replay for $seconds s"
-"$facecapd" \
+allow_root=()
+[ "$(id -u)" -ne 0 ] || allow_root=(--allow-root)  # facecapd refuses root otherwise
+"$facecapd" "${allow_root[@]}" \
   --set "rig.path=$rig" \
   --set source.driver=replay --set "source.replay.file=$work/ict-240.fcrec" --set source.replay.loop=true \
   --set calibration.head_markers=0 \

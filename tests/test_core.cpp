@@ -1,10 +1,17 @@
+#include <cstdlib>
+
 #include <catch2/catch.hpp>
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "core/enum_table.hpp"
 #include "core/error.hpp"
 #include "core/frame.hpp"
 #include "core/huge_pages.hpp"
 #include "core/io.hpp"
+#include "core/log.hpp"
 #include "core/realtime.hpp"
 #include "core/time.hpp"
 #include "core/toml_reader.hpp"
@@ -144,4 +151,23 @@ TEST_CASE("a non-ASCII character outside TOML strings and comments is refused be
                     Catch::Contains("junk.toml:1:"));
   const toml::table trimmed = parse_toml("a = \"\"\"x\\\n  y\xc3\xa9 \\\\\xc3\xa9\"\"\"\n", "trimmed.toml");
   CHECK(trimmed["a"].value<std::string>() == "xy\xc3\xa9 \\\xc3\xa9");
+}
+
+TEST_CASE("a descriptor is the journal's stream only when $JOURNAL_STREAM names its device and inode") {
+  const auto file = test::scratch_dir("journal") / "stream";
+  test::write_text(file, "");
+  const int fd = ::open(file.c_str(), O_WRONLY);
+  REQUIRE(fd >= 0);
+  struct stat st {};
+  REQUIRE(::fstat(fd, &st) == 0);
+  ::unsetenv("JOURNAL_STREAM");
+  CHECK_FALSE(is_journal_stream(fd));
+  ::setenv("JOURNAL_STREAM", fmt::format("{}:{}", st.st_dev, st.st_ino).c_str(), 1);
+  CHECK(is_journal_stream(fd));
+  ::setenv("JOURNAL_STREAM", fmt::format("{}:{}", st.st_dev, st.st_ino + 1).c_str(), 1);  // inherited, not ours
+  CHECK_FALSE(is_journal_stream(fd));
+  ::setenv("JOURNAL_STREAM", "garbage", 1);
+  CHECK_FALSE(is_journal_stream(fd));
+  ::unsetenv("JOURNAL_STREAM");
+  ::close(fd);
 }

@@ -9,6 +9,9 @@
 #include "client/facecap_client.hpp"
 #include "core/time.hpp"
 #include "formats/recording.hpp"
+#include "outputs/shm/shm_writer.hpp"
+#include "pipeline/calibration.hpp"
+#include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/process_test_support.hpp"
 
@@ -183,8 +186,83 @@ TEST_CASE("a second facecapd on the same shared memory name fails and the first 
   CHECK(first.wait_exit(5 * kNsPerSecond) == 0);
 }
 
+TEST_CASE("facecapd --check-config loads the calibration against the rig and names a file that is not TOML or another rig's") {
+  const fs::path dir = test::scratch_dir("facecapd-checkcal");
+  const Rig& rig = BuiltinFace::instance().rig();
+  pipeline::Calibration calibration = pipeline::default_calibration(rig, 12, 4);
+  align::save_calibration_profile(dir / "actor.toml", calibration);
+  calibration.rig_hash ^= 1;  // as if fitted to another rig
+  align::save_calibration_profile(dir / "other-rig.toml", calibration);
+  test::write_text(dir / "garbage.toml", "this is not a calibration {\n");
+  const auto check = [&](const std::string& calibration_file, int* status) {
+    test::write_text(dir / "facecapd.toml", fmt::format("version = 1\n[calibration]\nfile = \"{}\"\n", (dir / calibration_file).string()));
+    return test::run_and_capture(kFacecapd + " --check-config " + (dir / "facecapd.toml").string() + " 2>&1", status);
+  };
+  int status = 0;
+  std::string out = check("actor.toml", &status);
+  INFO(out);
+  CHECK(WEXITSTATUS(status) == 0);
+  CHECK_THAT(out, Contains("valid") && Contains("calibration " + (dir / "actor.toml").string() + " (12 markers)"));
+  for (const std::string bad : {"garbage.toml", "other-rig.toml"}) {
+    out = check(bad, &status);
+    INFO(out);
+    CHECK(WEXITSTATUS(status) == 1);
+    CHECK_THAT(out, Contains((dir / bad).string()));
+  }
+}
+
+TEST_CASE("under journald every log line starts with its sd-daemon priority, and errors are <2> or <3>") {
+  const fs::path dir = test::scratch_dir("facecapd-journal");
+  const std::string shm = unique_shm("journal");
+  outputs::ShmOutputSpec spec;
+  spec.name = shm;
+  spec.shape_names = {"a"};
+  outputs::ShmWriter holder(spec);  // facecapd finds the name taken and fails to start
+  const fs::path log = dir / "facecapd.log";
+  const auto run = [&](bool journald) {
+    test::write_text(log, "");
+    struct stat st {};
+    REQUIRE(::stat(log.c_str(), &st) == 0);
+    // systemd's "device:inode" of the stream it connected; not this one when journald is false.
+    const std::string stream = fmt::format("JOURNAL_STREAM={}:{}", st.st_dev, journald ? st.st_ino : st.st_ino + 1);
+    DaemonProcess d({"--set", "outputs.shm.name=" + shm}, {stream}, log);
+    CHECK(d.wait_exit(60 * kNsPerSecond) == 1);
+    return d.log();
+  };
+  std::string out = run(true);
+  INFO(out);
+  std::istringstream lines(out);
+  int lines_seen = 0, errors = 0;
+  for (std::string line; std::getline(lines, line); ++lines_seen) {
+    CHECK(line.size() > 3);
+    CHECK(line.substr(0, 1) == "<");
+    CHECK(line.substr(2, 1) == ">");
+    if (line.starts_with("<2>") || line.starts_with("<3>")) {
+      ++errors;
+      CHECK_THAT(line, Contains(fmt::format("pid {}", ::getpid())));
+    }
+  }
+  CHECK(lines_seen > 0);
+  CHECK(errors == 1);
+  out = run(false);  // JOURNAL_STREAM inherited but naming another stream: plain lines
+  CHECK_THAT(out, Contains(fmt::format("pid {}", ::getpid())));
+  CHECK_FALSE(out.starts_with("<"));
+}
+
+TEST_CASE("facecapd refuses to run as root without --allow-root, and says why") {
+  if (::geteuid() != 0) {
+    WARN("SKIPPED: needs root (checks what facecapd does when started as root)");
+    return;
+  }
+  int status = 0;
+  const std::string out = test::run_and_capture(kFacecapd + " --set control.run_seconds=1 2>&1", &status);
+  CHECK(WEXITSTATUS(status) == 1);
+  CHECK_THAT(out, Contains("refusing to run as root") && Contains("--allow-root") && Contains("facecap user"));
+}
+
 TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working and stops it cleanly") {
-  const std::string command = std::string(FACECAP_BINARY_DIR) + "/tools/facecap daemon-demo --seconds 2 2>&1";
+  const std::string command = std::string(FACECAP_BINARY_DIR) + "/tools/facecap daemon-demo --seconds 2" +
+                              (::geteuid() == 0 ? " --allow-root" : "") + " 2>&1";
   std::string out;
   FILE* pipe = popen(command.c_str(), "r");
   REQUIRE(pipe != nullptr);

@@ -171,3 +171,36 @@ TEST_CASE("a tick pulling from a replay allocates nothing") {
   CHECK(counted.frames == 120);
   CHECK(counted.allocations == 0);
 }
+
+TEST_CASE("the plausibility gate allocates nothing, accepting or refusing markers") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const pipeline::Calibration calibration = pipeline::default_calibration(rig, 24, 4);
+  const MarkerSet rest = pipeline::rest_marker_set(calibration);
+  const std::vector<std::string> labels = rest.labels();
+  pipeline::SolvePipeline pipeline(rig, calibration, {labels, ""}, {});
+  SolvedFrame solved = pipeline.make_solved_frame(false);
+  MarkerFrame frame = make_marker_frame(labels);
+  for (std::size_t k = 0; k < labels.size(); ++k) {
+    frame.markers[k].flags = 0;
+    frame.markers[k].position =
+        k < rest.face.size() ? binding_point(rest.face[k], rig.neutral) : rest.head[k - rest.face.size()].position;
+  }
+  pipeline.process(frame, solved);  // the first frame: every marker accepted
+  const MarkerFrame clean = frame;
+  std::size_t allocations = 0;
+  uint32_t flagged = 0;
+  for (int i = 1; i <= 3; ++i) {
+    frame = clean;  // same size: no allocation, and outside the count
+    frame.source_time_ns = i * (kNsPerSecond / 120);
+    if (i == 2) {  // in rig units (cm): one marker 10 cm off, another at 1e300
+      frame.markers[3].position.x() += 10.0;
+      frame.markers[4].position.y() = 1e300;
+    }
+    const test::CountAllocations counter;
+    pipeline.process(frame, solved);
+    allocations += std::size_t(counter.count());
+    flagged += (solved.flags & kSolvedImplausibleMarker) ? 1u : 0u;
+  }
+  CHECK(flagged == 1);
+  CHECK(allocations == 0);
+}

@@ -1,6 +1,7 @@
 // The shared-memory ring: layout, seqlock under a concurrent writer, read-next with
 // lapping, restarted and stale writers, permissions.
 #include <atomic>
+#include <csignal>
 #include <cstring>
 #include <fstream>
 #include <thread>
@@ -10,6 +11,7 @@
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include "client/facecap_client.hpp"
@@ -170,34 +172,101 @@ TEST_CASE("a reader follows a restarted writer and sees its new shapes") {
   CHECK(frame_is_consistent(f));
 }
 
-TEST_CASE("a reader notices a writer that stopped beating without a clean stop") {
+TEST_CASE("a reader tells a writer that stopped beating but lives from one that is gone") {
   const std::string name = unique_name("stale");
-  ShmWriter writer(spec(name, 2, 0, 4));
-  writer.beat(monotonic_now_ns() - 3 * kNsPerSecond);  // as if its loop hung 3 s ago
+  auto writer = std::make_unique<ShmWriter>(spec(name, 2, 0, 4));
+  writer->beat(monotonic_now_ns() - 3 * kNsPerSecond);  // as if its loop hung 3 s ago
   client::Subscriber reader(name);
-  CHECK(reader.check_writer(kNsPerSecond) == FACECAP_ERR_WRITER_GONE);
-  writer.beat(monotonic_now_ns());
+  CHECK(reader.check_writer(kNsPerSecond) == FACECAP_WRITER_STALLED);  // it still holds the writer lock
+  writer->beat(monotonic_now_ns());
   CHECK(reader.check_writer(kNsPerSecond) == FACECAP_OK);
+  writer.reset();
+  CHECK(reader.check_writer(kNsPerSecond) == FACECAP_ERR_WRITER_GONE);
 }
 
-TEST_CASE("a live writer's segment is refused and a dead writer's segment is replaced") {
+TEST_CASE("a live writer's segment is refused, naming its pid") {
   const std::string name = unique_name("exclusive");
-  {
-    ShmWriter live(spec(name));
-    live.beat(monotonic_now_ns());
-    try {
-      ShmWriter second(spec(name));
-      FAIL("a second writer was created over a live one");
-    } catch (const Error& e) {
-      CHECK_THAT(e.what(), Catch::Contains("already exists") && Catch::Contains(fmt::format("pid {}", ::getpid())));
-    }
-    // A crashed writer: its segment stays behind with an old heartbeat.
-    live.beat(monotonic_now_ns() - 10 * kNsPerSecond);
-    ShmWriter replacement(spec(name, 6));
-    client::Subscriber reader(name);
-    CHECK(reader.shape_count() == 6);
-    // `live` unlinks the name on destruction below, after `replacement`: harmless.
+  ShmWriter live(spec(name));
+  live.beat(monotonic_now_ns());
+  try {
+    ShmWriter second(spec(name));
+    FAIL("a second writer was created over a live one");
+  } catch (const Error& e) {
+    CHECK_THAT(e.what(), Catch::Contains("already exists") && Catch::Contains(fmt::format("pid {} is writing", ::getpid())));
   }
+  // However old its heartbeat, a writer that holds its lock keeps the name.
+  live.beat(monotonic_now_ns() - 10 * kNsPerSecond);
+  CHECK_THROWS_WITH(ShmWriter(spec(name)), Catch::Contains("stalled"));
+}
+
+namespace {
+
+// A writer in a child process: it creates `name`, says so on a pipe, then beats every
+// 10 ms until killed.
+pid_t start_child_writer(const std::string& name) {
+  int ready[2];
+  REQUIRE(::pipe(ready) == 0);
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    ::close(ready[0]);
+    try {
+      ShmWriter writer(spec(name, 3, 0, 4));
+      writer.publish(frame_with_pattern(1, 3, 0));
+      const char ok = 1;
+      if (::write(ready[1], &ok, 1) != 1) ::_exit(2);
+      for (;;) {
+        writer.beat(monotonic_now_ns());
+        ::usleep(10'000);
+      }
+    } catch (...) {
+      ::_exit(1);
+    }
+  }
+  ::close(ready[1]);
+  char ok = 0;
+  const bool started = ::read(ready[0], &ok, 1) == 1 && ok == 1;
+  ::close(ready[0]);
+  REQUIRE(started);
+  return child;
+}
+
+void kill_child(pid_t child) {
+  ::kill(child, SIGKILL);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+}
+
+}  // namespace
+
+TEST_CASE("a writer stopped for more than 2 s keeps its name against a second writer") {
+  const std::string name = unique_name("stopped");
+  const pid_t child = start_child_writer(name);
+  client::Subscriber reader(name);
+  REQUIRE(::kill(child, SIGSTOP) == 0);
+  ::usleep(2'200'000);  // past the 2 s after which a heartbeat counted as dead before
+  try {
+    ShmWriter second(spec(name, 5, 0, 4));
+    FAIL("a second writer took the name of a stopped one");
+  } catch (const Error& e) {
+    CHECK_THAT(e.what(), Catch::Contains(fmt::format("facecapd pid {} still holds it but is stalled", child)));
+  }
+  CHECK(reader.check_writer(kNsPerSecond) == FACECAP_WRITER_STALLED);
+  CHECK(reader.shape_count() == 3);  // still the stopped writer's segment
+  REQUIRE(::kill(child, SIGCONT) == 0);
+  kill_child(child);
+}
+
+TEST_CASE("a killed writer's segment is taken over and its readers follow the new writer") {
+  const std::string name = unique_name("killed");
+  const pid_t child = start_child_writer(name);
+  client::Subscriber reader(name);
+  kill_child(child);  // the segment stays behind; the kernel dropped its lock
+  CHECK(reader.check_writer(kNsPerSecond) == FACECAP_OK);  // the heartbeat alone still looks fresh
+  ShmWriter replacement(spec(name, 6));
+  CHECK(reader.check_writer(0) == FACECAP_RESTARTED);
+  CHECK(reader.shape_count() == 6);
+  CHECK(reader.writer_pid() == ::getpid());
 }
 
 TEST_CASE("segments are created 0640 and mapped read-only by readers") {

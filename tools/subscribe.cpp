@@ -80,9 +80,13 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
   const int64_t start = monotonic_now_ns();
   int64_t window_start = start;
   facecap_frame frame{};
+  bool stalled = false;  // said once per stall
   for (;;) {
     const int status = sub.wait_next(frame, 50 * kNsPerMs);
     const int64_t now = monotonic_now_ns();
+    if (status == FACECAP_WRITER_STALLED && !stalled && !options.json)
+      fmt::print("writer pid {} stalled: alive but not beating (stopped or hung)\n", sub.writer_pid());
+    stalled = status == FACECAP_WRITER_STALLED || (stalled && status == FACECAP_NO_FRAME);
     if (status == FACECAP_OK) {
       const int64_t latency = now - frame.publish_time_ns;
       window_latency.push_back(latency);
@@ -98,7 +102,7 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
     } else if (status == FACECAP_ERR_WRITER_GONE) {
       if (!options.json) fmt::print("writer stopped\n");
       break;
-    } else if (status != FACECAP_NO_FRAME) {
+    } else if (status != FACECAP_NO_FRAME && status != FACECAP_WRITER_STALLED) {
       throw Error(fmt::format("reading {}: {}", udp ? options.udp_address : options.shm_name, facecap_status_string(status)));
     }
     if (now - window_start >= kNsPerSecond) {

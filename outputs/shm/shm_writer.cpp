@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <csignal>
 #include <cstring>
 #include <random>
 
@@ -12,6 +11,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "client/facecap_shm_lock.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "core/time.hpp"
@@ -21,37 +21,53 @@ namespace {
 
 using namespace facecap::shm;
 
-// A writer that has not beaten for this long is considered dead.
-constexpr int64_t kStaleWriterNs = 2 * kNsPerSecond;
+// A writer that holds its lock but has not beaten for this long is reported as stalled.
+constexpr int64_t kStalledWriterNs = 2 * kNsPerSecond;
 constexpr mode_t kSegmentMode = 0640;  // owner writes, the facecap group reads
+// A name freed by removing a stale segment can be taken by another writer before ours is
+// created; after this many rounds we give up and say so.
+constexpr int kCreateAttempts = 4;
 
-bool process_alive(pid_t pid) { return pid > 0 && (::kill(pid, 0) == 0 || errno == EPERM); }
-
-// Explains who holds an existing segment, or returns empty when it may be removed.
-std::string existing_segment_owner(const std::string& name) {
-  const int fd = shm_open(name.c_str(), O_RDONLY, 0);
-  if (fd < 0) return {};
-  struct stat st {};
+// Removes the segment `name` when its writer is gone (nobody holds the writer lock) and
+// returns empty; otherwise explains who holds it and leaves it alone.
+std::string remove_if_stale(const std::string& name) {
+  int fd = shm_open(name.c_str(), O_RDWR, 0);
+  const bool can_take = fd >= 0;
+  if (fd < 0) fd = shm_open(name.c_str(), O_RDONLY, 0);
+  if (fd < 0) return errno == ENOENT ? std::string() : fmt::format("it cannot be opened ({})", std::strerror(errno));
+  // Held from here to the unlink, so that nobody else judges the same segment meanwhile.
+  const bool locked = can_take && try_writer_lock(fd);
   std::string owner;
+  struct stat st {};
+  const Header* h = nullptr;
+  void* p = MAP_FAILED;
   if (fstat(fd, &st) == 0 && std::size_t(st.st_size) >= sizeof(Header)) {
-    void* p = mmap(nullptr, sizeof(Header), PROT_READ, MAP_SHARED, fd, 0);
-    if (p != MAP_FAILED) {
-      const auto* h = static_cast<const Header*>(p);
-      if (__atomic_load_n(&h->magic, __ATOMIC_ACQUIRE) != kMagic) {
-        owner = "it is not a facecap segment";
-      } else {
-        const int64_t age_ns = monotonic_now_ns() - h->heartbeat_ns.load(std::memory_order_acquire);
-        const bool stopped = h->writer_state.load(std::memory_order_acquire) == kWriterStopped;
-        if (!stopped && age_ns < kStaleWriterNs && process_alive(h->writer_pid))
-          owner = fmt::format("facecapd pid {} is writing it (last heartbeat {:.2f} s ago)", h->writer_pid,
-                              double(age_ns) / kNsPerSecond);
-      }
-      munmap(p, sizeof(Header));
-    }
-  } else if (std::size_t(st.st_size) < sizeof(Header)) {
-    owner = "it is not a facecap segment";
+    p = mmap(nullptr, sizeof(Header), PROT_READ, MAP_SHARED, fd, 0);
+    if (p != MAP_FAILED && __atomic_load_n(&static_cast<const Header*>(p)->magic, __ATOMIC_ACQUIRE) == kMagic)
+      h = static_cast<const Header*>(p);
   }
-  close(fd);
+  if (!locked && writer_lock_held(fd)) {
+    if (!h) {
+      owner = "another writer is creating it";
+    } else {
+      const int64_t age_ns = monotonic_now_ns() - h->heartbeat_ns.load(std::memory_order_acquire);
+      owner = age_ns < kStalledWriterNs
+                  ? fmt::format("facecapd pid {} is writing it (last heartbeat {:.2f} s ago)", h->writer_pid,
+                                double(age_ns) / kNsPerSecond)
+                  : fmt::format("facecapd pid {} still holds it but is stalled (no heartbeat for {:.1f} s: stopped "
+                                "or hung, not dead)", h->writer_pid, double(age_ns) / kNsPerSecond);
+    }
+  } else if (!h) {
+    owner = "it is not a facecap segment";
+  } else if (!locked) {
+    owner = "its writer is gone but this user may not remove it";
+  } else {
+    spdlog::warn("taking over shared memory {}: its writer (facecapd pid {}) is gone, nothing holds its lock", name,
+                 h->writer_pid);
+    shm_unlink(name.c_str());
+  }
+  if (p != MAP_FAILED) munmap(p, sizeof(Header));
+  close(fd);  // drops our lock, after the unlink
   return owner;
 }
 
@@ -71,16 +87,23 @@ ShmWriter::ShmWriter(const ShmOutputSpec& spec) : name_(shm_object_name(spec.nam
   const uint32_t shape_count = uint32_t(spec.shape_names.size());
   const Geometry geometry = compute_geometry(shape_count, spec.vertex_count, spec.slot_count);
 
-  int fd = shm_open(name_.c_str(), O_CREAT | O_EXCL | O_RDWR, kSegmentMode);
-  if (fd < 0 && errno == EEXIST) {
-    if (const std::string owner = existing_segment_owner(name_); !owner.empty())
-      throw Error(fmt::format("shared memory {} already exists and {}; choose another outputs.shm.name or stop that "
-                              "writer (remove /dev/shm{} if it is stale)", name_, owner, name_));
-    spdlog::warn("removing stale shared memory {} left by a writer that is gone", name_);
-    shm_unlink(name_.c_str());
+  int fd = -1;
+  for (int attempt = 0; fd < 0 && attempt < kCreateAttempts; ++attempt) {
     fd = shm_open(name_.c_str(), O_CREAT | O_EXCL | O_RDWR, kSegmentMode);
+    if (fd >= 0 || errno != EEXIST) break;
+    if (const std::string owner = remove_if_stale(name_); !owner.empty())
+      throw Error(fmt::format("shared memory {} already exists and {}; choose another outputs.shm.name or stop that "
+                              "writer", name_, owner));
   }
   if (fd < 0) throw Error(fmt::format("cannot create shared memory {}: {}", name_, std::strerror(errno)));
+  // Before anything else: a segment whose lock is free counts as stale. Someone inspecting
+  // the new segment holds the lock for a moment; wait for them.
+  if (!take_writer_lock(fd)) {
+    const int saved_errno = errno;
+    close(fd);
+    shm_unlink(name_.c_str());
+    throw Error(fmt::format("cannot lock shared memory {}: {}", name_, std::strerror(saved_errno)));
+  }
   // The umask may have narrowed the mode; readers in the group need exactly 0640.
   const bool sized = fchmod(fd, kSegmentMode) == 0 && ftruncate(fd, off_t(geometry.total_bytes)) == 0;
   if (struct stat st {}; fstat(fd, &st) == 0) {
@@ -89,12 +112,13 @@ ShmWriter::ShmWriter(const ShmOutputSpec& spec) : name_(shm_object_name(spec.nam
   }
   void* p = sized ? mmap(nullptr, geometry.total_bytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0) : MAP_FAILED;
   const int saved_errno = errno;
-  close(fd);
   if (p == MAP_FAILED) {
     shm_unlink(name_.c_str());
+    close(fd);
     throw Error(fmt::format("cannot size or map shared memory {} ({} bytes): {}", name_, geometry.total_bytes,
                             std::strerror(saved_errno)));
   }
+  lock_fd_ = fd;
   base_ = static_cast<unsigned char*>(p);
   size_ = geometry.total_bytes;
   std::memset(base_, 0, size_);  // also faults every page in now rather than on the solve thread
@@ -141,6 +165,7 @@ ShmWriter::~ShmWriter() {
   const bool still_ours = fstat(fd, &st) == 0 && st.st_dev == device_ && st.st_ino == inode_;
   close(fd);
   if (still_ours) shm_unlink(name_.c_str());
+  close(lock_fd_);  // releases the writer lock, after the unlink
 }
 
 shm::SlotHeader& ShmWriter::slot_for(uint64_t sequence) noexcept {

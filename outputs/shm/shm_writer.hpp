@@ -27,11 +27,13 @@ struct ShmOutputSpec {
 
 class ShmWriter {
  public:
-  // Creates the segment with O_EXCL and mode 0640. A segment left behind by a writer that
-  // is dead (or stopped beating) is removed first; a live one is an Error. Not RT-safe.
+  // Creates the segment with O_EXCL and mode 0640 and holds its writer lock
+  // (client/facecap_shm_lock.hpp) until destroyed. A segment whose writer is gone (lock
+  // free) is removed first, with a warning; one whose writer lives, even stalled, is an
+  // Error naming its pid. Not RT-safe.
   explicit ShmWriter(const ShmOutputSpec& spec);
-  // Marks the writer stopped, unmaps, and unlinks the name unless a newer writer has
-  // already replaced this segment under it. Not RT-safe.
+  // Marks the writer stopped, unmaps, unlinks the name unless a newer writer has already
+  // replaced this segment under it, then releases the lock. Not RT-safe.
   ~ShmWriter();
   ShmWriter(const ShmWriter&) = delete;
   ShmWriter& operator=(const ShmWriter&) = delete;
@@ -57,6 +59,7 @@ class ShmWriter {
   shm::SlotHeader& slot_for(uint64_t sequence) noexcept;
 
   std::string name_;
+  int lock_fd_ = -1;  // open for the writer's lifetime: it holds the writer lock
   unsigned char* base_ = nullptr;
   std::size_t size_ = 0;
   dev_t device_ = 0;
