@@ -4,6 +4,7 @@
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "client/facecap_client.hpp"
@@ -21,6 +22,8 @@ using Catch::Contains;
 namespace fs = std::filesystem;
 
 namespace {
+
+const std::string kFacecapd = std::string(FACECAP_BINARY_DIR) + "/daemon/facecapd";
 
 std::string unique_shm(const std::string& what) { return fmt::format("facecap-test-{}-{}", ::getpid(), what); }
 
@@ -255,14 +258,13 @@ TEST_CASE("facecapd refuses to run as root without --allow-root, and says why") 
     return;
   }
   int status = 0;
-  const std::string out = test::run_and_capture(kFacecapd + " --set control.run_seconds=1 2>&1", &status);
+  const std::string out = test::run_and_capture("env -u FACECAPD_ALLOW_ROOT " + kFacecapd + " 2>&1", &status);
   CHECK(WEXITSTATUS(status) == 1);
   CHECK_THAT(out, Contains("refusing to run as root") && Contains("--allow-root") && Contains("facecap user"));
 }
 
 TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working and stops it cleanly") {
-  const std::string command = std::string(FACECAP_BINARY_DIR) + "/tools/facecap daemon-demo --seconds 2" +
-                              (::geteuid() == 0 ? " --allow-root" : "") + " 2>&1";
+  const std::string command = std::string(FACECAP_BINARY_DIR) + "/tools/facecap daemon-demo --seconds 2 2>&1";
   std::string out;
   FILE* pipe = popen(command.c_str(), "r");
   REQUIRE(pipe != nullptr);

@@ -70,7 +70,6 @@ vertices = true
 )", trc.string(), ict.string(), (dir / "actor.toml").string(), ::getpid(), (dir / "rec").string()));
 
   std::vector<std::string> facecapd_args = {"--config", (dir / "facecapd.toml").string()};
-  if (::geteuid() == 0) facecapd_args.emplace_back("--allow-root");  // facecapd refuses root otherwise
   r = test::run_built("daemon/facecapd", dir, facecapd_args);
   INFO(r.out << r.err);
   REQUIRE(r.exit_code == 0);

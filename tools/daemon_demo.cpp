@@ -53,7 +53,6 @@ struct DemoOptions {
   std::vector<std::string> overrides;
   double seconds = 5.0;
   std::optional<double> noise_mm;
-  bool allow_root = false;
 };
 
 // How far the solved stream is from the sim's performance, when facecapd runs the sim on
@@ -110,7 +109,11 @@ int run_demo(DemoOptions options) {
   const std::string binary = options.facecapd.empty() ? find_facecapd() : options.facecapd;
   std::vector<std::string> args = {binary, "--set", "outputs.shm.name=" + shm_name, "--set", "logging.level=warn"};
   if (!options.config.empty()) args.insert(args.end(), {"--config", options.config});
-  if (options.allow_root) args.emplace_back("--allow-root");
+  if (::geteuid() == 0) {  // a demo in a root shell or container: facecapd refuses root otherwise
+    fmt::print("facecap daemon-demo: running facecapd as root for this demo; on a capture box run it as the facecap "
+               "user (docs/daemon.md)\n");
+    args.emplace_back("--allow-root");
+  }
   for (const auto& o : options.overrides) args.insert(args.end(), {"--set", o});
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());
@@ -196,7 +199,6 @@ void add_daemon_demo_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--facecapd", opts->facecapd, "The facecapd binary (default: beside facecap, or on PATH)");
   cmd->add_option("--config", opts->config, "A facecapd configuration file instead of the defaults");
   cmd->add_option("--set", opts->overrides, "Pass a key=value override to facecapd (repeatable)");
-  cmd->add_flag("--allow-root", opts->allow_root, "Let facecapd run as root (it refuses otherwise)");
   cmd->add_option("--noise", opts->noise_mm, "Marker noise of the simulated capture, mm (source.sim.noise_mm)");
   cmd->callback([opts, &exit_code] { exit_code = run_demo(*opts); });
 }
