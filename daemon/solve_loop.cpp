@@ -113,6 +113,13 @@ void SolveLoop::follow_source_phase(int64_t waited_ns) noexcept {
   phase_correction_ns_ = std::clamp(int64_t(-kPhaseGain * double(error)), -limit, limit);
 }
 
+void SolveLoop::record_telemetry() noexcept {
+  add(counters_.markers_used, solved_frame_.markers_used);
+  add(counters_.markers_expected, solved_frame_.markers_expected);
+  for (const float residual_mm : solved_frame_.marker_residual_mm)
+    if (!std::isnan(residual_mm)) residual_um_.record(int64_t(std::lround(double(residual_mm) * 1000.0)));
+}
+
 bool SolveLoop::tick(int64_t now_ns) noexcept {
   add(counters_.ticks);
   for (outputs::OutputSink* sink : sinks_) sink->tick(now_ns);
@@ -136,6 +143,7 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
   }
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit)
     if (solved_frame_.flags & (1u << bit)) add(counters_.flagged_frames[bit]);
+  record_telemetry();
 
   int64_t offered_ns = solved_ns;
   for (std::size_t i = 0; i < sinks_.size(); ++i) {

@@ -59,6 +59,9 @@ struct LoopCounters {
   // Solved frames with each SolvedFlags bit set (bit i: solved_flag_name(i)).
   std::array<std::atomic<uint64_t>, kSolvedFlagCount> flagged_frames{};
   std::atomic<uint64_t> solved_sequence{0};     // bumps per solved frame; the watchdog checks it moves
+  // Operator telemetry: face markers used and expected, summed over the solved frames.
+  std::atomic<uint64_t> markers_used{0};
+  std::atomic<uint64_t> markers_expected{0};
 };
 
 // What one output's offer() costs the solve thread. Written by the solve thread only.
@@ -92,6 +95,9 @@ class SolveLoop {
 
   const LoopCounters& counters() const noexcept { return counters_; }
   LatencyHistogram::Snapshot latency() const noexcept { return latency_.snapshot(); }
+  // Every fit residual of every solved frame, in micrometres (the histogram's buckets
+  // serve micrometres as they serve nanoseconds: 1 um wide below 1 mm, ...).
+  LatencyHistogram::Snapshot residuals_um() const noexcept { return residual_um_.snapshot(); }
   // The outputs in offer order, and what each costs the solve thread.
   std::span<outputs::OutputSink* const> sinks() const noexcept { return sinks_; }
   const SinkTiming& sink_timing(std::size_t i) const noexcept { return sink_timing_[i]; }
@@ -118,6 +124,8 @@ class SolveLoop {
   void run_lockstep() noexcept;
   void adopt_offered_pipeline() noexcept;
   void record_stage(LoopStage stage, int64_t ns) noexcept;
+  // Markers used and expected, and each fit residual, of the frame just solved. RT-safe.
+  void record_telemetry() noexcept;
   void follow_source_phase(int64_t waited_ns) noexcept;
 
   LoopOptions options_;
@@ -136,6 +144,7 @@ class SolveLoop {
 
   LoopCounters counters_;
   LatencyHistogram latency_;
+  LatencyHistogram residual_um_;
   RealtimeReport realtime_report_;
   std::atomic<bool> realtime_ready_{false};
   std::atomic<bool> stop_requested_{false};
