@@ -74,7 +74,7 @@ struct Daemon::Sample {
   std::array<uint64_t, kSolvedFlagCount> flagged{};
   uint64_t markers_used = 0, markers_expected = 0;
   LatencyHistogram::Snapshot latency;
-  LatencyHistogram::Snapshot residuals_um;
+  LatencyHistogram::Snapshot residuals_nm;
 };
 
 Daemon::Daemon(DaemonOptions options, config::LoadedConfig config)
@@ -206,7 +206,7 @@ Daemon::Sample Daemon::take_sample() const {
   s.markers_used = counters.markers_used.load();
   s.markers_expected = counters.markers_expected.load();
   s.latency = loop_->latency();
-  s.residuals_um = loop_->residuals_um();
+  s.residuals_nm = loop_->residuals_nm();
   return s;
 }
 
@@ -238,11 +238,11 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
     capture.head_held_fraction = double(f.flagged_frames[0]) / frames;  // kSolvedHeadPoseHeld
     capture.face_held_fraction = double(f.flagged_frames[1]) / frames;  // kSolvedTooFewMarkers
   }
-  const LatencyHistogram::Snapshot residuals = to.residuals_um.since(from.residuals_um);
+  const LatencyHistogram::Snapshot residuals = to.residuals_nm.since(from.residuals_nm);
   capture.residuals = residuals.total();
-  capture.residual_p50_mm = double(residuals.quantile_ns(0.50)) / 1000.0;
-  capture.residual_p95_mm = double(residuals.quantile_ns(0.95)) / 1000.0;
-  capture.residual_max_mm = double(residuals.quantile_ns(1.0)) / 1000.0;
+  capture.residual_p50_mm = double(residuals.quantile_ns(0.50)) / 1e6;  // nanometres recorded
+  capture.residual_p95_mm = double(residuals.quantile_ns(0.95)) / 1e6;
+  capture.residual_max_mm = double(residuals.quantile_ns(1.0)) / 1e6;
   return f;
 }
 

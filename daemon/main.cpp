@@ -9,6 +9,7 @@
 #include "config/config_file.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/version.hpp"
 #include "daemon/daemon.hpp"
 #include "drivers/table.hpp"
 
@@ -42,6 +43,8 @@ int main(int argc, char** argv) {
   app.add_flag("--print-default-config", print_defaults, "Print the documented default configuration file");
   app.add_flag("--print-config-reference", print_reference, "Print the key reference (Markdown, as in docs/config.md)");
   app.add_flag("--list-drivers", list_drivers, "List the marker source drivers");
+  const std::string version = fmt::format("facecapd {}", version_string());
+  app.set_version_flag("--version", version, "Print the version (and the git commit it was built from) and exit");
   CLI11_PARSE(app, argc, argv);
 
   if (std::getenv("JOURNAL_STREAM")) spdlog::set_pattern("%l: %v");  // journald adds time and unit
@@ -88,7 +91,8 @@ int main(int argc, char** argv) {
   }
 
   try {
-    daemon::Daemon d({.config_file = config_file, .overrides = overrides, .handle_signals = true}, std::move(loaded));
+    daemon::Daemon d({.config_file = config_file, .overrides = overrides, .handle_signals = true, .version = version},
+                     std::move(loaded));
     d.start();
     return d.run();
   } catch (const Error& e) {

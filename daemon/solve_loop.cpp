@@ -117,7 +117,7 @@ void SolveLoop::record_telemetry() noexcept {
   add(counters_.markers_used, solved_frame_.markers_used);
   add(counters_.markers_expected, solved_frame_.markers_expected);
   for (const float residual_mm : solved_frame_.marker_residual_mm)
-    if (!std::isnan(residual_mm)) residual_um_.record(int64_t(std::lround(double(residual_mm) * 1000.0)));
+    if (!std::isnan(residual_mm)) residual_nm_.record(int64_t(std::llround(double(residual_mm) * 1e6)));
 }
 
 bool SolveLoop::tick(int64_t now_ns) noexcept {

@@ -95,9 +95,9 @@ class SolveLoop {
 
   const LoopCounters& counters() const noexcept { return counters_; }
   LatencyHistogram::Snapshot latency() const noexcept { return latency_.snapshot(); }
-  // Every fit residual of every solved frame, in micrometres (the histogram's buckets
-  // serve micrometres as they serve nanoseconds: 1 um wide below 1 mm, ...).
-  LatencyHistogram::Snapshot residuals_um() const noexcept { return residual_um_.snapshot(); }
+  // Every fit residual of every solved frame, in nanometres: the histogram's buckets,
+  // 1 us wide below 1 ms, ..., are 1 um wide below 1 mm, 10 um below 10 mm, ...
+  LatencyHistogram::Snapshot residuals_nm() const noexcept { return residual_nm_.snapshot(); }
   // The outputs in offer order, and what each costs the solve thread.
   std::span<outputs::OutputSink* const> sinks() const noexcept { return sinks_; }
   const SinkTiming& sink_timing(std::size_t i) const noexcept { return sink_timing_[i]; }
@@ -144,7 +144,7 @@ class SolveLoop {
 
   LoopCounters counters_;
   LatencyHistogram latency_;
-  LatencyHistogram residual_um_;
+  LatencyHistogram residual_nm_;
   RealtimeReport realtime_report_;
   std::atomic<bool> realtime_ready_{false};
   std::atomic<bool> stop_requested_{false};

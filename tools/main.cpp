@@ -5,6 +5,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/version.hpp"
 #include "tools/commands.hpp"
 
 int main(int argc, char** argv) {
@@ -12,6 +13,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   std::string log_level = "warn";
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error, off")->capture_default_str();
+  app.set_version_flag("--version", "facecap " + std::string(facecap::version_string()),
+                       "Print the version (and the git commit it was built from) and exit");
 
   int exit_code = 0;
   // The ordered command table.
