@@ -19,5 +19,6 @@ void add_subscribe_command(CLI::App& app, int& exit_code);
 void add_daemon_demo_command(CLI::App& app, int& exit_code);
 void add_loopcheck_command(CLI::App& app, int& exit_code);
 void add_diff_command(CLI::App& app, int& exit_code);
+void add_ctl_command(CLI::App& app, int& exit_code);
 
 }  // namespace facecap::tools

@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   facecap::tools::add_daemon_demo_command(app, exit_code);
   facecap::tools::add_loopcheck_command(app, exit_code);
   facecap::tools::add_diff_command(app, exit_code);
+  facecap::tools::add_ctl_command(app, exit_code);
 
   try {
     app.parse(argc, argv);
