@@ -529,6 +529,7 @@ void Daemon::publish_status(int64_t now_ns) {
   r.late_start_misses = counters.late_start_misses.load();
   r.skipped_ticks = counters.skipped_ticks.load();
   r.pipeline_swaps = counters.pipeline_swaps.load();
+  r.swap_misses = counters.swap_misses.load();
   r.reloads_accepted = reloads_accepted();
   r.reloads_rejected = reloads_rejected();
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit)

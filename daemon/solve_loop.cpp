@@ -93,7 +93,10 @@ void SolveLoop::offer_pipeline(std::unique_ptr<pipeline::SolvePipeline> pipeline
 void SolveLoop::collect_retired() { pipeline_handoff_.collect(); }
 
 void SolveLoop::adopt_offered_pipeline() noexcept {
-  if (pipeline_handoff_.adopt(pipeline_)) add(counters_.pipeline_swaps);
+  if (pipeline_handoff_.adopt(pipeline_)) {
+    add(counters_.pipeline_swaps);
+    swap_ticks_watched_ = 2;
+  }
 }
 
 void SolveLoop::record_stage(LoopStage stage, int64_t ns) noexcept {
@@ -188,6 +191,10 @@ void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
     store_max(counters_.max_tick_ns, end_ns - wake_ns);
     const rt::TickOutcome outcome = grid.advance(wake_ns, end_ns, phase_correction_ns_);
     phase_correction_ns_ = 0;
+    if (swap_ticks_watched_ > 0) {
+      --swap_ticks_watched_;
+      if (outcome.missed) add(counters_.swap_misses);
+    }
     if (outcome.missed) {
       add(counters_.missed_deadlines);
       if (outcome.started_late) add(counters_.late_start_misses);

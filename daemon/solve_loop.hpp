@@ -53,6 +53,9 @@ struct LoopCounters {
   std::atomic<int64_t> max_wake_late_ns{0};     // worst wake-up after a deadline
   std::atomic<int64_t> max_tick_ns{0};          // longest tick, wake-up to the end of its work
   std::atomic<uint64_t> pipeline_swaps{0};
+  // Missed deadlines of the ticks that adopted a new pipeline and of the tick after each
+  // (its caches cold): what a swap (reload, actor, calibration) cost the loop.
+  std::atomic<uint64_t> swap_misses{0};
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_total_ns{};
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_max_ns{};
   std::array<std::atomic<int64_t>, kSolveStageCount> solver_stage_total_ns{};
@@ -136,6 +139,7 @@ class SolveLoop {
   int64_t period_ns_;
   bool phase_lock_ = false;
   int64_t phase_correction_ns_ = 0;  // applied to the next deadline
+  int swap_ticks_watched_ = 0;       // ticks left whose misses count as swap_misses
 
   MarkerFrame marker_frame_;
   SolvedFrame solved_frame_;
