@@ -60,7 +60,6 @@ struct ControlServer::Impl : std::enable_shared_from_this<ControlServer::Impl> {
   std::set<std::shared_ptr<StreamSession>> clients;
   bool pumping = false;
   bool closed = false;
-  int64_t next_status_ns = 0;
 };
 
 namespace {
@@ -85,8 +84,9 @@ class StreamSession : public std::enable_shared_from_this<StreamSession> {
     ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
     ws_.async_accept(upgrade, [self = shared_from_this()](beast::error_code ec) {
       if (ec) return;
-      self->server_->add_client(self);
+      // The schema first: frames and status messages only follow it.
       self->send(schema_message(self->server_->stream->schema(), self->request_.rate_hz, self->request_.vertices).dump());
+      self->server_->add_client(self);
       self->read();
     });
   }
@@ -96,6 +96,8 @@ class StreamSession : public std::enable_shared_from_this<StreamSession> {
   void sent_frame(int64_t time_ns) noexcept {
     next_due_ns_ = time_ns + int64_t(1e9 / request_.rate_hz) - int64_t(1e9 / request_.rate_hz) / 8;
   }
+  bool status_due(int64_t now_ns) const noexcept { return !writing_ && now_ns >= next_status_ns_; }
+  void sent_status(int64_t now_ns) noexcept { next_status_ns_ = now_ns + kStatusMessageIntervalNs; }
   bool vertices() const noexcept { return request_.vertices; }
   double rate_hz() const noexcept { return request_.rate_hz; }
   void send(std::string text) {
@@ -133,6 +135,7 @@ class StreamSession : public std::enable_shared_from_this<StreamSession> {
   std::string out_;
   bool writing_ = false;
   int64_t next_due_ns_ = 0;
+  int64_t next_status_ns_ = 0;
 };
 
 namespace {
@@ -227,7 +230,6 @@ void ControlServer::Impl::add_client(const std::shared_ptr<StreamSession>& clien
   update_stream_rate();
   if (!pumping) {
     pumping = true;
-    next_status_ns = monotonic_now_ns();
     pump();
   }
 }
@@ -269,10 +271,14 @@ void ControlServer::Impl::pump() {
     if (undelivered) stream->count_undelivered();
     stream->pop();
   }
-  if (const int64_t now = monotonic_now_ns(); now >= next_status_ns) {
-    next_status_ns = now + kStatusMessageIntervalNs;
-    const std::string message = "{\"type\":\"status\",\"status\":" + context.board.latest()->status_json + "}";
-    for (const auto& client : clients) client->send(message);  // skipped by a client still writing
+  // Each client's status once a second, when its last message has gone.
+  const int64_t now = monotonic_now_ns();
+  std::string status;
+  for (const auto& client : clients) {
+    if (!client->status_due(now)) continue;
+    if (status.empty()) status = "{\"type\":\"status\",\"status\":" + context.board.latest()->status_json + "}";
+    client->send(status);
+    client->sent_status(now);
   }
   pump_timer.expires_after(kPumpInterval);
   pump_timer.async_wait([self = shared_from_this()](beast::error_code ec) {
