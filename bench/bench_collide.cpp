@@ -10,7 +10,9 @@
 #include <benchmark/benchmark.h>
 
 #include "solver/builtin_face.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/collider.hpp"
+#include "solver/collide/lip_region.hpp"
+#include "solver/collide/metrics.hpp"
 #include "solver/rig.hpp"
 
 namespace {

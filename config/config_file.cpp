@@ -12,6 +12,7 @@
 #include <toml++/toml.h>
 
 #include "client/facecap_shm_layout.hpp"
+#include "core/toml_reader.hpp"
 
 namespace facecap::config {
 namespace fs = std::filesystem;
@@ -137,10 +138,11 @@ class Loader {
       problem(where("loop.mode"), fmt::format("lockstep needs a source that can hand every frame on request; the {} "
                                               "driver runs on its own clock (use mode = \"fixed\")",
                                               drivers::kDriverIds.name(c.source.driver)));
-    if (c.solver.method == "meshik" && c.loop.mode == LoopMode::kFixed)
-      problem(where("solver.method"), "meshik is an offline baseline that takes seconds a frame and cannot keep a "
-                                      "fixed-rate loop: use \"nonlinear\" live, or meshik with loop.mode = \"lockstep\" and "
-                                      "a replay (or `facecap solve --set solver.method=meshik`)");
+    if (!solver_method_is_realtime(c.solver.method) && c.loop.mode == LoopMode::kFixed)
+      problem(where("solver.method"),
+              fmt::format("{0} is an offline baseline that takes seconds a frame and cannot keep a fixed-rate loop: use "
+                          "\"nonlinear\" live, or {0} with loop.mode = \"lockstep\" and a replay (or `facecap solve "
+                          "--set solver.method={0}`)", kSolverMethods.name(c.solver.method)));
     if (c.calibration.file.empty() && (c.calibration.head_markers == 1 || c.calibration.head_markers == 2))
       problem(where("calibration.head_markers"),
               fmt::format("{} head markers cannot fix a rigid pose: use 0 (no stabilisation) or at least 3",
@@ -390,13 +392,10 @@ LoadedConfig load_config(const std::string& file, const std::vector<std::string>
   return load(file, overrides, checks, [&](Loader& loader) {
     if (file.empty()) return;
     try {
-      const toml::table table = toml::parse_file(file);
+      const toml::table table = parse_toml_file(file);
       loader.apply_table(table, "", Origin::kFile, file, fs::path(file).parent_path());
-    } catch (const toml::parse_error& e) {
-      const auto& begin = e.source().begin;
-      const bool missing = !fs::exists(file);
-      loader.problem({.file = file, .line = missing ? -1 : int64_t(begin.line), .column = missing ? -1 : int64_t(begin.column)},
-                     missing ? "cannot open the configuration file" : std::string(e.description()));
+    } catch (const Error& e) {
+      loader.problem(e.where(), e.message());
     }
   });
 }
@@ -405,11 +404,10 @@ LoadedConfig load_config_text(std::string_view text, const std::string& name, co
                               Checks checks) {
   return load(name, overrides, checks, [&](Loader& loader) {
     try {
-      const toml::table table = toml::parse(text, name);
+      const toml::table table = parse_toml(text, name);
       loader.apply_table(table, "", Origin::kFile, name, fs::current_path());
-    } catch (const toml::parse_error& e) {
-      loader.problem({.file = name, .line = int64_t(e.source().begin.line), .column = int64_t(e.source().begin.column)},
-                     std::string(e.description()));
+    } catch (const Error& e) {
+      loader.problem(e.where(), e.message());
     }
   });
 }

@@ -10,6 +10,7 @@
 #include "core/enum_table.hpp"
 #include "core/log.hpp"
 #include "drivers/api/source_config.hpp"
+#include "solver/params.hpp"
 
 namespace facecap::config {
 
@@ -33,16 +34,10 @@ struct CalibrationSection {
   bool stabilise_head = true;
 };
 
-struct SolverSection {
-  std::string method;
-  double alpha = 0.0;
-  double mu = 0.0;
-  double beta = 0.0;
-  int64_t weight_refinements = 0;
-  std::string collisions;
-  double collision_epsilon = 0.0;
-  int64_t collision_max_pins = 0;
-  double active_weight = 0.0;
+// The solver's parameters as the solver takes them (their initialisers are the defaults),
+// and the method.
+struct SolverSection : SolverParams {
+  SolverMethod method = SolverMethod::kNonlinear;
 };
 
 struct LoopSection {

@@ -5,33 +5,22 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
-#include "solver/face_solver.hpp"
+#include "solver/params.hpp"
 
 namespace facecap::config {
 namespace {
 
-// TODO(solver params table): solver.method and solver.collisions become enums.
-std::vector<Choice> solver_method_choices() {
-  std::vector<Choice> out;
-  for (const auto name : solver_names()) out.push_back({name, ""});
-  return out;
-}
-std::vector<Choice> collision_choices() { return {{"none", ""}, {"lips", ""}, {"face", ""}}; }
-template <std::vector<Choice> (*kChoices)()>
-bool set_string_choice(std::string& member, std::string_view name) {
-  for (const Choice& c : kChoices())
-    if (c.name == name) {
-      member.assign(name);
-      return true;
-    }
-  return false;
-}
+// The solver's own defaults: the schema's are these.
+constexpr SolverParams kSolverDefaults{};
 
 // The key path is the member path, so a key and the field it sets cannot disagree.
 #define FACECAP_KEY(member) .path = #member, .field = +[](DaemonConfig& c) -> auto& { return c.member; }
 // A choice key: the member is an enum, its names and descriptions come from `table`.
-#define FACECAP_CHOICE_KEY(member, table)                                                              \
-  .path = #member, .field = ChoiceField {                                                              \
+#define FACECAP_CHOICE_KEY(member, table) FACECAP_CHOICE_KEY_NAMED(#member, member, table)
+// The same where the key's name is not the member's (solver.collisions, from before the
+// solver's parameters were the configuration's).
+#define FACECAP_CHOICE_KEY_NAMED(key, member, table)                                                   \
+  .path = key, .field = ChoiceField {                                                                  \
     +[](const DaemonConfig& c) { return table.name(c.member); },                                       \
     +[](DaemonConfig& c, std::string_view name) {                                                      \
       const auto value = table.parse(name);                                                            \
@@ -39,12 +28,6 @@ bool set_string_choice(std::string& member, std::string_view name) {
       return value.has_value();                                                                        \
     },                                                                                                 \
     +[] { return table.choices(); }                                                                    \
-  }
-#define FACECAP_STRING_CHOICE_KEY(member, choices)                                                     \
-  .path = #member, .field = ChoiceField {                                                              \
-    +[](const DaemonConfig& c) { return std::string_view(c.member); },                                 \
-    +[](DaemonConfig& c, std::string_view name) { return set_string_choice<&choices>(c.member, name); }, \
-    &choices                                                                                           \
   }
 
 const std::vector<KeySpec>& schema_rows() {
@@ -117,32 +100,31 @@ const std::vector<KeySpec>& schema_rows() {
        .description = "Fit the head's rigid motion to the head markers every frame and solve the face in head space "
                       "(needs 3 head markers present; otherwise the last pose is held)."},
 
-      {FACECAP_STRING_CHOICE_KEY(solver.method, solver_method_choices), .default_value = std::string("nonlinear"),
+      {FACECAP_CHOICE_KEY(solver.method, kSolverMethods), .default_value = std::string("nonlinear"),
        .reload = Reload::kRebuild,
-       .description = "nonlinear: the paper's non-linear blendshape interpolation; linear: direct manipulation "
-                      "(x0 + B w); dt: deformation transfer; meshik: MeshIK, an offline baseline far too slow for "
-                      "the loop."},
-      {FACECAP_KEY(solver.alpha), .default_value = 0.1, .min = 0, .max = 1000, .reload = Reload::kRebuild,
+       .description = "The per-frame face solver."},
+      {FACECAP_KEY(solver.alpha), .default_value = kSolverDefaults.alpha, .min = 0, .max = 1000, .reload = Reload::kRebuild,
        .description = "Temporal smoothing of the weights: alpha |w - w_prev|^2 in Eq. 2."},
-      {FACECAP_KEY(solver.mu), .default_value = 0.001, .min = 0, .max = 1000, .reload = Reload::kRebuild,
+      {FACECAP_KEY(solver.mu), .default_value = kSolverDefaults.mu, .min = 0, .max = 1000, .reload = Reload::kRebuild,
        .description = "Regularisation of the weights' size: mu |w|^2 in Eq. 2."},
-      {FACECAP_KEY(solver.beta), .default_value = 100.0, .min = 0.001, .max = 1e6, .reload = Reload::kRebuild,
+      {FACECAP_KEY(solver.beta), .default_value = kSolverDefaults.beta, .min = 0.001, .max = 1e6, .reload = Reload::kRebuild,
        .description = "How strongly markers pin the mesh in Eq. 5."},
-      {FACECAP_KEY(solver.weight_refinements), .default_value = int64_t{2}, .min = 0, .max = 10,
+      {FACECAP_KEY(solver.weight_refinements), .default_value = int64_t{kSolverDefaults.weight_refinements}, .min = 0, .max = 10,
        .reload = Reload::kRebuild,
        .description = "Gauss-Newton refinements of the weights along the paths rotations move markers (nonlinear "
                       "solver); 0 gives the paper's linear fit."},
-      {FACECAP_STRING_CHOICE_KEY(solver.collisions, collision_choices), .default_value = std::string("lips"),
+      {FACECAP_CHOICE_KEY_NAMED("solver.collisions", solver.collision_region, kCollisionRegions),
+       .default_value = std::string(kCollisionRegions.name(kSolverDefaults.collision_region)),
        .reload = Reload::kRebuild,
-       .description = "Collision handling: none, lips (the lip region) or face (every triangle, slower)."},
-      {FACECAP_KEY(solver.collision_epsilon), .default_value = 0.01, .unit = "rig units", .min = 0, .max = 10,
+       .description = "Which triangles the collision stage checks for pairs closer than collision_epsilon."},
+      {FACECAP_KEY(solver.collision_epsilon), .default_value = kSolverDefaults.collision_epsilon, .unit = "rig units", .min = 0, .max = 10,
        .reload = Reload::kRebuild,
        .description = "Triangle pairs closer than this are held apart at their linear-blend positions."},
-      {FACECAP_KEY(solver.collision_max_pins), .default_value = int64_t{64}, .unit = "vertices", .min = 0, .max = 1024,
+      {FACECAP_KEY(solver.collision_max_pins), .default_value = int64_t{kSolverDefaults.collision_max_pins}, .unit = "vertices", .min = 0, .max = 1024,
        .reload = Reload::kRebuild,
        .description = "Vertices the collision stage pins per frame at most, which bounds its cost (64 pins take "
                       "about 0.15 ms on a 6,706-vertex face); a pose that needs more keeps some crossings."},
-      {FACECAP_KEY(solver.active_weight), .default_value = 1e-4, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
+      {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
 
       {FACECAP_KEY(loop.rate_hz), .default_value = 120.0, .unit = "Hz", .min = 1, .max = 2000,
@@ -291,6 +273,11 @@ const KeySpec* find_key(std::string_view path) noexcept {
   return nullptr;
 }
 
+ValueType KeySpec::type() const noexcept {
+  // The variant's alternatives in ValueType order, then int members as integers.
+  return field.index() == std::variant_size_v<Field> - 1 ? ValueType::kInt : ValueType(field.index());
+}
+
 std::vector<Choice> KeySpec::choices() const {
   const auto* choice = std::get_if<ChoiceField>(&field);
   return choice ? choice->choices() : std::vector<Choice>{};
@@ -300,7 +287,9 @@ Value get_value(const KeySpec& key, const DaemonConfig& config) {
   auto& mutable_config = const_cast<DaemonConfig&>(config);  // the accessors only read here
   return std::visit(
       [&](const auto& field) -> Value {
-        if constexpr (std::is_same_v<std::decay_t<decltype(field)>, ChoiceField>) return std::string(field.get(config));
+        using F = std::decay_t<decltype(field)>;
+        if constexpr (std::is_same_v<F, ChoiceField>) return std::string(field.get(config));
+        else if constexpr (std::is_same_v<F, int& (*)(DaemonConfig&)>) return int64_t{field(mutable_config)};
         else return field(mutable_config);
       },
       key.field);
@@ -309,9 +298,12 @@ Value get_value(const KeySpec& key, const DaemonConfig& config) {
 void set_value(const KeySpec& key, DaemonConfig& config, const Value& value) {
   std::visit(
       [&](const auto& field) {
-        if constexpr (std::is_same_v<std::decay_t<decltype(field)>, ChoiceField>) {
+        using F = std::decay_t<decltype(field)>;
+        if constexpr (std::is_same_v<F, ChoiceField>) {
           if (!field.set(config, std::get<std::string>(value)))
             throw Error(fmt::format("\"{}\" is not one of {}'s choices", std::get<std::string>(value), key.path));
+        } else if constexpr (std::is_same_v<F, int& (*)(DaemonConfig&)>) {
+          field(config) = int(std::get<int64_t>(value));  // the key's range keeps it within int
         } else {
           using T = std::remove_reference_t<decltype(field(config))>;
           field(config) = std::get<T>(value);

@@ -22,9 +22,11 @@ struct ChoiceField {
   std::vector<Choice> (*choices)();
 };
 
-// The member of DaemonConfig a key sets; its type is the key's type.
+// The member of DaemonConfig a key sets; its type is the key's type (an int member, as the
+// solver's parameters have, is an integer key read and written as int64_t).
 using Field = std::variant<bool& (*)(DaemonConfig&), int64_t& (*)(DaemonConfig&), double& (*)(DaemonConfig&),
-                           std::string& (*)(DaemonConfig&), std::vector<int64_t>& (*)(DaemonConfig&), ChoiceField>;
+                           std::string& (*)(DaemonConfig&), std::vector<int64_t>& (*)(DaemonConfig&), ChoiceField,
+                           int& (*)(DaemonConfig&)>;
 // A choice's value is its name.
 using Value = std::variant<bool, int64_t, double, std::string, std::vector<int64_t>>;
 
@@ -51,7 +53,7 @@ struct KeySpec {
   bool names_input_file = false;  // a path that must exist (unless empty or "builtin")
   std::string_view description;
 
-  ValueType type() const noexcept { return ValueType(field.index()); }
+  ValueType type() const noexcept;
   // The rows of a choice key; empty for other keys.
   std::vector<Choice> choices() const;
   std::string_view section() const noexcept;  // "loop" for "loop.rate_hz", "" for "version"

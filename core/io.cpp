@@ -5,7 +5,9 @@
 #include <cstring>
 #include <fstream>
 
+#include <fcntl.h>
 #include <fmt/format.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "core/error.hpp"
@@ -13,14 +15,30 @@
 namespace facecap {
 
 std::vector<char> read_file_bytes(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw file_error(path.string(), fmt::format("cannot open: {}", std::strerror(errno)));
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw file_error(path.string(), "cannot determine size (is it a directory?)");
-  in.seekg(0, std::ios::beg);
-  std::vector<char> bytes(static_cast<std::size_t>(size));
-  if (size > 0 && !in.read(bytes.data(), size)) throw file_error(path.string(), "read failed");
+  // open + fstat rather than an ifstream's seek/tell: a directory opens as a stream whose
+  // "size" is 2^63, which would be allocated before the read failed.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw file_error(path.string(), fmt::format("cannot open: {}", std::strerror(errno)));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    const bool directory = S_ISDIR(st.st_mode);
+    ::close(fd);
+    throw file_error(path.string(), directory ? "is a directory, not a file" : "not a regular file");
+  }
+  std::vector<char> bytes(static_cast<std::size_t>(st.st_size));
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::read(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int err = n < 0 ? errno : 0;
+      ::close(fd);
+      throw file_error(path.string(), err ? fmt::format("read failed: {}", std::strerror(err))
+                                          : fmt::format("file shrank while being read ({} of {} bytes)", done, bytes.size()));
+    }
+    done += std::size_t(n);
+  }
+  ::close(fd);
   return bytes;
 }
 

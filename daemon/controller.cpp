@@ -112,7 +112,7 @@ void Controller::adopt_built() {
     parts_.loop->offer_pipeline(std::move(built.pipeline));
     calibration_ = std::move(built.calibration);
     actor_ = std::move(built.actor);
-    spdlog::info("new solver handed to the loop ({}, calibration {}{})", parts_.config->solver.method,
+    spdlog::info("new solver handed to the loop ({}, calibration {}{})", kSolverMethods.name(parts_.config->solver.method),
                  calibration_.source_take, actor_.empty() ? "" : fmt::format(", actor {}", actor_));
     if (reply) reply({200, std::move(built.report)});
   } catch (const std::exception& e) {

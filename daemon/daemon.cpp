@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <bit>
 #include <cerrno>
 #include <csignal>
 #include <fstream>
@@ -235,8 +236,8 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
     const double frames = double(f.frames_solved);
     capture.markers_used = double(to.markers_used - from.markers_used) / frames;
     capture.markers_expected = double(to.markers_expected - from.markers_expected) / frames;
-    capture.head_held_fraction = double(f.flagged_frames[0]) / frames;  // kSolvedHeadPoseHeld
-    capture.face_held_fraction = double(f.flagged_frames[1]) / frames;  // kSolvedTooFewMarkers
+    capture.head_held_fraction = double(f.flagged_frames[std::countr_zero(uint32_t(kSolvedHeadPoseHeld))]) / frames;
+    capture.face_held_fraction = double(f.flagged_frames[std::countr_zero(uint32_t(kSolvedTooFewMarkers))]) / frames;
   }
   const LatencyHistogram::Snapshot residuals = to.residuals_nm.since(from.residuals_nm);
   capture.residuals = residuals.total();
@@ -501,7 +502,7 @@ void Daemon::publish_status(int64_t now_ns) {
   r.rig_hash = rig_->content_hash();
   r.rig_vertices = rig_->vertex_count();
   r.rig_shapes = rig_->shape_count();
-  r.solver = c.solver.method;
+  r.solver = kSolverMethods.name(c.solver.method);
   controller_->report(r);
   r.mode = config::kLoopModes.name(c.loop.mode);
   r.rate_hz = c.loop.rate_hz;
@@ -558,7 +559,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["rate_hz"] = config_.values.loop.rate_hz;
   j["mode"] = config::kLoopModes.name(config_.values.loop.mode);
   j["rig"] = rig_->name;
-  j["solver"] = config_.values.solver.method;
+  j["solver"] = kSolverMethods.name(config_.values.solver.method);
   j["ticks"] = f.ticks;
   j["frames_solved"] = f.frames_solved;
   j["solved_fps"] = f.solved_fps;

@@ -20,6 +20,7 @@ constexpr uint8_t kHeaderKey = 0x50;    // second byte of every C3D file
 constexpr uint8_t kProcessorBase = 83;  // processor byte = 83 + type
 enum class Processor : uint8_t { kIntel = 1, kDec = 2, kMips = 3 };
 constexpr std::size_t kMaxLabelsPerParameter = 255;  // a dimension is one byte
+constexpr std::size_t kMaxPoints = 65535;            // POINT:USED is a 16-bit word
 
 std::string_view processor_name(Processor p) {
   switch (p) {
@@ -261,6 +262,12 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
   ParameterValues values(reader);
 
   const int64_t points = values.count(params.find("POINT", "USED")).value_or(header_points);
+  // One label per point is allocated even for a take of no frames: the count must be one
+  // a 16-bit word can hold, as the format defines it (a real-typed parameter can claim more).
+  if (points > int64_t(kMaxPoints)) {
+    reader.fail_at(params.find("POINT", "USED")->data_offset,
+                   fmt::format("POINT:USED is {}, more than the {} points a C3D file can hold", points, kMaxPoints));
+  }
   double scale = values.number(params.find("POINT", "SCALE")).value_or(header_scale);
   if (!std::isfinite(scale) || scale == 0.0) {
     if (std::isfinite(header_scale) && header_scale != 0.0f) {
@@ -361,13 +368,14 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
 
   // Data section.
   const double point_scale = float_storage ? 1.0 : scale;
+  const bool timed = usable_frame_rate(rate, std::size_t(frame_count));  // finish_take says why not
   const double nan = std::numeric_limits<double>::quiet_NaN();
   take.frames.resize(std::size_t(frame_count));
   reader.seek(data_offset, "data section");
   for (int64_t f = 0; f < frame_count; ++f) {
     MarkerFrame& frame = take.frames[std::size_t(f)];
     frame.frame_no = first_frame + f;
-    frame.source_time_ns = rate > 0 ? std::llround(double(f) * 1e9 / rate) : 0;
+    frame.source_time_ns = timed ? std::llround(double(f) * 1e9 / rate) : 0;
     frame.markers.resize(std::size_t(points));
     for (int64_t p = 0; p < points; ++p) {
       Marker& m = frame.markers[std::size_t(p)];
@@ -392,6 +400,7 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
     }
     reader.skip(std::size_t(analog_per_frame) * word_bytes, "analog samples");
   }
+  finish_take(take, name);
   return take;
 }
 
@@ -474,7 +483,8 @@ int16_t word_bits(int64_t unsigned_value) { return int16_t(uint16_t(std::clamp<i
 std::vector<char> write_c3d(const MarkerTake& take, const ProgressFn& progress) {
   check_take_shape(take, "C3D writer");
   const std::size_t points = take.marker_count();
-  if (points > 65535) throw Error(fmt::format("C3D holds at most 65535 points per frame, the take has {}", points));
+  if (points > kMaxPoints)
+    throw Error(fmt::format("C3D holds at most {} points per frame, the take has {}", kMaxPoints, points));
   const int64_t frames = int64_t(take.frames.size());
   const int64_t first = std::max<int64_t>(1, take.first_frame);
   const int64_t last = first + frames - 1;  // first - 1 for an empty take

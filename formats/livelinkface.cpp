@@ -116,40 +116,55 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
   const std::size_t column_count = fields.size();
   std::vector<Column> columns(column_count);
   std::vector<std::string> column_names(fields.begin(), fields.end());
-  std::array<bool, kArkitShapeCount> have_weight{};
-  std::array<bool, kLiveLinkAngleCount> have_angle{};
+  // The column each weight and angle is read from (0: none yet; data columns start at 2).
+  std::array<std::size_t, kArkitShapeCount> weight_column{};
+  std::array<std::size_t, kLiveLinkAngleCount> angle_column{};
   std::vector<std::string> ignored;
+  std::size_t repeated = 0;
   for (std::size_t c = 2; c < column_count; ++c) {
     const std::string_view column_name = trim_spaces(fields[c]);
-    if (auto s = arkit_shape_index(column_name); s && !have_weight[*s]) {
-      columns[c] = {Column::kWeight, *s};
-      have_weight[*s] = true;
-      continue;
+    std::size_t* first = nullptr;
+    Column column;
+    if (auto s = arkit_shape_index(column_name)) {
+      first = &weight_column[*s];
+      column = {Column::kWeight, *s};
+    } else if (const auto angle = std::find_if(kLiveLinkAngleNames.begin(), kLiveLinkAngleNames.end(),
+                                               [&](std::string_view a) { return equals_ignore_case(a, column_name); });
+               angle != kLiveLinkAngleNames.end()) {
+      column = {Column::kAngle, std::size_t(angle - kLiveLinkAngleNames.begin())};
+      first = &angle_column[column.index];
     }
-    const auto angle = std::find_if(kLiveLinkAngleNames.begin(), kLiveLinkAngleNames.end(),
-                                    [&](std::string_view a) { return equals_ignore_case(a, column_name); });
-    if (angle != kLiveLinkAngleNames.end() && !have_angle[std::size_t(angle - kLiveLinkAngleNames.begin())]) {
-      const auto a = std::size_t(angle - kLiveLinkAngleNames.begin());
-      columns[c] = {Column::kAngle, a};
-      have_angle[a] = true;
-      continue;
+    if (first && *first == 0) {
+      *first = c;
+      columns[c] = column;
+    } else if (first) {
+      if (repeated++ == 0)  // the first is read, as everywhere a name is repeated
+        take.warnings.push_back(fmt::format("{}: column {} repeats '{}' of column {}; the first is read", name, c + 1,
+                                            column_name, *first + 1));
+    } else if (!(column_name.empty() && c + 1 == column_count)) {  // not a trailing comma
+      ignored.emplace_back(column_name);
     }
-    if (column_name.empty() && c + 1 == column_count) continue;  // trailing comma
-    ignored.emplace_back(column_name);
   }
+  if (repeated > 1) take.warnings.push_back(fmt::format("{}: {} columns repeat an earlier name", name, repeated));
   for (std::size_t s = 0; s < kArkitShapeCount; ++s) {
-    if (!have_weight[s]) throw line_error(name, 1, fmt::format("header lacks the {} column", kArkitShapes[s].arkit));
+    if (weight_column[s] == 0) throw line_error(name, 1, fmt::format("header lacks the {} column", kArkitShapes[s].arkit));
   }
   if (!ignored.empty()) {
     take.warnings.push_back(
         fmt::format("{}: {} unknown columns ignored (first: '{}')", name, ignored.size(), ignored.front()));
   }
-  if (std::count(have_angle.begin(), have_angle.end(), false) > 0) {
+  if (std::count(angle_column.begin(), angle_column.end(), std::size_t(0)) > 0) {
     take.warnings.push_back(fmt::format("{}: some head/eye angle columns are missing; read as 0", name));
   }
 
   const float nan = std::numeric_limits<float>::quiet_NaN();
+  // A take may run past one midnight (timecode jumping back by more than half a day); a
+  // second such jump cannot be another midnight (that would be a take of over a day) and
+  // counts as a jump back, so times stay within two days whatever the rows say.
   int64_t day_offset_ns = 0;
+  int64_t midnight_line = 0;
+  std::size_t jumps_back = 0;
+  int64_t first_jump_back_line = 0;
   std::size_t count_mismatches = 0;
   while (lines.next(line)) {
     if (trim_spaces(line).empty()) continue;
@@ -164,10 +179,15 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
     FaceFrame& frame = take.frames.emplace_back();
     frame.timecode = *timecode;
     frame.source_time_ns = timecode_ns(*timecode) + day_offset_ns;
-    if (take.frames.size() > 1 &&
-        frame.source_time_ns < take.frames[take.frames.size() - 2].source_time_ns - kNsPerDay / 2) {
-      day_offset_ns += kNsPerDay;  // the take ran past midnight
-      frame.source_time_ns += kNsPerDay;
+    if (take.frames.size() > 1) {
+      const int64_t previous_ns = take.frames[take.frames.size() - 2].source_time_ns;
+      if (midnight_line == 0 && frame.source_time_ns < previous_ns - kNsPerDay / 2) {
+        midnight_line = lines.line_number();  // the take ran past midnight
+        day_offset_ns = kNsPerDay;
+        frame.source_time_ns += kNsPerDay;
+      } else if (frame.source_time_ns < previous_ns) {
+        if (jumps_back++ == 0) first_jump_back_line = lines.line_number();
+      }
     }
     if (*count == 0 && (fields.size() == 2 ||
                         std::all_of(fields.begin() + 2, fields.end(), [](auto f) { return trim_spaces(f).empty(); }))) {
@@ -191,6 +211,12 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
         frame.angles[columns[c].index] = float(*value);
       }
     }
+  }
+  if (jumps_back > 0) {
+    take.warnings.push_back(fmt::format("{}: the timecode jumps back {} times (first at line {}){}", name, jumps_back,
+                                        first_jump_back_line,
+                                        midnight_line ? fmt::format("; line {} was read as passing midnight", midnight_line)
+                                                      : std::string()));
   }
   if (count_mismatches > 0) {
     take.warnings.push_back(fmt::format("{}: {} rows give a BlendShapeCount other than the {} value columns", name,

@@ -410,17 +410,19 @@ std::optional<ChunkView> chunk_at(std::span<const char> bytes, std::size_t offse
   r.seek(offset);
   const uint32_t code = r.u32();
   const uint32_t size = r.u32();
-  const uint64_t checksum = r.u64();
+  [[maybe_unused]] const uint64_t checksum = r.u64();
   if (size > r.remaining()) {
     why = fmt::format("chunk {} at byte {} needs {} payload bytes, {} remain", fourcc_text(code), offset, size,
                       r.remaining());
     return std::nullopt;
   }
   const char* payload = bytes.data() + r.offset();
+#ifndef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION  // fuzzers reach the payload decoders past the checksum
   if (chunk_checksum(code, size, payload) != checksum) {
     why = fmt::format("checksum mismatch in chunk {} at byte {}", fourcc_text(code), offset);
     return std::nullopt;
   }
+#endif
   return ChunkView{code, offset, std::span<const char>(payload, size)};
 }
 
@@ -483,7 +485,7 @@ bool RecordingReader::load_index(std::size_t chunks_begin) {
     e.source_time_ns = r.i64();
     // Chunks follow each other without overlap and before the index.
     if (kind > uint8_t(ChunkKind::kSolvedFrame) || e.offset < previous_end ||
-        e.offset + kChunkHeaderBytes > index_offset)
+        e.offset > index_offset - kChunkHeaderBytes)  // not e.offset + 16: that can wrap
       return false;
     previous_end = e.offset + kChunkHeaderBytes;
   }
@@ -561,8 +563,11 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
   for (std::size_t k = 0; k < take.labels.size(); ++k) slot_of.emplace(take.labels[k], k);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::size_t duplicates = 0;
+  std::string first_duplicate;  // described when found
+  const std::size_t sample_limit = max_take_samples(reader.size_bytes());
   MarkerFrame raw;
-  std::vector<bool> filled;
+  constexpr std::size_t kUnfilled = std::size_t(-1);
+  std::vector<std::size_t> filled_by;  // per slot, the marker of this frame that filled it
   std::string generated;
   const std::size_t count = reader.marker_frame_count();
   take.frames.reserve(count);
@@ -573,7 +578,7 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
     frame.source_time_ns = raw.source_time_ns;
     frame.receive_time_ns = raw.receive_time_ns;
     frame.timecode = raw.timecode;
-    filled.assign(take.labels.size(), false);
+    filled_by.assign(take.labels.size(), kUnfilled);
     for (std::size_t k = 0; k < raw.markers.size(); ++k) {
       const Marker& m = raw.markers[k];
       std::string_view label = m.label.view();
@@ -587,17 +592,26 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
       if (k >= take.labels.size() || take.labels[k] != label) {
         auto [it, added] = slot_of.emplace(std::string(label), take.labels.size());
         if (added) {
+          // Every frame gets a slot per label: marker ids that change every frame would
+          // multiply into more slots than the file could ever describe.
+          if (count * (take.labels.size() + 1) > sample_limit)
+            throw file_error(reader.name(),
+                             fmt::format("{} distinct marker labels by frame {} of {}: as a take (a slot per label in "
+                                         "every frame) more than the {} marker samples a {}-byte file may expand to",
+                                         take.labels.size() + 1, i + 1, count, sample_limit, reader.size_bytes()));
           take.labels.emplace_back(label);
-          filled.push_back(false);
+          filled_by.push_back(kUnfilled);
         }
         slot = it->second;
       }
       if (frame.markers.size() < take.labels.size()) frame.markers.resize(take.labels.size());
-      if (filled[slot]) {
-        ++duplicates;
+      if (filled_by[slot] != kUnfilled) {
+        if (duplicates++ == 0)
+          first_duplicate = fmt::format("'{}' in frame {} (markers {} and {} of the frame)", label, raw.frame_no,
+                                        filled_by[slot] + 1, k + 1);
         continue;
       }
-      filled[slot] = true;
+      filled_by[slot] = k;
       frame.markers[slot] = m;
       frame.markers[slot].label.assign(label);
     }
@@ -637,8 +651,10 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
   if (reader.truncated())
     take.warnings.push_back(fmt::format("{}: recording cut off: {}", reader.name(), reader.stop_reason()));
   if (duplicates > 0)
-    take.warnings.push_back(
-        fmt::format("{}: {} markers repeated a label within a frame (kept the first)", reader.name(), duplicates));
+    take.warnings.push_back(fmt::format("{}: {} markers repeat a label within their frame, the first {}; the first "
+                                        "marker with a label is kept",
+                                        reader.name(), duplicates, first_duplicate));
+  finish_take(take, reader.name());
   return take;
 }
 

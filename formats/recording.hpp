@@ -113,6 +113,7 @@ class RecordingReader {
 
   const RecordingHeader& header() const noexcept { return header_; }
   const std::string& name() const noexcept { return name_; }
+  std::size_t size_bytes() const noexcept { return bytes_.size(); }
   // The index as written at close, or rebuilt by scanning.
   const std::vector<RecordingIndexEntry>& index() const noexcept { return index_; }
   bool index_rebuilt() const noexcept { return index_rebuilt_; }
@@ -150,7 +151,9 @@ class RecordingReader {
 };
 
 // A recording's marker frames as a take: one slot per distinct label in order of first
-// appearance (unlabelled markers are named id_<id>), absent markers missing.
+// appearance (unlabelled markers are named id_<id>), absent markers missing. A label
+// repeated within a frame keeps its first marker (with a warning naming the frame and
+// both markers). Throws Error when labels x frames exceeds max_take_samples of the file.
 MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& progress = {});
 
 // Writes a take's frames as a marker-only recording (the HEAD names the source).

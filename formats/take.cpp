@@ -6,6 +6,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <unordered_map>
 
 #include <fmt/format.h>
 #include <unistd.h>
@@ -82,6 +83,65 @@ MarkerFrame& append_empty_frame(MarkerTake& take, int64_t frame_no, int64_t sour
     set_missing(frame.markers[k]);
   }
   return frame;
+}
+
+bool usable_frame_rate(double rate_hz, std::size_t frames) noexcept {
+  return std::isfinite(rate_hz) && rate_hz > 0.0 && rate_hz <= kMaxFrameRateHz &&
+         double(frames) * 1e9 / rate_hz < 9.0e18;
+}
+
+std::size_t max_take_samples(std::size_t bytes) noexcept { return 16 * bytes + (std::size_t(1) << 20); }
+
+namespace {
+
+// Labels given to more than one slot, each with its first two slots (1-based, as the
+// formats number points and markers).
+void warn_duplicate_labels(MarkerTake& take, const std::string& name) {
+  constexpr std::size_t kNamed = 5;  // a hostile file may repeat thousands: name a few, count the rest
+  std::unordered_map<std::string_view, std::size_t> first_slot;
+  std::size_t repeated = 0;
+  for (std::size_t k = 0; k < take.labels.size(); ++k) {
+    const auto [it, added] = first_slot.emplace(take.labels[k], k);
+    if (added) continue;
+    if (++repeated <= kNamed) {
+      take.warnings.push_back(fmt::format("{}: label '{}' is given to markers {} and {}; matching by label uses marker {}",
+                                          name, take.labels[k], it->second + 1, k + 1, it->second + 1));
+    }
+  }
+  if (repeated > kNamed)
+    take.warnings.push_back(fmt::format("{}: {} more markers repeat an earlier label", name, repeated - kNamed));
+}
+
+void retime_equal_timestamps(MarkerTake& take, const std::string& name) {
+  auto& frames = take.frames;
+  if (frames.size() < 2) return;
+  const int64_t first_ns = frames.front().source_time_ns;
+  for (const auto& f : frames)
+    if (f.source_time_ns != first_ns) return;
+  if (take.rate_hz <= 0.0) {
+    take.warnings.push_back(fmt::format("{}: all {} frames carry the same timestamp and the take states no frame "
+                                        "rate: its frames have no timing",
+                                        name, frames.size()));
+    return;
+  }
+  take.warnings.push_back(fmt::format("{}: all {} frames carry the same timestamp ({} ns); timed at the nominal "
+                                      "{} Hz instead",
+                                      name, frames.size(), first_ns, take.rate_hz));
+  const double span_ns = double(frames.size()) * 1e9 / take.rate_hz;  // < 9e18: the rate is usable
+  const int64_t base_ns = double(first_ns) + span_ns < 9.2e18 ? first_ns : 0;
+  for (std::size_t i = 0; i < frames.size(); ++i)
+    frames[i].source_time_ns = base_ns + std::llround(double(i) * 1e9 / take.rate_hz);
+}
+
+}  // namespace
+
+void finish_take(MarkerTake& take, const std::string& name) {
+  if (take.rate_hz != 0.0 && !usable_frame_rate(take.rate_hz, take.frames.size())) {
+    take.warnings.push_back(fmt::format("{}: frame rate {} Hz is not usable; treated as unknown", name, take.rate_hz));
+    take.rate_hz = 0.0;
+  }
+  warn_duplicate_labels(take, name);
+  retime_equal_timestamps(take, name);
 }
 
 void report_progress(const ProgressFn& progress, std::size_t done, std::size_t total) {

@@ -49,6 +49,25 @@ struct MarkerTake {
   std::string_view metadata_value(std::string_view key) const noexcept;
 };
 
+// Frame rates the readers accept as timing: finite, positive, at most kMaxFrameRateHz, and
+// slow enough that `frames` frames end within int64 nanoseconds.
+inline constexpr double kMaxFrameRateHz = 1e6;
+bool usable_frame_rate(double rate_hz, std::size_t frames) noexcept;
+
+// What every marker reader does last, so that all formats treat these alike (warnings in
+// take.warnings, each naming `name`):
+// - a rate that is not usable_frame_rate becomes 0 (unknown);
+// - a label given to more than one marker slot is named with both slots (everything that
+//   matches markers by label uses the first);
+// - when two or more frames all carry one timestamp, they are re-timed at the nominal rate
+//   (replay paces by timestamps), or said to have no timing when there is no rate.
+void finish_take(MarkerTake& take, const std::string& name);
+
+// How many marker samples (frames x slots) a file of `bytes` may expand to: a bound
+// checked before frames are allocated, generous for real files (a sample costs a few
+// bytes of text at least) and small enough that hostile counts cannot exhaust memory.
+std::size_t max_take_samples(std::size_t bytes) noexcept;
+
 // Appends a frame of marker_count missing markers labelled from take.labels.
 MarkerFrame& append_empty_frame(MarkerTake& take, int64_t frame_no, int64_t source_time_ns);
 

@@ -24,10 +24,6 @@ void split_row(std::string_view line, std::vector<std::string_view>& out) {
 
 bool blank(std::string_view line) { return trim_spaces(line).empty(); }
 
-// A hostile header can claim millions of markers over millions of short rows; real files
-// never hold more marker samples than a small multiple of their size.
-std::size_t sample_limit(std::size_t text_bytes) { return 16 * text_bytes + (std::size_t(1) << 20); }
-
 }  // namespace
 
 MarkerTake read_trc(std::string_view text, const std::string& name) {
@@ -129,7 +125,8 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
   take.labels = std::move(labels);
 
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  const std::size_t limit = sample_limit(text.size());
+  // A hostile header can claim thousands of markers over millions of short rows.
+  const std::size_t limit = max_take_samples(text.size());
   std::size_t rows_with_extra_columns = 0;
   std::size_t partial_cells = 0;
   while (lines.next(line)) {
@@ -201,6 +198,7 @@ MarkerTake read_trc(std::string_view text, const std::string& name) {
     take.warnings.push_back(
         fmt::format("{}: {} markers had only some coordinates and were read as missing", name, partial_cells));
   }
+  finish_take(take, name);
   return take;
 }
 

@@ -4,10 +4,10 @@
 #include <set>
 
 #include <fmt/format.h>
-#include <toml++/toml.h>
 
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "core/toml_reader.hpp"
 #include "core/units.hpp"
 #include "solver/align/profile.hpp"
 
@@ -127,13 +127,7 @@ Calibration read_hand_written(const toml::table& table, const std::string& file,
 }  // namespace
 
 Calibration read_calibration(std::string_view text, const std::string& name, const Rig& rig) {
-  toml::table table;
-  try {
-    table = toml::parse(text, name);
-  } catch (const toml::parse_error& e) {
-    throw Error(std::string(e.description()),
-                {.file = name, .line = int64_t(e.source().begin.line), .column = int64_t(e.source().begin.column)});
-  }
+  const toml::table table = parse_toml(text, name);
   if (!(table.contains("transform") && table.contains("marker"))) return read_hand_written(table, name, rig);
   Calibration profile = align::read_calibration_profile(text, name);
   align::check_profile_matches_rig(profile, rig, name);

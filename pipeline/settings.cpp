@@ -7,19 +7,9 @@
 namespace facecap::pipeline {
 
 SolveSettings solve_settings(const config::DaemonConfig& config) {
-  const config::SolverSection& s = config.solver;
   SolveSettings settings;
-  settings.method = s.method;
-  settings.params.alpha = s.alpha;
-  settings.params.mu = s.mu;
-  settings.params.beta = s.beta;
-  settings.params.weight_refinements = int(s.weight_refinements);
-  settings.params.collision_region = s.collisions == "none"   ? CollisionRegion::kNone
-                                     : s.collisions == "face" ? CollisionRegion::kFace
-                                                              : CollisionRegion::kLips;
-  settings.params.collision_epsilon = s.collision_epsilon;
-  settings.params.collision_max_pins = int(s.collision_max_pins);
-  settings.params.active_weight = s.active_weight;
+  settings.method = config.solver.method;
+  settings.params = config.solver;  // the section is the solver's parameters
   settings.mapper.stabilise_head = config.calibration.stabilise_head;
   return settings;
 }

@@ -19,7 +19,8 @@ constexpr double kLabelMarginMm = 1.0;      // in favour of the label a point ca
 SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                              const SolveSettings& settings)
     : mapper_(calibration, source.labels, source.units, settings.mapper),
-      solver_(make_solver(settings.method, build_solver_model(rig, calibration.bindings(), settings.params))),
+      solver_(make_solver(settings.method,
+                          build_solver_model(rig, calibration.bindings(), settings.params))),
       mapped_(mapper_.make_output()),
       result_(solver_->make_result()),
       bindings_(calibration.bindings()),
@@ -78,7 +79,7 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.markers_used = result_.markers_used;
   out.markers_expected = uint32_t(bindings_.size());
   out.collision_constraints = result_.collision_constraints;
-  out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | (result_.held ? kSolvedTooFewMarkers : 0u);
+  out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | result_.status;
   record_fit_residuals(out);
   out.solve_end_ns = monotonic_now_ns();
 }

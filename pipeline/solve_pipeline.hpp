@@ -28,7 +28,7 @@ struct SourceDescription {
 
 // How to solve: the [solver] section's method and parameters, and the mapping options.
 struct SolveSettings {
-  std::string method = "nonlinear";
+  SolverMethod method = SolverMethod::kNonlinear;
   SolverParams params;
   MapperOptions mapper;
   // Check each frame's labels against the markers' predicted positions and correct

@@ -17,6 +17,7 @@ packages=(
   libtomlplusplus-dev libtinygltf-dev nlohmann-json3-dev
   libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev libdtl-dev libpcap-dev
   catch2 libbenchmark-dev
+  clang libclang-rt-dev  # scripts/fuzz: libFuzzer with ASan and UBSan
   systemd  # systemd-analyze: the test that checks systemd/facecapd.service
 )
 

@@ -4,9 +4,9 @@
 
 namespace facecap {
 
-BoxQpSolver::BoxQpSolver(Eigen::Index size)
-    : n_(size), state_(size), free_(size), chol_(size, size), rhs_(size), candidate_(size), gradient_(size),
-      bound_product_(size) {}
+BoxQpSolver::BoxQpSolver(Eigen::Index size, int max_iterations)
+    : n_(size), max_iterations_(max_iterations > 0 ? max_iterations : int(10 * size + 10)), state_(size), free_(size),
+      chol_(size, size), rhs_(size), candidate_(size), gradient_(size), bound_product_(size) {}
 
 // Solves H_FF w_F = g_F - H_FA w_A for the free set into candidate_. False if H_FF is
 // not positive definite (cannot happen for the ridge-regularised weights problem).
@@ -70,7 +70,7 @@ BoxQpSolver::Result BoxQpSolver::solve(const Eigen::MatrixXd& H, const Eigen::Ve
   constexpr int kPrimalDualIterations = 8;
   gradient_.noalias() = H * w;
   gradient_ -= g;
-  for (int it = 0; it < kPrimalDualIterations; ++it) {
+  for (int it = 0; it < kPrimalDualIterations && result.iterations < max_iterations_; ++it) {
     bool changed = false;
     for (Eigen::Index i = 0; i < n_; ++i) {
       const double trial = w[i] - gradient_[i] / H(i, i);
@@ -101,8 +101,7 @@ BoxQpSolver::Result BoxQpSolver::solve(const Eigen::MatrixXd& H, const Eigen::Ve
     w[i] = std::fmin(std::fmax(w[i], lower), upper);
     state_[i] = w[i] <= lower ? -1 : (w[i] >= upper ? 1 : 0);
   }
-  const int max_iterations = int(10 * n_ + 10);
-  while (result.iterations < max_iterations) {
+  while (result.iterations < max_iterations_) {
     ++result.iterations;
     if (!solve_free_subproblem(H, g, w)) return result;
     // Step from the feasible w towards the candidate, stopping at the first bound hit.

@@ -10,11 +10,13 @@ namespace facecap {
 
 class BoxQpSolver {
  public:
-  explicit BoxQpSolver(Eigen::Index size);  // allocates workspace (not real-time)
+  // Allocates workspace (not real-time). max_iterations bounds each solve's iterations
+  // (both phases together); 0 gives 10 size + 10, far more than the few it takes.
+  explicit BoxQpSolver(Eigen::Index size, int max_iterations = 0);
 
   struct Result {
     int iterations = 0;
-    bool converged = false;
+    bool converged = false;  // false: stopped at max_iterations (or a singular subproblem), w feasible
   };
 
   // H: n x n symmetric positive definite; g: n. w: warm start in (clamped to the box
@@ -28,6 +30,7 @@ class BoxQpSolver {
   bool solve_free_subproblem(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, const Eigen::VectorXd& w) noexcept;
 
   Eigen::Index n_;
+  int max_iterations_;
   Eigen::VectorXi state_;      // 0 free, -1 at lower, +1 at upper
   Eigen::VectorXi free_;       // indices of free variables
   Eigen::Index free_count_ = 0;

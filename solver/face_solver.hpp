@@ -15,6 +15,7 @@
 #include <Eigen/Core>
 
 #include "core/frame.hpp"
+#include "solver/params.hpp"
 #include "solver/rig.hpp"
 
 namespace facecap {
@@ -30,24 +31,6 @@ struct MarkerBinding {
   }
 };
 
-enum class CollisionRegion : uint8_t { kNone, kLips, kFace };
-
-struct SolverParams {
-  double alpha = 0.1;     // temporal weight regularisation (Eq. 2)
-  double mu = 0.001;      // weight magnitude regularisation (Eq. 2)
-  double beta = 100.0;    // marker pinning strength (Eq. 5)
-  CollisionRegion collision_region = CollisionRegion::kLips;
-  double collision_epsilon = 0.01;  // rig units: triangle pairs closer than this collide
-  // Vertices pinned per frame at most: bounds the collision stage's cost. Lip poses that
-  // need more keep some crossings (ICT: one pose in 41 needs 100).
-  int collision_max_pins = 64;
-  double active_weight = 1e-4;      // weights below this are left out of T(w)
-  // Gauss-Newton refinements of Eq. 2 for the nonlinear solver, fitting markers along
-  // the paths the rotations of Eq. 4 move them (a hinge swings, it does not slide);
-  // 0 gives the paper's linear fit.
-  int weight_refinements = 2;
-};
-
 // One frame's result. Sized by FaceSolver::make_result(); solve() only writes into it.
 struct SolveResult {
   Eigen::VectorXd weights;    // M
@@ -57,7 +40,10 @@ struct SolveResult {
   uint32_t markers_used = 0;
   uint32_t collision_pairs = 0;        // colliding triangle pairs found
   uint32_t collision_constraints = 0;  // vertices pinned to the linear blend
-  bool held = false;                   // too few markers: previous result kept
+  // SolvedFlags (core/frame.hpp) this solve raised: kSolvedTooFewMarkers (the previous
+  // result kept), kSolvedQpIterationCap, kSolvedPinsBeyondCapacity,
+  // kSolvedSingularCorrection. 0 for a normal frame.
+  uint32_t status = 0;
 };
 
 class SolverModel;
@@ -98,8 +84,8 @@ class FaceSolver {
 std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vector<MarkerBinding> markers,
                                                       const SolverParams& params = {});
 
-// "nonlinear" (the paper, default), "linear", "dt", "meshik". Throws Error on an unknown name.
-std::unique_ptr<FaceSolver> make_solver(std::string_view name, std::shared_ptr<const SolverModel> model);
-std::span<const std::string_view> solver_names() noexcept;
+// The solver of `method` (kSolverMethods) over a built model. Not real-time; throws Error
+// without a model.
+std::unique_ptr<FaceSolver> make_solver(SolverMethod method, std::shared_ptr<const SolverModel> model);
 
 }  // namespace facecap

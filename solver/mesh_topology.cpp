@@ -3,7 +3,16 @@
 #include <algorithm>
 #include <tuple>
 
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+
 namespace facecap {
+
+void check_triangle_indices(const Eigen::Matrix3Xi& triangles, Eigen::Index vertex_count) {
+  if (triangles.size() > 0 && (triangles.minCoeff() < 0 || triangles.maxCoeff() >= vertex_count))
+    throw Error(fmt::format("triangle vertex indices must lie in [0, {})", vertex_count));
+}
 
 TriangleAdjacency::TriangleAdjacency(const Eigen::Matrix3Xi& triangles) {
   const Eigen::Index T = triangles.cols();

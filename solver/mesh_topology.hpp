@@ -1,11 +1,15 @@
 #pragma once
-// Triangle adjacency of a triangle mesh (precomputation only).
+// Triangle adjacency of a triangle mesh, and the check of its vertex indices
+// (precomputation only: these allocate or throw).
 #include <span>
 #include <vector>
 
 #include <Eigen/Core>
 
 namespace facecap {
+
+// Throws Error unless every index of `triangles` (3 x T) lies in [0, vertex_count).
+void check_triangle_indices(const Eigen::Matrix3Xi& triangles, Eigen::Index vertex_count);
 
 class TriangleAdjacency {
  public:

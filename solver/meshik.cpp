@@ -31,13 +31,13 @@ Eigen::Matrix3d symmetric_from6(const double* s, double diagonal) {
 template <class F>
 void for_each_changed_triangle(const SolverModel& m, Eigen::Index shape, F&& f) {
   constexpr int B = ShapeBlocks::kBlock;
-  constexpr int C = SolverModel::kNonlinearComponents;
+  constexpr int C = BlendData::kNonlinearComponents;
   double stored[C * B];
-  for (const int32_t e : m.triangle_blocks.entries_of_shape(shape)) {
-    const std::size_t first = std::size_t(m.triangle_blocks.entries[std::size_t(e)].block) * B;
-    m.triangle_nonlinear.decode(e, stored);
+  for (const int32_t e : m.blend.triangle_blocks.entries_of_shape(shape)) {
+    const std::size_t first = std::size_t(m.blend.triangle_blocks.entries[std::size_t(e)].block) * B;
+    m.blend.triangle_nonlinear.decode(e, stored);
     for (int i = 0; i < B; ++i) {
-      const int32_t t = m.triangle_blocks.element_of_slot[first + std::size_t(i)];
+      const int32_t t = m.blend.triangle_blocks.element_of_slot[first + std::size_t(i)];
       if (t < 0) continue;
       double local[C];
       bool changes = false;
@@ -46,7 +46,7 @@ void for_each_changed_triangle(const SolverModel& m, Eigen::Index shape, F&& f) 
         changes = changes || local[c] != 0.0;
       }
       if (!changes) continue;
-      const Eigen::Matrix3d s = m.world_stretch(t, local + 3);
+      const Eigen::Matrix3d s = m.blend.world_stretch(t, local + 3);
       const std::array<double, 9> v = {local[0], local[1], local[2], s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)};
       f(Eigen::Index(t), v);
     }
@@ -57,7 +57,7 @@ void for_each_changed_triangle(const SolverModel& m, Eigen::Index shape, F&& f) 
 
 struct MeshIkSolver::State {
   State(const SolverModel& model, const MeshIkOptions& opts, std::unique_ptr<FaceSolver> eq2_solver)
-      : m(model), options(opts), eq2(std::move(eq2_solver)), qp(model.shape_count()) {}
+      : m(model), options(opts), eq2(std::move(eq2_solver)), qp(model.shape_count(), model.params.weight_qp_iteration_cap) {}
 
   const SolverModel& m;
   MeshIkOptions options;
@@ -100,6 +100,7 @@ struct MeshIkSolver::State {
   std::array<int64_t, kSolveStageCount>* stage_ns = nullptr;
   int64_t last_lap_ns = 0;
   MeshIkReport report;
+  bool qp_iteration_cap = false;  // a Gauss-Newton step's box QP stopped at its cap
 
   void lap(SolveStage stage) noexcept {
     const int64_t now = monotonic_now_ns();
@@ -124,7 +125,7 @@ struct MeshIkSolver::State {
       const Eigen::Vector3d n = (x1 - x0).cross(x2 - x0);
       const double twice_area = n.norm();
       // The same test as the model's operator: a degenerate triangle constrains nothing.
-      if (twice_area <= 1e-14 * scale || m.triangle_operator.col(t).isZero(0.0)) continue;
+      if (twice_area <= 1e-14 * scale || m.blend.triangle_operator.col(t).isZero(0.0)) continue;
       const Eigen::Vector3d unit = n / twice_area;
       Eigen::Matrix3d grad;
       grad.col(0) = unit.cross(x2 - x1) / twice_area;
@@ -137,7 +138,7 @@ struct MeshIkSolver::State {
       Eigen::Map<Matrix32>(vertex_projection.col(t).data()) = root_area * grad.transpose() * E;
       Eigen::Map<Matrix32>(target_projection.col(t).data()) = root_area * E;
       live_triangles.push_back(int(t));
-      const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
+      const Eigen::Map<const Eigen::Matrix3d> Q(m.blend.triangle_operator.col(t).data());
       for (int k = 0; k < 3; ++k) identity_rhs.col(tri[k]) += Q.col(k);
     }
     std::vector<uint8_t> shaped(std::size_t(T), 0);
@@ -185,7 +186,7 @@ struct MeshIkSolver::State {
     for (Eigen::Index i = 0; i < s; ++i)
       for (Eigen::Index j = 0; j < s; ++j) {
         const auto& marker = m.markers[std::size_t(missing[std::size_t(i)])];  // c_i^T A0^-1 c_j
-        const auto z = m.marker_solution.col(missing[std::size_t(j)]);
+        const auto z = m.poisson.marker_solution.col(missing[std::size_t(j)]);
         small(i, j) = marker.barycentric[0] * z[marker.vertices[0]] + marker.barycentric[1] * z[marker.vertices[1]] +
                       marker.barycentric[2] * z[marker.vertices[2]];
       }
@@ -197,7 +198,7 @@ struct MeshIkSolver::State {
 
   // b = A^-1 b in place, A the matrix with this frame's missing markers removed.
   void solve_system(Eigen::Matrix3Xd& b) {
-    m.factor->solve_in_place(b, work);
+    m.poisson.factor->solve_in_place(b, work);
     const Eigen::Index s = Eigen::Index(missing.size());
     if (s == 0) return;
     for (Eigen::Index i = 0; i < s; ++i) {
@@ -208,7 +209,7 @@ struct MeshIkSolver::State {
     }
     small_solution = woodbury.solve(small_rhs);
     for (Eigen::Index i = 0; i < s; ++i) {
-      const auto z = m.marker_solution.col(missing[std::size_t(i)]);
+      const auto z = m.poisson.marker_solution.col(missing[std::size_t(i)]);
       b.noalias() -= small_solution.row(i).transpose() * z.transpose();
     }
   }
@@ -241,7 +242,7 @@ struct MeshIkSolver::State {
     const Rig& rig = m.rig;
     rhs = identity_rhs;
     for (int t : shaped_triangles) {
-      const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
+      const Eigen::Map<const Eigen::Matrix3d> Q(m.blend.triangle_operator.col(t).data());
       const Eigen::Matrix3d contribution =
           (Eigen::Map<const Eigen::Matrix3d>(transform.col(t).data()) - Eigen::Matrix3d::Identity()) * Q;
       for (int k = 0; k < 3; ++k) rhs.col(rig.triangles(k, t)) += contribution.col(k);
@@ -290,7 +291,7 @@ struct MeshIkSolver::State {
     const double h = options.difference_step;
     jacobian.setZero();
     for (Eigen::Index i = 0; i < M; ++i) {
-      if (m.triangle_blocks.entries_of_shape(i).empty()) continue;  // the shape deforms no triangle: its column is zero
+      if (m.blend.triangle_blocks.entries_of_shape(i).empty()) continue;  // the shape deforms no triangle: its column is zero
       column_rhs.setZero();
       for_each_changed_triangle(m, i, [&](Eigen::Index t, const std::array<double, 9>& v) {
         Eigen::Map<Eigen::Matrix3d> dT(&transform_derivative[9 * std::size_t(t)]);
@@ -301,7 +302,7 @@ struct MeshIkSolver::State {
         for (int k = 0; k < 6; ++k) s[k] = v[std::size_t(3 + k)];
         dT = dR * Eigen::Map<const Eigen::Matrix3d>(stretch.col(t).data()) +
              Eigen::Map<const Eigen::Matrix3d>(rotation.col(t).data()) * symmetric_from6(s, 0.0);
-        const Eigen::Map<const Eigen::Matrix3d> Q(m.triangle_operator.col(t).data());
+        const Eigen::Map<const Eigen::Matrix3d> Q(m.blend.triangle_operator.col(t).data());
         const Eigen::Matrix3d contribution = dT * Q;
         for (int k = 0; k < 3; ++k) column_rhs.col(rig.triangles(k, t)) += contribution.col(k);
       });
@@ -343,7 +344,7 @@ struct MeshIkSolver::State {
         g.noalias() = H * w;
         g -= Jtf;
         trial = w;
-        qp.solve(H, g, 0.0, 1.0, trial);
+        if (!qp.solve(H, g, 0.0, 1.0, trial).converged) qp_iteration_cap = true;
         lap(SolveStage::kWeights);
         if ((trial - w).cwiseAbs().maxCoeff() < 1e-12) break;  // no step left to take
         trial_energy = evaluate(trial);
@@ -372,7 +373,7 @@ MeshIkSolver::MeshIkSolver(std::shared_ptr<const SolverModel> model, const MeshI
     : FaceSolver(std::move(model)) {
   if (!(options.difference_step > 0) || options.max_iterations < 0)
     throw Error("meshik: the difference step must be > 0 and the iteration count >= 0");
-  state_ = std::make_unique<State>(*model_, options, make_solver("linear", model_));
+  state_ = std::make_unique<State>(*model_, options, make_solver(SolverMethod::kLinear, model_));
   state_->configure();
 }
 
@@ -388,9 +389,10 @@ void MeshIkSolver::solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_
   out.stage_ns.fill(0);
   out.collision_pairs = out.collision_constraints = 0;
   s.report = {};
+  s.qp_iteration_cap = false;
   s.eq2->solve(targets, present, s.eq2_result);  // Eq. 2: the starting weights
-  out.held = s.eq2_result.held;
-  if (out.held) { out.total_ns = monotonic_now_ns() - start; return; }
+  out.status = s.eq2_result.status;
+  if (out.status & kSolvedTooFewMarkers) { out.total_ns = monotonic_now_ns() - start; return; }
   out.markers_used = s.eq2_result.markers_used;
   s.stage_ns = &out.stage_ns;
   s.last_lap_ns = start;
@@ -400,6 +402,7 @@ void MeshIkSolver::solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_
   s.minimise();
   out.weights = s.w;
   out.vertices = s.x;
+  if (s.qp_iteration_cap) out.status |= kSolvedQpIterationCap;
   s.lap(SolveStage::kWeights);
   s.stage_ns = nullptr;
   out.total_ns = monotonic_now_ns() - start;
@@ -411,7 +414,7 @@ void MeshIkSolver::solve_with_weights(const Eigen::VectorXd& weights, const Eige
   const int64_t start = monotonic_now_ns();
   out.stage_ns.fill(0);
   out.collision_pairs = out.collision_constraints = 0;
-  out.held = false;
+  out.status = 0;
   s.report = {};
   s.stage_ns = &out.stage_ns;
   s.last_lap_ns = start;

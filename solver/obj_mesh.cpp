@@ -1,6 +1,8 @@
 #include "solver/obj_mesh.hpp"
 
 #include <charconv>
+#include <cmath>
+#include <limits>
 #include <vector>
 
 #include <fmt/format.h>
@@ -53,9 +55,13 @@ ObjMesh parse_obj(std::string_view text, const std::string& file) {
         const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), value);
         if (ec != std::errc{} || ptr != tok.data() + tok.size())
           throw line_error(file, line_no, fmt::format("vertex coordinate '{}' is not a number", tok));
+        if (!std::isfinite(value))
+          throw line_error(file, line_no, fmt::format("vertex coordinate '{}' is not a finite number", tok));
         coords.push_back(value);
       }
       mesh.vertex_lines.push_back(line_no);
+      if (mesh.vertex_lines.size() > std::size_t(std::numeric_limits<int>::max()))
+        throw line_error(file, line_no, "more vertices than a face index can address");
       // A fourth (w) or colour values may follow; they are ignored.
     } else if (keyword == "f") {
       polygon.clear();
@@ -74,6 +80,8 @@ ObjMesh parse_obj(std::string_view text, const std::string& file) {
       }
       if (polygon.size() < 3)
         throw line_error(file, line_no, fmt::format("face has {} vertices, needs at least 3 (truncated file?)", polygon.size()));
+      if (tris.size() / 3 + polygon.size() > std::size_t(std::numeric_limits<int>::max()))
+        throw line_error(file, line_no, "more triangles than a mesh can index");
       for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
         tris.push_back(polygon[0]);
         tris.push_back(polygon[i]);
@@ -94,6 +102,34 @@ ObjMesh parse_obj(std::string_view text, const std::string& file) {
 ObjMesh read_obj(const std::string& path) {
   const std::vector<char> bytes = read_file_bytes(path);
   return parse_obj(std::string_view(bytes.data(), bytes.size()), path);
+}
+
+void check_shape_matches_neutral(const ObjMesh& shape, const std::string& shape_file, const ObjMesh& neutral,
+                                 const std::string& neutral_name) {
+  const Eigen::Index n = neutral.vertices.cols();
+  if (shape.vertices.cols() > n)
+    throw line_error(shape_file, shape.vertex_lines[std::size_t(n)],
+                     fmt::format("vertex {} is one more than the neutral {} has ({}): all shapes must share its vertices",
+                                 n + 1, neutral_name, n));
+  if (shape.vertices.cols() < n)
+    throw line_error(shape_file, shape.line_count,
+                     fmt::format("file ends after {} vertices, the neutral {} has {} (truncated file?)",
+                                 shape.vertices.cols(), neutral_name, n));
+  const Eigen::Index shape_faces = shape.triangles.cols(), neutral_faces = neutral.triangles.cols();
+  if (shape_faces == 0) return;  // a shape may leave the faces to the neutral
+  Eigen::Index t = 0;
+  while (t < std::min(shape_faces, neutral_faces) && shape.triangles.col(t) == neutral.triangles.col(t)) ++t;
+  if (t == shape_faces && t == neutral_faces) return;
+  if (t == shape_faces)
+    throw line_error(shape_file, shape.line_count,
+                     fmt::format("file ends after {} triangles, the neutral {} has {}: all shapes must share its topology",
+                                 shape_faces, neutral_name, neutral_faces));
+  throw line_error(shape_file, shape.triangle_lines[std::size_t(t)],
+                   t == neutral_faces
+                       ? fmt::format("triangle {} is one more than the neutral {} has ({}): all shapes must share its topology",
+                                     t + 1, neutral_name, neutral_faces)
+                       : fmt::format("face list differs from the neutral {} here: all shapes must share its topology",
+                                     neutral_name));
 }
 
 std::string format_obj(const Eigen::Matrix3Xd& vertices, const Eigen::Matrix3Xi& triangles) {

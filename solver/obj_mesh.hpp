@@ -21,9 +21,15 @@ struct ObjMesh {
 
 // Parses OBJ text; `file` names it in errors ("path:line: what").
 // Reads v and f (v, v/vt, v//vn, v/vt/vn, negative indices); ignores vt, vn, groups,
-// materials and smoothing. Throws Error.
+// materials and smoothing. Coordinates must be finite (nan and inf are refused). Throws
+// Error.
 ObjMesh parse_obj(std::string_view text, const std::string& file);
 ObjMesh read_obj(const std::string& path);
+
+// Throws Error at the shape's file:line unless `shape` can be a blendshape of `neutral`:
+// the same number of vertices and, when it has faces at all, the same faces in order.
+void check_shape_matches_neutral(const ObjMesh& shape, const std::string& shape_file, const ObjMesh& neutral,
+                                 const std::string& neutral_name);
 
 // Writes vertices and triangles (for tests and exports).
 std::string format_obj(const Eigen::Matrix3Xd& vertices, const Eigen::Matrix3Xi& triangles);

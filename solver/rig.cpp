@@ -7,10 +7,10 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
-#include <toml++/toml.h>
 
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "core/toml_reader.hpp"
 #include "core/units.hpp"
 #include "solver/builtin_face.hpp"
 #include "solver/gltf_rig.hpp"
@@ -74,56 +74,56 @@ Eigen::VectorXd max_shape_displacement(const Rig& rig) {
   return out;
 }
 
+RigManifest parse_rig_manifest(std::string_view text, const fs::path& manifest) {
+  const std::string file = manifest.string();
+  const toml::table table = parse_toml(text, file);
+  auto fail = [&](const toml::node& node, std::string what, std::string key) -> Error {
+    const auto& b = node.source().begin;
+    return Error(std::move(what), ErrorLocation{.file = file, .line = b.line, .column = b.column, .key = std::move(key)});
+  };
+  for (const auto& [key, value] : table) {
+    if (key != "name" && key != "neutral" && key != "shapes")
+      throw fail(value, fmt::format("unknown key '{}' (a manifest has name, neutral and [shapes])", key.str()),
+                 std::string(key.str()));
+  }
+  const fs::path dir = manifest.parent_path();
+  RigManifest out;
+  out.name = dir.filename().string();
+  if (const toml::node* name = table.get("name")) {
+    if (!name->is_string()) throw fail(*name, "name must be a string", "name");
+    out.name = name->as_string()->get();
+  }
+  const toml::node* neutral = table.get("neutral");
+  if (!neutral) throw Error("missing 'neutral = \"file.obj\"'", ErrorLocation{.file = file, .key = "neutral"});
+  if (!neutral->is_string() || neutral->as_string()->get().empty())
+    throw fail(*neutral, "neutral must name an OBJ file", "neutral");
+  out.neutral = dir / neutral->as_string()->get();
+  const toml::table* shapes = table["shapes"].as_table();
+  if (!shapes || shapes->empty())
+    throw Error("missing [shapes] table naming at least one shape", ErrorLocation{.file = file, .key = "shapes"});
+  for (const auto& [key, value] : *shapes) {
+    const std::string shape_key = "shapes." + std::string(key.str());
+    if (key.str().empty()) throw fail(value, "a shape needs a name", shape_key);
+    if (!value.is_string() || value.as_string()->get().empty())
+      throw fail(value, "shape file must be a non-empty string", shape_key);
+    out.shapes.push_back({std::string(key.str()), dir / value.as_string()->get()});
+  }
+  return out;
+}
+
 namespace {
 
-struct ShapeFile {
-  std::string name;
-  fs::path path;
-};
-
-struct RigFiles {
-  std::string name;
-  fs::path neutral;
-  std::vector<ShapeFile> shapes;
-  std::vector<fs::path> inputs;  // every file the rig depends on (for the cache key)
+// A manifest, or what a directory without one implies.
+struct RigFiles : RigManifest {
+  std::vector<fs::path> inputs;  // files beside the OBJs the rig depends on (for the cache key)
 };
 
 constexpr const char* kIctNeutral = "generic_neutral_mesh.obj";
 constexpr const char* kManifestName = "rig.toml";
 
-// A manifest:
-//   neutral = "neutral.obj"
-//   [shapes]
-//   jawOpen = "jaw_open.obj"
 RigFiles read_manifest(const fs::path& manifest) {
-  toml::table table;
-  try {
-    table = toml::parse_file(manifest.string());
-  } catch (const toml::parse_error& e) {
-    const auto& b = e.source().begin;
-    throw Error(std::string(e.description()),
-                ErrorLocation{.file = manifest.string(), .line = b.line, .column = b.column});
-  }
-  const fs::path dir = manifest.parent_path();
-  RigFiles files;
-  files.name = table["name"].value_or(dir.filename().string());
-  const auto neutral = table["neutral"].value<std::string>();
-  if (!neutral) throw Error("missing 'neutral = \"file.obj\"'", ErrorLocation{.file = manifest.string(), .key = "neutral"});
-  files.neutral = dir / *neutral;
-  const toml::table* shapes = table["shapes"].as_table();
-  if (!shapes || shapes->empty())
-    throw Error("missing [shapes] table naming at least one shape", ErrorLocation{.file = manifest.string(), .key = "shapes"});
-  for (const auto& [key, value] : *shapes) {
-    const auto file = value.value<std::string>();
-    if (!file) {
-      const auto& b = value.source().begin;
-      throw Error("shape file must be a string", ErrorLocation{.file = manifest.string(), .line = b.line,
-                                                                .column = b.column, .key = "shapes." + std::string(key.str())});
-    }
-    files.shapes.push_back({std::string(key.str()), dir / *file});
-  }
-  files.inputs.push_back(manifest);
-  return files;
+  const std::vector<char> bytes = read_file_bytes(manifest);
+  return RigFiles{parse_rig_manifest(std::string_view(bytes.data(), bytes.size()), manifest), {manifest}};
 }
 
 RigFiles scan_obj_directory(const fs::path& dir) {
@@ -141,7 +141,7 @@ RigFiles scan_obj_directory(const fs::path& dir) {
     files.shapes.push_back({entry.path().stem().string(), entry.path()});
   }
   std::sort(files.shapes.begin(), files.shapes.end(),
-            [](const ShapeFile& a, const ShapeFile& b) { return a.name < b.name; });
+            [](const RigShapeFile& a, const RigShapeFile& b) { return a.name < b.name; });
   if (files.shapes.empty()) throw file_error(dir.string(), "no blendshape OBJ files beside the neutral mesh");
   return files;
 }
@@ -155,37 +155,26 @@ Rig load_obj_rig(const RigFiles& files) {
   const ObjMesh neutral = read_obj(files.neutral.string());
   if (neutral.vertices.cols() == 0) throw file_error(files.neutral.string(), "neutral mesh has no vertices");
   if (neutral.triangles.cols() == 0) throw file_error(files.neutral.string(), "neutral mesh has no faces");
+  const std::string neutral_name = files.neutral.filename().string();
   Rig rig;
   rig.name = files.name;
   rig.neutral = neutral.vertices;
   rig.triangles = neutral.triangles;
-  rig.deltas.resize(3 * neutral.vertices.cols(), Eigen::Index(files.shapes.size()));
-  for (std::size_t i = 0; i < files.shapes.size(); ++i) {
-    const std::string path = files.shapes[i].path.string();
+  // Gathered as the shapes are read rather than sized 3N x M up front: N and M come from
+  // different files, and only shapes that parsed may claim memory.
+  const auto column = std::size_t(neutral.vertices.size());
+  std::vector<double> deltas;
+  for (const auto& s : files.shapes) {
+    const std::string path = s.path.string();
     const ObjMesh shape = read_obj(path);
-    const std::string neutral_name = files.neutral.filename().string();
-    if (shape.vertices.cols() > neutral.vertices.cols())
-      throw line_error(path, shape.vertex_lines[std::size_t(neutral.vertices.cols())],
-                       fmt::format("vertex {} is one more than the neutral {} has ({}): all shapes must share its vertices",
-                                   neutral.vertices.cols() + 1, neutral_name, neutral.vertices.cols()));
-    if (shape.vertices.cols() < neutral.vertices.cols())
-      throw line_error(path, shape.line_count,
-                       fmt::format("file ends after {} vertices, the neutral {} has {} (truncated file?)",
-                                   shape.vertices.cols(), neutral_name, neutral.vertices.cols()));
-    if (shape.triangles.cols() != 0 && shape.triangles != neutral.triangles) {
-      Eigen::Index t = 0;
-      while (t < std::min(shape.triangles.cols(), neutral.triangles.cols()) &&
-             shape.triangles.col(t) == neutral.triangles.col(t))
-        ++t;
-      const int64_t line = t < shape.triangles.cols() ? shape.triangle_lines[std::size_t(t)] : shape.line_count;
-      throw line_error(path, line, fmt::format("face list differs from the neutral {} here: all shapes must share its topology",
-                                               neutral_name));
-    }
-    rig.shape_names.push_back(files.shapes[i].name);
-    rig.deltas.col(Eigen::Index(i)) =
+    check_shape_matches_neutral(shape, path, neutral, neutral_name);
+    rig.shape_names.push_back(s.name);
+    deltas.resize(deltas.size() + column);
+    Eigen::Map<Eigen::VectorXd>(deltas.data() + deltas.size() - column, Eigen::Index(column)) =
         Eigen::Map<const Eigen::VectorXd>(shape.vertices.data(), shape.vertices.size()) -
         Eigen::Map<const Eigen::VectorXd>(neutral.vertices.data(), neutral.vertices.size());
   }
+  rig.deltas = Eigen::Map<const Eigen::MatrixXd>(deltas.data(), Eigen::Index(column), Eigen::Index(files.shapes.size()));
   return rig;
 }
 

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -61,6 +62,25 @@ struct RigLoadReport {
   std::filesystem::path cache_file;  // empty when caching is off or failed
   double seconds = 0.0;
 };
+
+// A rig manifest (rig.toml):
+//   name = "actor"            # optional
+//   neutral = "neutral.obj"
+//   [shapes]
+//   jawOpen = "jaw_open.obj"  # one OBJ per shape, in file order
+// Paths are relative to the manifest's directory.
+struct RigShapeFile {
+  std::string name;
+  std::filesystem::path path;
+};
+struct RigManifest {
+  std::string name;
+  std::filesystem::path neutral;
+  std::vector<RigShapeFile> shapes;
+};
+// Parses a manifest's text; `manifest` names it in errors and anchors relative paths.
+// Throws Error with file:line:col and the key.
+RigManifest parse_rig_manifest(std::string_view text, const std::filesystem::path& manifest);
 
 // Loads "builtin", an OBJ directory (ICT layout or with rig.toml), a .toml manifest,
 // or a .gltf/.glb file. Throws Error naming the file and line on malformed input.

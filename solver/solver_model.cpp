@@ -17,7 +17,8 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/lip_region.hpp"
+#include "solver/collide/metrics.hpp"
 #include "solver/mesh_topology.hpp"
 
 namespace facecap {
@@ -31,6 +32,8 @@ void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const S
   if (markers.empty()) throw Error("solver: no markers to solve from");
   if (params.collision_max_pins < 0 || params.collision_max_pins > 1024)
     throw Error(fmt::format("solver: collision_max_pins {} is not in [0, 1024]", params.collision_max_pins));
+  if (params.weight_qp_iteration_cap < 0)
+    throw Error(fmt::format("solver: weight_qp_iteration_cap {} must be >= 0", params.weight_qp_iteration_cap));
   if (!(params.beta > 0) || !(params.alpha >= 0) || !(params.mu >= 0))
     throw Error(fmt::format("solver: beta must be > 0 and alpha, mu >= 0 (beta {}, alpha {}, mu {})", params.beta,
                             params.alpha, params.mu));
@@ -47,21 +50,21 @@ void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const S
 void build_marker_rows(SolverModel& model) {
   const Rig& rig = model.rig;
   const Eigen::Index K = model.marker_count(), M = rig.shape_count();
-  model.marker_basis.setZero(3 * K, M);
-  model.marker_neutral.setZero(3 * K);
+  model.weights.marker_basis.setZero(3 * K, M);
+  model.weights.marker_neutral.setZero(3 * K);
   for (Eigen::Index k = 0; k < K; ++k) {
     const auto& m = model.markers[std::size_t(k)];
     for (int i = 0; i < 3; ++i) {
-      model.marker_basis.middleRows(3 * k, 3) += m.barycentric[i] * rig.deltas.middleRows(3 * m.vertices[i], 3);
-      model.marker_neutral.segment<3>(3 * k) += m.barycentric[i] * rig.neutral.col(m.vertices[i]);
+      model.weights.marker_basis.middleRows(3 * k, 3) += m.barycentric[i] * rig.deltas.middleRows(3 * m.vertices[i], 3);
+      model.weights.marker_neutral.segment<3>(3 * k) += m.barycentric[i] * rig.neutral.col(m.vertices[i]);
     }
   }
-  model.marker_basis_rows = model.marker_basis;
-  model.gram_all = model.marker_basis.transpose() * model.marker_basis;
-  model.gram_per_marker.resize(M, M * K);
+  model.weights.marker_basis_rows = model.weights.marker_basis;
+  model.weights.gram_all = model.weights.marker_basis.transpose() * model.weights.marker_basis;
+  model.weights.gram_per_marker.resize(M, M * K);
   for (Eigen::Index k = 0; k < K; ++k)
-    model.gram_per_marker.middleCols(k * M, M) =
-        model.marker_basis.middleRows(3 * k, 3).transpose() * model.marker_basis.middleRows(3 * k, 3);
+    model.weights.gram_per_marker.middleCols(k * M, M) =
+        model.weights.marker_basis.middleRows(3 * k, 3).transpose() * model.weights.marker_basis.middleRows(3 * k, 3);
 }
 
 // Twice the area below which a triangle is degenerate: it constrains nothing.
@@ -70,10 +73,10 @@ double degenerate_area(const Rig& rig) { return 1e-14 * bounding_box(rig.neutral
 void build_triangle_frames(SolverModel& model) {
   const Rig& rig = model.rig;
   const double degenerate = degenerate_area(rig);
-  model.triangle_frames.setZero(9, rig.triangle_count());
+  model.blend.triangle_frames.setZero(9, rig.triangle_count());
   for (Eigen::Index t = 0; t < rig.triangle_count(); ++t) {
     const Eigen::Vector3i tri = rig.triangles.col(t);
-    Eigen::Map<Eigen::Matrix3d>(model.triangle_frames.col(t).data()) =
+    Eigen::Map<Eigen::Matrix3d>(model.blend.triangle_frames.col(t).data()) =
         rest_frame(rig.neutral.col(tri[0]), rig.neutral.col(tri[1]), rig.neutral.col(tri[2]), degenerate);
   }
 }
@@ -82,7 +85,7 @@ void build_triangle_frames(SolverModel& model) {
 Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
   const Rig& rig = model.rig;
   const Eigen::Index T = rig.triangle_count();
-  model.triangle_operator.setZero(9, T);
+  model.blend.triangle_operator.setZero(9, T);
   std::vector<Eigen::Triplet<double>> entries;
   entries.reserve(std::size_t(T) * 9);
   const double degenerate = degenerate_area(rig);
@@ -98,7 +101,7 @@ Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
     grad.col(1) = unit.cross(x0 - x2) / twice_area;
     grad.col(2) = unit.cross(x1 - x0) / twice_area;
     const double area = 0.5 * twice_area;
-    Eigen::Map<Eigen::Matrix3d>(model.triangle_operator.col(t).data()) = area * grad;
+    Eigen::Map<Eigen::Matrix3d>(model.blend.triangle_operator.col(t).data()) = area * grad;
     const Eigen::Matrix3d local = area * grad.transpose() * grad;
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) entries.emplace_back(tri[a], tri[b], local(a, b));
@@ -111,8 +114,8 @@ Eigen::SparseMatrix<double> build_triangle_operators(SolverModel& model) {
 // One shape's Eq. 3 terms on every triangle (built, then regrouped).
 struct ShapeDeformation {
   std::vector<uint8_t> changed;  // T
-  std::vector<float> nonlinear;  // kNonlinearComponents x T, triangle-major (SolverModel::triangle_nonlinear)
-  std::vector<float> gradient;   // kGradientComponents x T (SolverModel::triangle_gradient)
+  std::vector<float> nonlinear;  // kNonlinearComponents x T, triangle-major (BlendData::triangle_nonlinear)
+  std::vector<float> gradient;   // kGradientComponents x T (BlendData::triangle_gradient)
 };
 
 // Deformation of every (shape, triangle) that changes, with rotation logs kept on one
@@ -162,15 +165,15 @@ ShapeDeformation build_shape_deformation(const SolverModel& model, Eigen::Index 
   for (Eigen::Index t = 0; t < T; ++t)  // islands rotating more than pi/2 everywhere
     if (!decided[std::size_t(t)]) { decided[std::size_t(t)] = 1; frontier.push(int(t)); propagate(); }
 
-  constexpr auto kNonlinear = std::size_t(SolverModel::kNonlinearComponents);
-  constexpr auto kGradient = std::size_t(SolverModel::kGradientComponents);
+  constexpr auto kNonlinear = std::size_t(BlendData::kNonlinearComponents);
+  constexpr auto kGradient = std::size_t(BlendData::kGradientComponents);
   ShapeDeformation out;
   out.changed = std::move(changed);
   out.nonlinear.assign(kNonlinear * triangle_count, 0.0f);
   out.gradient.assign(kGradient * triangle_count, 0.0f);
   for (std::size_t i = 0; i < triangle_count; ++i) {
     if (!out.changed[i]) continue;
-    const Eigen::Map<const Eigen::Matrix3d> frame(model.triangle_frames.col(Eigen::Index(i)).data());
+    const Eigen::Map<const Eigen::Matrix3d> frame(model.blend.triangle_frames.col(Eigen::Index(i)).data());
     const Eigen::Matrix3d s = frame.transpose() * stretch[i] * frame;
     const double nonlinear[kNonlinear] = {logs[i][0], logs[i][1], logs[i][2], s(0, 0), s(1, 1), s(0, 1), s(0, 2), s(1, 2)};
     const Eigen::Matrix<double, 3, 2> planar = gradient[i] * frame.leftCols<2>();
@@ -350,17 +353,17 @@ void build_triangle_terms(SolverModel& model, const std::vector<ShapeDeformation
   Eigen::Matrix3Xd centroids = Eigen::Matrix3Xd::Zero(3, rig.triangle_count());
   for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
     for (int k = 0; k < 3; ++k) centroids.col(t) += rig.neutral.col(rig.triangles(k, t)) / 3.0;
-  model.triangle_blocks = make_shape_blocks(centroids, rig.shape_count(), [&](Eigen::Index s, int32_t t) {
+  model.blend.triangle_blocks = make_shape_blocks(centroids, rig.shape_count(), [&](Eigen::Index s, int32_t t) {
     return shapes[std::size_t(s)].changed[std::size_t(t)] != 0;
   });
   // Rotation logs and stretches are relative: 1e-5 rad moves a triangle's far corner by
   // 1e-5 of its size (ICT: at most 4.5e-6 cm on any vertex, docs/solver.md).
   constexpr double kTolerance = 1e-5;
-  constexpr int kNonlinear = SolverModel::kNonlinearComponents, kGradient = SolverModel::kGradientComponents;
-  model.triangle_nonlinear = quantise(model.triangle_blocks, kNonlinear, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
+  constexpr int kNonlinear = BlendData::kNonlinearComponents, kGradient = BlendData::kGradientComponents;
+  model.blend.triangle_nonlinear = quantise(model.blend.triangle_blocks, kNonlinear, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
     return double(shapes[std::size_t(s)].nonlinear[std::size_t(kNonlinear * t + c)]);
   });
-  model.triangle_gradient = quantise(model.triangle_blocks, kGradient, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
+  model.blend.triangle_gradient = quantise(model.blend.triangle_blocks, kGradient, kTolerance, [&](Eigen::Index s, int32_t t, int c) {
     return double(shapes[std::size_t(s)].gradient[std::size_t(kGradient * t + c)]);
   });
 }
@@ -380,19 +383,19 @@ void build_marker_paths(SolverModel& model) {
       for (int a = 0; a < 3; ++a) {
         const auto& tris = incident[std::size_t(b.vertices[a])];
         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        for (int t : tris) sum += model.rotation_log(s, t);
+        for (int t : tris) sum += model.blend.rotation_log(s, t);
         if (!tris.empty()) r += b.barycentric[a] * sum / double(tris.size());
       }
       const double theta = r.norm();
       if (theta < kTurning || theta > 3.0) continue;  // near pi the axis is too uncertain to follow
       const Eigen::Vector3d axis = r / theta;
-      const Eigen::Vector3d delta = model.marker_basis.block(3 * k, s, 3, 1);
+      const Eigen::Vector3d delta = model.weights.marker_basis.block(3 * k, s, 3, 1);
       const Eigen::Vector3d axial = axis.dot(delta) * axis;
       // (exp(r) - I) arm = delta - axial with arm perpendicular to the axis.
       const Eigen::Matrix3d turn = (rotation_exp(r) - Eigen::Matrix3d::Identity()) *
                                        (Eigen::Matrix3d::Identity() - axis * axis.transpose()) + axis * axis.transpose();
       const Eigen::Vector3d arm = turn.inverse() * (delta - axial);
-      model.marker_paths.push_back({int(k), int(s), arm, axial, theta, axis.cross(arm)});
+      model.weights.marker_paths.push_back({int(k), int(s), arm, axial, theta, axis.cross(arm)});
     }
   }
 }
@@ -400,36 +403,36 @@ void build_marker_paths(SolverModel& model) {
 // Candidate triangles for the collision stage and the vertices it may pin.
 void choose_collision_region(SolverModel& model) {
   const Rig& rig = model.rig;
-  model.vertex_to_collision.assign(std::size_t(rig.vertex_count()), -1);
+  model.collision.vertex_index.assign(std::size_t(rig.vertex_count()), -1);
   switch (model.params.collision_region) {
     case CollisionRegion::kNone: return;
-    case CollisionRegion::kFace: model.collision_triangles = all_triangles(rig.triangle_count()); break;
-    case CollisionRegion::kLips: model.collision_triangles = lip_region_triangles(rig); break;
+    case CollisionRegion::kFace: model.collision.triangles = all_triangles(rig.triangle_count()); break;
+    case CollisionRegion::kLips: model.collision.triangles = lip_region_triangles(rig); break;
   }
-  for (int t : model.collision_triangles)
+  for (int t : model.collision.triangles)
     for (int k = 0; k < 3; ++k) {
       const int v = rig.triangles(k, t);
-      if (model.vertex_to_collision[std::size_t(v)] >= 0) continue;
-      model.vertex_to_collision[std::size_t(v)] = int(model.collision_vertices.size());
-      model.collision_vertices.push_back(v);
+      if (model.collision.vertex_index[std::size_t(v)] >= 0) continue;
+      model.collision.vertex_index[std::size_t(v)] = int(model.collision.vertices.size());
+      model.collision.vertices.push_back(v);
     }
 }
 
-// SolverModel::reference_*: the collision and tangle vertices, whose linear-blend
+// CollisionData::reference_*: the collision and tangle vertices, whose linear-blend
 // positions every frame needs.
 void build_reference_terms(SolverModel& model) {
-  model.vertex_to_reference.assign(std::size_t(model.vertex_count()), -1);
-  for (const auto* vertices : {&model.collision_vertices, &model.tangle_vertices})
+  model.collision.reference_index.assign(std::size_t(model.vertex_count()), -1);
+  for (const auto* vertices : {&model.collision.vertices, &model.collision.tangle_vertices})
     for (const int v : *vertices) {
-      if (model.vertex_to_reference[std::size_t(v)] >= 0) continue;
-      model.vertex_to_reference[std::size_t(v)] = int(model.reference_vertices.size());
-      model.reference_vertices.push_back(v);
+      if (model.collision.reference_index[std::size_t(v)] >= 0) continue;
+      model.collision.reference_index[std::size_t(v)] = int(model.collision.reference_vertices.size());
+      model.collision.reference_vertices.push_back(v);
     }
-  if (!model.reference_vertices.empty())
-    build_vertex_terms(model.rig, model.reference_vertices, model.reference_blocks, model.reference_deltas);
+  if (!model.collision.reference_vertices.empty())
+    build_vertex_terms(model.rig, model.collision.reference_vertices, model.collision.reference_blocks, model.collision.reference_deltas);
 }
 
-// SolverModel::tangle_vertices: the corners of triangles crossing in the neutral, grown
+// CollisionData::tangle_vertices: the corners of triangles crossing in the neutral, grown
 // by kTangleRings rings of mesh edges (with none, ICT's lip corners still fold on 7 of
 // 20 test poses; with one, on none).
 void find_tangle_vertices(SolverModel& model) {
@@ -450,91 +453,12 @@ void find_tangle_vertices(SolverModel& model) {
     tangled.swap(grown);
   }
   for (Eigen::Index v = 0; v < rig.vertex_count(); ++v)
-    if (tangled[std::size_t(v)]) model.tangle_vertices.push_back(int(v));
+    if (tangled[std::size_t(v)]) model.collision.tangle_vertices.push_back(int(v));
 }
 
 }  // namespace
 
-void PinColumns::set_column(Eigen::Index c, const Eigen::Ref<const Eigen::VectorXd>& column) {
-  const double largest = column.cwiseAbs().maxCoeff();
-  const double step = largest > 0.0 ? largest / 32767.0 : 1.0;
-  scale[std::size_t(c)] = float(step);
-  int16_t* q = values.data() + std::size_t(c * rows);
-  for (Eigen::Index r = 0; r < rows; ++r)
-    q[r] = int16_t(std::clamp(std::lround(column[r] / double(float(step))), -32767L, 32767L));
-}
-
-BlendTerms::Located BlendTerms::locate(int32_t entry) const noexcept {
-  Located l;
-  l.position = std::size_t(position_of_entry[std::size_t(entry)]);
-  const auto run = std::prev(std::upper_bound(blocks.begin(), blocks.end(), int32_t(l.position),
-                                              [](int32_t p, const BlockRun& r) { return p < r.first; }));
-  const std::size_t entry_values = std::size_t(components) * ShapeBlocks::kBlock;
-  l.values = run->values;
-  int32_t k = int32_t(l.position) - run->first;
-  for (; l.width + 1 < kWidths && k >= run->count[l.width]; ++l.width) {
-    l.values += std::size_t(run->count[l.width]) * entry_values * std::size_t(kBytesPerValue[l.width]);
-    k -= run->count[l.width];
-  }
-  l.values += std::size_t(k) * entry_values * std::size_t(kBytesPerValue[l.width]);
-  return l;
-}
-
-double BlendTerms::stored(const Located& l, int component, int slot) const noexcept {
-  const std::size_t at = l.values + (std::size_t(component) * ShapeBlocks::kBlock + std::size_t(slot)) *
-                                        std::size_t(kBytesPerValue[l.width]);
-  double q = 0.0;
-  if (l.width == 0) {
-    q = double(int8_t(values[at]));
-  } else if (l.width == 1) {
-    int16_t v;
-    std::memcpy(&v, values.data() + at, sizeof v);
-    q = double(v);
-  } else {
-    float v;
-    std::memcpy(&v, values.data() + at, sizeof v);
-    q = double(v);
-  }
-  const std::size_t at_component = l.position * std::size_t(components) + std::size_t(component);
-  return double(offsets[at_component]) + double(half_to_float(scales[at_component]) * kScaleUnit) * q;
-}
-
-double BlendTerms::at(int32_t entry, int component, int slot) const noexcept {
-  return stored(locate(entry), component, slot);
-}
-
-void BlendTerms::decode(int32_t entry, std::span<double> out) const noexcept {
-  const Located l = locate(entry);
-  for (int c = 0; c < components; ++c)
-    for (int i = 0; i < ShapeBlocks::kBlock; ++i) out[std::size_t(c * ShapeBlocks::kBlock + i)] = stored(l, c, i);
-}
-
-float half_to_float(uint16_t h) noexcept {
-  const int exponent = (h >> 10) & 0x1f, mantissa = h & 0x3ff;
-  const float magnitude = exponent == 0    ? std::ldexp(float(mantissa), -24)
-                          : exponent == 31 ? (mantissa ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity())
-                                           : std::ldexp(float(1024 + mantissa), exponent - 25);
-  return (h & 0x8000) ? -magnitude : magnitude;
-}
-
-uint16_t half_at_least(float x) noexcept {
-  // Positive halves grow with their bit patterns: the first one not below x.
-  uint16_t low = 0, high = 0x7bff;  // 0x7bff: 65504, the largest finite half
-  while (low < high) {
-    const auto middle = uint16_t(low + (high - low) / 2);
-    if (half_to_float(middle) < x) low = uint16_t(middle + 1);
-    else high = middle;
-  }
-  return low;
-}
-
-int32_t ShapeBlocks::find_entry(Eigen::Index shape, int block) const noexcept {
-  for (int32_t e = block_begin[std::size_t(block)]; e < block_begin[std::size_t(block) + 1]; ++e)
-    if (entries[std::size_t(e)].shape == shape) return e;
-  return -1;
-}
-
-Eigen::Vector3d SolverModel::rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept {
+Eigen::Vector3d BlendData::rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept {
   const int32_t slot = triangle_blocks.slot_of_element[std::size_t(triangle)];
   const int32_t e = triangle_blocks.find_entry(shape, slot / ShapeBlocks::kBlock);
   if (e < 0) return Eigen::Vector3d::Zero();
@@ -542,7 +466,7 @@ Eigen::Vector3d SolverModel::rotation_log(Eigen::Index shape, Eigen::Index trian
   return {triangle_nonlinear.at(e, 0, i), triangle_nonlinear.at(e, 1, i), triangle_nonlinear.at(e, 2, i)};
 }
 
-Eigen::Matrix3d SolverModel::world_stretch(Eigen::Index triangle, const double* local) const noexcept {
+Eigen::Matrix3d BlendData::world_stretch(Eigen::Index triangle, const double* local) const noexcept {
   Eigen::Matrix3d s;
   s << local[0], local[2], local[3], local[2], local[1], local[4], local[3], local[4], 0.0;
   const Eigen::Map<const Eigen::Matrix3d> frame(triangle_frames.col(triangle).data());
@@ -617,7 +541,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   model->params = params;
   model->markers = std::move(markers);
   build_marker_rows(*model);
-  build_vertex_terms(rig, {}, model->vertex_blocks, model->vertex_deltas);
+  build_vertex_terms(rig, {}, model->blend.vertex_blocks, model->blend.vertex_deltas);
 
   const TriangleAdjacency adjacency(rig.triangles);
   {
@@ -647,11 +571,11 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
         for (int b = 0; b < 3; ++b)
           pins.emplace_back(m.vertices[a], m.vertices[b], params.beta * m.barycentric[a] * m.barycentric[b]);
     find_tangle_vertices(*model);
-    for (const int v : model->tangle_vertices) pins.emplace_back(v, v, SolverModel::kTangleWeight * params.beta);
+    for (const int v : model->collision.tangle_vertices) pins.emplace_back(v, v, CollisionData::kTangleWeight * params.beta);
     Eigen::SparseMatrix<double> P(N, N);
     P.setFromTriplets(pins.begin(), pins.end());
     A += P;
-    model->factor = std::make_unique<SparseLdlt>(A);
+    model->poisson.factor = std::make_unique<SparseLdlt>(A);
     model->setup.factor_s = seconds_since(t0);
   }
   {
@@ -661,8 +585,8 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
     // Beyond this many candidate vertices (a whole-face region) the columns would take
     // too much memory; pins are then solved for per frame.
     constexpr std::size_t kMaxPrecomputedPins = 3000;
-    const Eigen::Index C = model->collision_vertices.size() <= kMaxPrecomputedPins
-                               ? Eigen::Index(model->collision_vertices.size()) : 0;
+    const Eigen::Index C = model->collision.vertices.size() <= kMaxPrecomputedPins
+                               ? Eigen::Index(model->collision.vertices.size()) : 0;
     // Three columns per back-substitution (the solver's x, y, z kernel).
     auto solve_columns = [&](Eigen::Index count, auto&& unit, auto&& store) {
       Eigen::Matrix3Xd b(3, N);
@@ -670,21 +594,21 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
       for (Eigen::Index first = 0; first < count; first += 3) {
         b.setZero();
         for (Eigen::Index r = 0; r < 3 && first + r < count; ++r) unit(first + r, b.row(r));
-        model->factor->solve_in_place(b, work);
+        model->poisson.factor->solve_in_place(b, work);
         for (Eigen::Index r = 0; r < 3 && first + r < count; ++r) store(first + r, b.row(r).transpose());
       }
     };
-    model->marker_solution.resize(N, K);
+    model->poisson.marker_solution.resize(N, K);
     solve_columns(
         K,
         [&](Eigen::Index k, auto row) {
           for (int a = 0; a < 3; ++a) row[model->markers[std::size_t(k)].vertices[a]] += model->markers[std::size_t(k)].barycentric[a];
         },
-        [&](Eigen::Index k, const auto& column) { model->marker_solution.col(k) = column; });
-    model->pin_solution.resize(N, C);
+        [&](Eigen::Index k, const auto& column) { model->poisson.marker_solution.col(k) = column; });
+    model->poisson.pin_solution.resize(N, C);
     solve_columns(
-        C, [&](Eigen::Index c, auto row) { row[model->collision_vertices[std::size_t(c)]] = 1.0; },
-        [&](Eigen::Index c, const auto& column) { model->pin_solution.set_column(c, column); });
+        C, [&](Eigen::Index c, auto row) { row[model->collision.vertices[std::size_t(c)]] = 1.0; },
+        [&](Eigen::Index c, const auto& column) { model->poisson.pin_solution.set_column(c, column); });
     model->setup.modifications_s = seconds_since(t0);
   }
   model->setup.total_s = seconds_since(start);

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "solver/simd.hpp"
 
 namespace facecap {
 
@@ -64,7 +65,7 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A) : n_(A.rows()) {
 
 namespace {
 // x, y, z and a pad lane of one vertex: one vector operation per factor entry.
-using Lanes = double __attribute__((vector_size(32), aligned(8)));  // Eigen may align to 16 only
+using simd::DoubleX4;
 
 // Both triangular solves walk L by columns. L y = b scatters each solved entry down its
 // column (independent updates, so no chain of dependent additions); L^T u = z gathers
@@ -72,18 +73,18 @@ using Lanes = double __attribute__((vector_size(32), aligned(8)));  // Eigen may
 template <class Row>
 void solve_lanes(Eigen::Index n, const int* perm, const int* col_start, const Row* rows, const double* vals,
                  const double* inv_diagonal, Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) noexcept {
-  Lanes* w = reinterpret_cast<Lanes*>(work.data());
+  DoubleX4* w = reinterpret_cast<DoubleX4*>(work.data());
   const double* b = xyz.data();
   for (Eigen::Index k = 0; k < n; ++k) {
     const double* src = b + 3 * perm[k];
-    w[k] = Lanes{src[0], src[1], src[2], 0.0};
+    w[k] = DoubleX4{src[0], src[1], src[2], 0.0};
   }
   for (Eigen::Index j = 0; j < n; ++j) {
-    const Lanes y = w[j];
+    const DoubleX4 y = w[j];
     for (int k = col_start[j]; k < col_start[j + 1]; ++k) w[rows[k]] -= vals[k] * y;
   }
   for (Eigen::Index j = n - 1; j >= 0; --j) {
-    Lanes s0 = w[j] * inv_diagonal[j], s1{}, s2{}, s3{};
+    DoubleX4 s0 = w[j] * inv_diagonal[j], s1{}, s2{}, s3{};
     int k = col_start[j];
     const int end = col_start[j + 1];
     for (; k + 4 <= end; k += 4) {
@@ -98,7 +99,7 @@ void solve_lanes(Eigen::Index n, const int* perm, const int* col_start, const Ro
   double* out = xyz.data();
   for (Eigen::Index k = 0; k < n; ++k) {
     double* dst = out + 3 * perm[k];
-    const Lanes v = w[k];
+    const DoubleX4 v = w[k];
     dst[0] = v[0]; dst[1] = v[1]; dst[2] = v[2];
   }
 }

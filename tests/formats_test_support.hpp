@@ -6,9 +6,49 @@
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 
+#include "formats/byte_io.hpp"
 #include "formats/take.hpp"
 
 namespace facecap::test {
+
+// A 1 KB C3D (header block, parameter block) whose only parameter is a real-typed
+// POINT:USED; the header declares no frames.
+inline std::vector<char> c3d_with_real_point_count(float points) {
+  std::vector<char> file;
+  formats::ByteWriter w(file);
+  w.u8(2);     // parameter block
+  w.u8(0x50);  // C3D key
+  w.u16(0);    // header points
+  w.u16(0);    // analog words
+  w.u16(1);    // first frame
+  w.u16(0);    // last frame: no frames
+  w.u16(0);
+  w.f32(-1.0f);  // float storage
+  w.u16(3);      // data start block
+  w.u16(0);
+  w.f32(60.0f);
+  file.resize(512, '\0');
+  w.u8(1);
+  w.u8(0x50);
+  w.u8(1);       // blocks
+  w.u8(83 + 1);  // Intel
+  // group POINT (id -1), then parameter USED: type 4 (real), no dimensions.
+  w.i8(5);
+  w.i8(-1);
+  w.bytes("POINT");
+  w.i16(3);  // to the next entry, counted from this word
+  w.u8(0);   // empty description
+  w.i8(4);
+  w.i8(1);
+  w.bytes("USED");
+  w.i16(0);  // last entry
+  w.i8(4);
+  w.u8(0);
+  w.f32(points);
+  w.u8(0);
+  file.resize(1024, '\0');
+  return file;
+}
 
 // A take whose positions are distinct functions of (frame, marker) and whose missing
 // markers follow a fixed pattern (every 7th sample), so comparisons catch shuffles.

@@ -214,8 +214,8 @@ TEST_CASE("Calibrated offsets give the rig neutral at rest despite identity mism
   for (int i = 0; i < 5; ++i) cal.stable_markers.push_back(labels[by_height[std::size_t(i)]]);
   pipeline::MarkerMapper mapper(cal, labels, "");
   auto model = build_solver_model(rig, cal.bindings());
-  for (const char* name : {"nonlinear", "linear"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear}) {
+    auto solver = make_solver(method, model);
     auto result = solver->make_result();
     auto mapped = mapper.make_output();
     // At rest: the targets are the bound points, the face the rig's neutral.
@@ -229,7 +229,7 @@ TEST_CASE("Calibrated offsets give the rig neutral at rest despite identity mism
     mapper.process(frame, mapped);
     for (std::size_t k = 0; k < layout.size(); ++k) CHECK((mapped.targets.col(Eigen::Index(k)) - cal.markers[k].bound_point).norm() < 1e-9);
     solver->solve(mapped.targets, mapped.present, result);
-    INFO(name << " at rest: largest weight " << result.weights.maxCoeff() << ", vertex error "
+    INFO(solver->name() << " at rest: largest weight " << result.weights.maxCoeff() << ", vertex error "
               << (result.vertices - rig.neutral).colwise().norm().maxCoeff() * 10.0 << " mm");
     CHECK(result.weights.maxCoeff() < 0.02);
     CHECK((result.vertices - rig.neutral).colwise().norm().maxCoeff() * 10.0 < 0.2);
@@ -244,7 +244,7 @@ TEST_CASE("Calibrated offsets give the rig neutral at rest despite identity mism
     solver->reset();
     mapper.process(frame, mapped);
     solver->solve(mapped.targets, mapped.present, result);
-    INFO(name << " jawOpen 0.6 solved as " << result.weights[jaw]);
+    INFO(solver->name() << " jawOpen 0.6 solved as " << result.weights[jaw]);
     CHECK(std::abs(result.weights[jaw] - 0.6) < 0.15);
   }
 }
@@ -532,6 +532,20 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   bad_rotation.replace(bad_rotation.find("rotation = [["), 13, "rotation = [[2, ");
   CHECK_THROWS_WITH(read_calibration_profile(bad_rotation, "actor.toml"), Catch::Contains("transform.rotation"));
   CHECK_THROWS_WITH(read_calibration_profile("version = 1\n[rig\n", "broken.toml"), Catch::Contains("broken.toml:2"));
+  // A vertex index past int was truncated (2^32 bound vertex 0), and a start past int too.
+  std::string huge_vertex = unsummed;
+  const auto first_vertex = huge_vertex.find("vertices = [") + 12;
+  huge_vertex.replace(first_vertex, huge_vertex.find(',', first_vertex) - first_vertex, "4294967296");
+  CHECK_THROWS_WITH(read_calibration_profile(huge_vertex, "actor.toml"),
+                    Catch::Contains(fmt::format("actor.toml:{}:", line_of(huge_vertex, "vertices = [4294967296"))) &&
+                        Catch::Contains("vertex indices"));
+  std::string huge_start = unsummed;
+  huge_start.replace(huge_start.find("start = "), 8, "start = 4294967296");
+  CHECK_THROWS_WITH(read_calibration_profile(huge_start, "actor.toml"), Catch::Contains("fit.start"));
+  std::string not_utf8 = unsummed;
+  not_utf8.insert(not_utf8.find("a note") + 2, "\xed\xa0\x80");  // a UTF-16 surrogate
+  CHECK_THROWS_WITH(read_calibration_profile(not_utf8, "actor.toml"),
+                    Catch::Contains(fmt::format("actor.toml:{}:", line_of(not_utf8, "note\""))) && Catch::Contains("not valid UTF-8"));
   // A profile for another rig.
   Calibration other = back;
   other.rig_hash ^= 1;

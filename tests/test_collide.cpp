@@ -10,7 +10,11 @@
 
 #include "core/error.hpp"
 #include "solver/builtin_face.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/collider.hpp"
+#include "solver/collide/geometry.hpp"
+#include "solver/collide/lip_region.hpp"
+#include "solver/collide/metrics.hpp"
+#include "solver/collide/pair_batch.hpp"
 #include "solver/rig.hpp"
 #include "tests/test_support.hpp"
 

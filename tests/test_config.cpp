@@ -54,9 +54,9 @@ TEST_CASE("every schema key has a default of its own type and sections are conti
   for (const KeySpec& key : config_schema()) {
     INFO(key.path);
     CHECK(paths.insert(key.path).second);
-    // A choice's value is its name; every other key's value has the field's own type.
+    // A choice's value is its name; every other key's value has its type's alternative.
     if (key.type() == ValueType::kChoice) CHECK(std::holds_alternative<std::string>(key.default_value));
-    else CHECK(key.default_value.index() == key.field.index());
+    else CHECK(key.default_value.index() == std::size_t(key.type()));
     CHECK_FALSE(key.description.empty());
     if (key.section() != section) {
       CHECK(finished_sections.insert(section).second);
@@ -78,6 +78,26 @@ TEST_CASE("every schema key has a default of its own type and sections are conti
   CHECK(paths.count("loop.rate_hz"));
   CHECK(default_config().loop.rate_hz == 120.0);
   CHECK(default_config().source.driver == drivers::DriverId::kSim);
+}
+
+TEST_CASE("the [solver] defaults are the solver's own, and its choices its tables'") {
+  const SolverSection s = default_config().solver;
+  const SolverParams p;
+  CHECK(s.method == SolverMethod::kNonlinear);
+  CHECK(s.alpha == p.alpha);
+  CHECK(s.mu == p.mu);
+  CHECK(s.beta == p.beta);
+  CHECK(s.weight_refinements == p.weight_refinements);
+  CHECK(s.collision_region == p.collision_region);
+  CHECK(s.collision_epsilon == p.collision_epsilon);
+  CHECK(s.collision_max_pins == p.collision_max_pins);
+  CHECK(s.active_weight == p.active_weight);
+  REQUIRE(find_key("solver.collisions")->choices().size() == kCollisionRegions.size());
+  CHECK(find_key("solver.method")->choices()[3].name == "meshik");
+  const LoadedConfig c = load_config("", {"solver.collisions=face", "solver.collision_max_pins=128", "solver.method=dt"});
+  CHECK(c.values.solver.collision_region == CollisionRegion::kFace);
+  CHECK(c.values.solver.collision_max_pins == 128);
+  CHECK(c.values.solver.method == SolverMethod::kDt);
 }
 
 TEST_CASE("the shipped config/facecapd.toml is exactly what the schema generates") {
@@ -252,4 +272,13 @@ TEST_CASE("the key reference in docs/config.md is what the schema generates") {
   REQUIRE(a != std::string::npos);
   REQUIRE(b != std::string::npos);
   CHECK(doc.substr(a + begin.size(), b - a - begin.size()) == render_markdown_reference());
+}
+
+TEST_CASE("a configuration that is not UTF-8 is refused at the first bad byte") {
+  const auto path = write_config("latin1.toml", "version = 1\n[outputs.shm]\nname = \"caf\xe9\"\n");
+  const Error e = only_problem(path);
+  CHECK(e.where().file == path.string());
+  CHECK(e.where().line == 3);
+  CHECK(e.where().column == 12);
+  CHECK_THAT(e.message(), Contains("0xe9") && Contains("not valid UTF-8"));
 }

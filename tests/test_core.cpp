@@ -7,6 +7,7 @@
 #include "core/io.hpp"
 #include "core/realtime.hpp"
 #include "core/time.hpp"
+#include "core/toml_reader.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -89,4 +90,58 @@ TEST_CASE("an enum table parses and names exactly its rows, in order") {
   CHECK(kFruits.names() == std::vector<std::string_view>{"apple", "pear"});
   REQUIRE(kFruits.choices().size() == 2);
   CHECK(kFruits.choices()[1].description == "tapered");
+}
+
+TEST_CASE("read_file_bytes refuses a directory instead of sizing it as 2^63 bytes") {
+  const auto dir = test::scratch_dir("io-directory");
+  CHECK_THROWS_WITH(read_file_bytes(dir), Catch::Contains(dir.string()) && Catch::Contains("is a directory"));
+}
+
+TEST_CASE("TOML text is checked to be UTF-8 first, at the line and column of the first bad byte") {
+  CHECK_NOTHROW(check_utf8("name = \"a\xc3\xa9\xe2\x82\xac\xf0\x9f\x98\x80\"\n", "ok.toml"));  // é € 😀
+  const std::pair<const char*, const char*> bad[] = {
+      {"\xc0\xaf", "0xc0"},          // overlong '/'
+      {"\xed\xa0\x80", "0xed"},      // a UTF-16 surrogate
+      {"\xf4\x90\x80\x80", "0xf4"},  // past U+10FFFF
+      {"\xe2\x82", "0xe2"},          // cut short at the end
+      {"\x80", "0x80"},              // a lone continuation byte
+      {"\xff", "0xff"},
+  };
+  for (const auto& [bytes, first] : bad) {
+    INFO(first);
+    // Line 2, after "x = \"\xc3\xa9": column 7 counts é as one character.
+    const std::string text = std::string("a = 1\nx = \"\xc3\xa9") + bytes + "\"\n";
+    CHECK_THROWS_WITH(parse_toml(text, "bad.toml"),
+                      Catch::Contains("bad.toml:2:7") && Catch::Contains(first) && Catch::Contains("not valid UTF-8"));
+  }
+  CHECK_THROWS_WITH(parse_toml("a = \n", "syntax.toml"), Catch::Contains("syntax.toml:1:"));
+}
+TEST_CASE("a non-ASCII character outside TOML strings and comments is refused before toml++ sees it") {
+  // toml++ 3.3 tested it for whitespace and reached __builtin_unreachable (found by the
+  // calibration_profile fuzzer: "offset = [0.01, 0, Н").
+  CHECK_THROWS_WITH(parse_toml("a = 1\noffset = [0.01, 0, \xd0\x9d\n", "cyrillic.toml"),
+                    Catch::Contains("cyrillic.toml:2:20") && Catch::Contains("non-ASCII character outside a string"));
+  CHECK_THROWS_WITH(parse_toml("caf\xc3\xa9 = 1\n", "key.toml"), Catch::Contains("key.toml:1:4"));
+  // Inside strings (escaped quotes, multi-line, literal) and comments it is text.
+  const toml::table t = parse_toml("# caf\xc3\xa9\na = \"q\\\"\xc3\xa9\" # \xd0\x9d\nb = '\xc3\xa9'\n"
+                                   "c = \"\"\"x\"\xc3\xa9\n\xd0\x9d\"\"\"\nd = '''\xc3\xa9'''\n",
+                                   "strings.toml");
+  CHECK(t["a"].value<std::string>() == "q\"\xc3\xa9");
+  CHECK(t["b"].value<std::string>() == "\xc3\xa9");
+  CHECK(t["c"].value<std::string>() == "x\"\xc3\xa9\n\xd0\x9d");
+  CHECK(t["d"].value<std::string>() == "\xc3\xa9");
+  // In a multi-line basic string toml++ also tests the character after a backslash, and
+  // the whitespace a line-ending backslash trims (found by the fuzzer the same way).
+  CHECK_THROWS_WITH(parse_toml("a = \"\"\"x\\\xc3\xa9\"\"\"\n", "escape.toml"),
+                    Catch::Contains("escape.toml:1:10") && Catch::Contains("after a backslash"));
+  CHECK_THROWS_WITH(parse_toml("a = \"\"\"x\\\n\n  \xcd\x9c\"\"\"\n", "trim.toml"),
+                    Catch::Contains("trim.toml:3:3") && Catch::Contains("a line-ending backslash trims"));
+  // A quote where no string can start (after '+') is read by toml++ as part of a bare value.
+  CHECK_THROWS_WITH(parse_toml("units=+\"blink\xd0\x90\"\n", "plus.toml"),
+                    Catch::Contains("plus.toml:1:14") && Catch::Contains("outside a string"));
+  // Nor where '=' does not separate a key from its value (rig_manifest fuzz finding).
+  CHECK_THROWS_WITH(parse_toml("namshapdeunitected=+=\"sub'''i\xef\xb9\xbfts_de\n", "junk.toml"),
+                    Catch::Contains("junk.toml:1:"));
+  const toml::table trimmed = parse_toml("a = \"\"\"x\\\n  y\xc3\xa9 \\\\\xc3\xa9\"\"\"\n", "trimmed.toml");
+  CHECK(trimmed["a"].value<std::string>() == "xy\xc3\xa9 \\\xc3\xa9");
 }

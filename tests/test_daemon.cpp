@@ -145,7 +145,7 @@ TEST_CASE("a new solver is swapped in between frames and the old one retired off
   };
   REQUIRE(tick_until_solved());
   pipeline::SolveSettings linear = settings;
-  linear.method = "linear";
+  linear.method = SolverMethod::kLinear;
   loop.offer_pipeline(std::make_unique<pipeline::SolvePipeline>(*rig, calibration, described(sim), linear));
   CHECK(loop.counters().pipeline_swaps.load() == 0);
   REQUIRE(tick_until_solved());

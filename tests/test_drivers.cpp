@@ -238,6 +238,15 @@ TEST_CASE("replay without looping finishes after its last frame") {
   CHECK(replay.health().finished);
 }
 
+TEST_CASE("replay refuses a take whose frames carry one timestamp and no rate") {
+  // Its cycle was 0 ns long: the first paced take_frame divided by zero (SIGFPE).
+  const auto path = test::scratch_dir("replay-still") / "still.trc";
+  test::write_text(path, "PathFileType\t4\t(X/Y/Z)\tstill.trc\nNumFrames\tNumMarkers\tUnits\n3\t1\tmm\n"
+                         "Frame#\tTime\tA\n\t\tX1\tY1\tZ1\n1\t0\t1\t2\t3\n2\t0\t1\t2\t3\n3\t0\t1\t2\t3\n");
+  ReplaySource replay(replay_options(path));
+  CHECK_THROWS_WITH(replay.open(), Contains("still.trc") && Contains("nothing to pace them by"));
+}
+
 TEST_CASE("replay refuses a missing file and an empty window") {
   ReplaySource missing(replay_options("/nonexistent/take.c3d"));
   CHECK_THROWS_AS(missing.open(), Error);

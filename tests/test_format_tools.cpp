@@ -120,6 +120,17 @@ TEST_CASE("facecap inspect and convert report bad input with file and place", "[
   CHECK(csv.err.find("output must end in .c3d, .trc or .fcrec") != std::string::npos);
 }
 
+TEST_CASE("facecap inspect exits 1 with the reader's message on a C3D claiming 4e9 points", "[tools][hostile]") {
+  // It aborted with an uncaught std::bad_alloc (exit 134).
+  const auto dir = facecap::test::scratch_dir("tool-hostile");
+  const auto bytes = facecap::test::c3d_with_real_point_count(4e9f);
+  std::ofstream(dir / "used.c3d", std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+  const Run run = run_facecap(dir, {"inspect", (dir / "used.c3d").string()});
+  CHECK(run.exit_code == 1);
+  CHECK_THAT(run.err, Catch::Contains("facecap: error:") && Catch::Contains("used.c3d @ byte 536") &&
+                          Catch::Contains("POINT:USED is 4000000000"));
+}
+
 TEST_CASE("facecap inspect on shared data: Eb015pi JSON and --time", "[tools][shared]") {
   FACECAP_REQUIRE_SHARED_DATA(path, "c3d/Eb015pi.c3d");
   const auto dir = facecap::test::scratch_dir("tool-inspect-shared");

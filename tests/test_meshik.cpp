@@ -35,7 +35,7 @@ TEST_CASE("meshik matches the articulated jaw at least as well as the paper's no
   const auto paper_model = build_solver_model(rig, layout, paper);
   const auto model = build_solver_model(rig, layout);
   auto run = [&](const std::shared_ptr<const SolverModel>& m) {
-    auto solver = make_solver("nonlinear", m);
+    auto solver = make_solver(SolverMethod::kNonlinear, m);
     SolveResult out = solver->make_result();
     solver->solve(targets, all_present(60), out);
     return out;

@@ -102,7 +102,7 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, s
 
   // Swapping in a rebuilt solver happens inside a tick too; this one checks labels.
   pipeline::SolveSettings linear = settings;
-  linear.method = "linear";
+  linear.method = SolverMethod::kLinear;
   linear.check_labels = true;
   loop.offer_pipeline(std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, linear));
   const Counted after_swap = run_ticks(loop, 60, loop.period_ns());

@@ -1,6 +1,7 @@
 // The one solve path (pipeline/): where calibrations come from, the marker mapper, and
 // SolvePipeline's status bits.
 #include <catch2/catch.hpp>
+#include <fmt/format.h>
 
 #include "core/error.hpp"
 #include "pipeline/calibration.hpp"
@@ -115,6 +116,27 @@ TEST_CASE("a hand-written calibration binds markers and moves them into rig spac
   test::write_text(file, "version = 1\n[[face]]\nlabel = \"a\"\nvertex = 1\n[[face]]\nlabel = \"a\"\nvertex = 2\n"
                          "[[face]]\nlabel = \"b\"\nvertex = 3\n");
   CHECK_THROWS_WITH(pipeline::load_calibration({.file = file.string()}, rig), Contains("marker 'a' is given twice"));
+}
+
+TEST_CASE("a calibration file with nan, inf or out-of-range numbers is refused where they are") {
+  const fs::path file = test::scratch_dir("calibration-nan") / "cal.toml";
+  const Rig& rig = BuiltinFace::instance().rig();
+  const std::string faces = "[[face]]\nlabel = \"a\"\nvertex = 10\n[[face]]\nlabel = \"b\"\nvertex = 20\n"
+                            "[[face]]\nlabel = \"c\"\nvertex = 30\n";
+  // rotation_wxyz = [nan, 0, 0, 0] was accepted (a NaN rotation for every marker).
+  for (const char* bad : {"rotation_wxyz = [nan, 0, 0, 0]", "rotation_wxyz = [1, 0, inf, 0]", "translation = [0, -inf, 0]"}) {
+    INFO(bad);
+    test::write_text(file, fmt::format("version = 1\n{}\n{}", bad, faces));
+    CHECK_THROWS_WITH(pipeline::load_calibration({.file = file.string()}, rig),
+                      Contains(file.string() + ":2:") && Contains("finite numbers"));
+  }
+  // A vertex number no integer holds (its conversion was undefined behaviour).
+  test::write_text(file, "version = 1\n[[face]]\nlabel = \"a\"\nvertices = [1e300, 1, 2]\nbarycentric = [1, 0, 0]\n" + faces);
+  CHECK_THROWS_WITH(pipeline::load_calibration({.file = file.string()}, rig),
+                    Contains(file.string() + ":4:") && Contains("vertex 1e+300 is not in the rig"));
+  test::write_text(file, "version = 1\n[[face]]\nlabel = \"\xc3\x28\"\nvertex = 1\n" + faces);
+  CHECK_THROWS_WITH(pipeline::load_calibration({.file = file.string()}, rig),
+                    Contains(file.string() + ":3:10") && Contains("not valid UTF-8"));
 }
 
 TEST_CASE("a calibration with head-rig markers round-trips through the profile and stabilises from them alone") {

@@ -3,6 +3,7 @@
 
 #include <catch2/catch.hpp>
 #include <Eigen/Geometry>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
@@ -121,6 +122,79 @@ TEST_CASE("malformed rigs fail with the file and line") {
   }
 }
 
+TEST_CASE("hostile OBJ rigs and manifests fail with an Error naming the file and line") {
+  const auto dir = write_small_rig("hostile");
+  SECTION("a manifest shape path that names a directory") {
+    fs::create_directories(dir / "shapes_dir");
+    test::write_text(dir / "rig.toml", "neutral = \"generic_neutral_mesh.obj\"\n[shapes]\njawOpen = \"shapes_dir\"\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("shapes_dir") && Contains("is a directory"));
+  }
+  SECTION("a neutral with more faces than a shape") {
+    std::string text = shape_text(0.5);
+    test::write_text(dir / "jawOpen.obj", text.substr(0, text.find("f 2 3 6 5")));
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()),
+                      Contains("jawOpen.obj:7:") && Contains("ends after 2 triangles") && Contains("has 4"));
+  }
+  SECTION("a shape with more faces than the neutral") {
+    test::write_text(dir / "jawOpen.obj", shape_text(0.5) + "f 1 2 4\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()),
+                      Contains("jawOpen.obj:9:") && Contains("triangle 5 is one more than the neutral"));
+  }
+  SECTION("nan and inf coordinates") {
+    for (const char* bad : {"nan", "inf", "-infinity", "NaN"}) {
+      test::write_text(dir / "mouthClose.obj", fmt::format("v 0 0 0\nv 1 {} 0\n", bad));
+      CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()),
+                        Contains("mouthClose.obj:2:") && Contains(fmt::format("'{}' is not a finite number", bad)));
+    }
+  }
+  SECTION("a manifest with an unknown key") {
+    test::write_text(dir / "rig.toml", "neutral = \"generic_neutral_mesh.obj\"\nshape = 1\n[shapes]\njawOpen = \"jawOpen.obj\"\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("rig.toml:2:") && Contains("unknown key 'shape'"));
+  }
+  SECTION("a manifest that is not UTF-8") {
+    test::write_text(dir / "rig.toml", "neutral = \"generic_neutral_mesh.obj\"\nname = \"a\xff\"\n");
+    CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("rig.toml:2:10") && Contains("0xff") && Contains("not valid UTF-8"));
+  }
+}
+
+TEST_CASE("hostile glTF rigs and cache entries fail with an Error before anything large is allocated") {
+  const Rig& builtin = BuiltinFace::instance().rig();
+  const auto dir = test::scratch_dir("hostile-gltf");
+  save_gltf_rig(builtin, (dir / "face.gltf").string());
+  const std::string json = test::slurp(dir / "face.gltf");
+  auto parse = [](const std::string& text) { return parse_gltf_rig(std::span<const char>(text.data(), text.size()), "x.gltf", false); };
+  CHECK(parse(json).shape_count() == builtin.shape_count());
+  auto replaced = [&](const std::string& from, const std::string& to) {
+    std::string text = json;
+    const auto at = text.find(from);
+    REQUIRE(at != std::string::npos);
+    return text.replace(at, from.size(), to);
+  };
+  // An accessor count the buffer cannot hold: it was allocated before the range check,
+  // and count * stride could wrap.
+  const std::string count = fmt::format("\"count\": {}", builtin.vertex_count());
+  CHECK_THROWS_WITH(parse(replaced(count, "\"count\": 2305843009213693952")),
+                    Contains("x.gltf [meshes[0].primitives[0].attributes.POSITION]") && Contains("do not fit in bufferView"));
+  // A buffer given as a file is not read from bytes (the fuzzers pass no directory).
+  {
+    std::string external = json;
+    const auto uri = external.find("data:application/octet-stream;base64,");
+    external.replace(uri, external.find('"', uri) - uri, "face.bin");
+    CHECK_THROWS_WITH(parse(external), Contains("external file 'face.bin' not read"));
+  }
+  // Target names that are not strings.
+  CHECK_THROWS_WITH(parse(replaced("\"targetNames\": [", "\"targetNames\": [7,")), Contains("must be a string"));
+
+  // A cache entry naming 100,000 shapes and holding no deltas for them: 6174 x 3 x 100,000
+  // doubles (15 GB) were allocated before the read failed.
+  Rig wide = builtin;
+  wide.deltas.resize(wide.deltas.rows(), 0);
+  wide.shape_names.clear();
+  for (int s = 0; s < 100000; ++s) wide.shape_names.push_back(fmt::format("s{}", s));
+  CHECK_THROWS_WITH(deserialize_rig(serialize_rig(wide, RigCacheKey{3}), RigCacheKey{3}, "wide.fcrig"),
+                    Contains("wide.fcrig") && Contains("100000 shapes of 6174 vertices do not fit"));
+}
+
 TEST_CASE("glTF morph targets round-trip through .gltf and .glb") {
   const Rig& builtin = BuiltinFace::instance().rig();
   const auto dir = test::scratch_dir("gltf");
@@ -166,6 +240,11 @@ TEST_CASE("the binary cache returns the same rig and survives damage") {
   const Rig d = load_rig(dir.string(), options, &fourth);
   CHECK_FALSE(fourth.from_cache);
   CHECK(d.deltas(3 * 4 + 2, 0) == Approx(0.75));
+
+  // An empty rig round-trips (its null data() pointers never reach memcpy: a UBSan finding).
+  const Rig empty = deserialize_rig(serialize_rig(Rig{}, RigCacheKey{5}), RigCacheKey{5}, "empty.fcrig");
+  CHECK(empty.vertex_count() == 0);
+  CHECK(empty.shape_count() == 0);
 
   const auto bytes = serialize_rig(a, RigCacheKey{7});
   CHECK_THROWS_WITH(deserialize_rig(bytes, RigCacheKey{8}, "x.fcrig"), Contains("x.fcrig") && Contains("key"));

@@ -73,12 +73,12 @@ TEST_CASE("solvers reproduce the neutral and every built-in shape exactly") {
   const auto layout = spread_marker_layout(rig, 60);
   const auto model = build_solver_model(rig, layout);
   const auto present = all_present(60);
-  for (const char* name : {"nonlinear", "dt", "linear"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt, SolverMethod::kLinear}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
     solver->solve_with_weights(w, markers_of(rig.neutral, layout), present, out);
-    INFO(name);
+    INFO(kSolverMethods.name(method));
     CHECK(max_error(out.vertices, rig.neutral) < 1e-5);
     for (Eigen::Index s = 0; s < rig.shape_count(); ++s) {
       w.setZero();
@@ -100,8 +100,8 @@ TEST_CASE("nonlinear and dt reproduce every ICT FaceKit shape within 1e-5 cm") {
   SolverParams params;
   params.collision_region = CollisionRegion::kNone;  // the shapes themselves have lip contacts
   const auto model = build_solver_model(rig, layout, params);
-  for (const char* name : {"nonlinear", "dt"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
     double worst = 0.0;
@@ -114,7 +114,7 @@ TEST_CASE("nonlinear and dt reproduce every ICT FaceKit shape within 1e-5 cm") {
       const double error = max_error(out.vertices, shape);
       if (error > worst) { worst = error; worst_shape = rig.shape_names[std::size_t(s)]; }
     }
-    INFO(name << ": largest error " << worst << " cm, on " << worst_shape);
+    INFO(kSolverMethods.name(method) << ": largest error " << worst << " cm, on " << worst_shape);
     CHECK(worst < 1e-5);
   }
 }
@@ -129,7 +129,7 @@ TEST_CASE("dt with small ICT FaceKit weights equals the mix of single-shape solv
   SolverParams params;
   params.collision_region = CollisionRegion::kNone;
   const auto model = build_solver_model(rig, layout, params);
-  auto solver = make_solver("dt", model);
+  auto solver = make_solver(SolverMethod::kDt, model);
   SolveResult out = solver->make_result();
   const Eigen::Index M = rig.shape_count();
   Eigen::VectorXd w = Eigen::VectorXd::Zero(M);
@@ -168,15 +168,15 @@ TEST_CASE("a missing marker gives the same mesh as a layout without it") {
   const Eigen::Matrix3Xd pose = BuiltinFace::instance().articulated_pose(w);
   auto present = all_present(40);
   present[7] = present[21] = 0;
-  for (const char* name : {"nonlinear", "dt"}) {
-    auto a = make_solver(name, full_model);
-    auto b = make_solver(name, small_model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt}) {
+    auto a = make_solver(method, full_model);
+    auto b = make_solver(method, small_model);
     SolveResult ra = a->make_result(), rb = b->make_result();
     Eigen::Matrix3Xd targets = markers_of(pose, layout);
     targets.col(7).setConstant(std::numeric_limits<double>::quiet_NaN());
     a->solve(targets, present, ra);
     b->solve(markers_of(pose, without), all_present(38), rb);
-    INFO(name);
+    INFO(kSolverMethods.name(method));
     CHECK(ra.markers_used == 38);
     CHECK((ra.weights - rb.weights).cwiseAbs().maxCoeff() < 1e-9);
     CHECK(max_error(ra.vertices, rb.vertices) < 1e-8);
@@ -187,7 +187,7 @@ TEST_CASE("pinned vertices end near their targets") {
   const Rig& rig = BuiltinFace::instance().rig();
   const auto layout = spread_marker_layout(rig, 60);
   const auto model = build_solver_model(rig, layout);
-  auto solver = make_solver("nonlinear", model);
+  auto solver = make_solver(SolverMethod::kNonlinear, model);
   SolveResult out = solver->make_result();
   // Targets 2 mm off the neutral at every marker, in alternating directions.
   Eigen::Matrix3Xd targets = markers_of(rig.neutral, layout);
@@ -209,8 +209,8 @@ TEST_CASE("nonlinear matches the articulated jaw better than linear") {
   const Eigen::Matrix3Xd targets = markers_of(truth, layout);
   double error[2];
   int i = 0;
-  for (const char* name : {"nonlinear", "linear"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     solver->solve(targets, all_present(60), out);
     error[i++] = mean_error(out.vertices, truth);
@@ -224,13 +224,13 @@ TEST_CASE("too few markers hold the previous result and unknown solvers are reje
   const Rig& rig = BuiltinFace::instance().rig();
   const auto layout = spread_marker_layout(rig, 10);
   const auto model = build_solver_model(rig, layout);
-  auto solver = make_solver("nonlinear", model);
+  auto solver = make_solver(SolverMethod::kNonlinear, model);
   SolveResult out = solver->make_result();
   std::vector<uint8_t> present(10, 0);
   present[0] = present[1] = 1;
   solver->solve(markers_of(rig.neutral, layout), present, out);
-  CHECK(out.held);
-  CHECK_THROWS_WITH(make_solver("magic", model), Catch::Contains("unknown solver 'magic'"));
+  CHECK(out.status == kSolvedTooFewMarkers);
+  CHECK_THROWS_WITH(parse_solver_method("magic"), Catch::Contains("unknown solver 'magic': choose nonlinear, linear, dt, meshik"));
   CHECK_THROWS_WITH(build_solver_model(rig, {MarkerBinding::at_vertex("bad", 1 << 30)}), Catch::Contains("marker 'bad'"));
   SolverParams too_many;
   too_many.collision_max_pins = 2000;
@@ -259,20 +259,20 @@ TEST_CASE("half floats decode exactly and half_at_least gives the smallest half 
 TEST_CASE("the Poisson solvers stream their blend's terms and operators, the linear solver nothing") {
   const Rig& rig = BuiltinFace::instance().rig();
   const auto model = build_solver_model(rig, spread_marker_layout(rig, 60));
-  const std::size_t operators = std::size_t(model->triangle_blocks.block_count()) * 9 * ShapeBlocks::kBlock * sizeof(float);
+  const std::size_t operators = std::size_t(model->blend.triangle_blocks.block_count()) * 9 * ShapeBlocks::kBlock * sizeof(float);
   auto bytes_of = [](const BlendTerms& t) {
     return t.values.size() + t.scales.size() * sizeof(uint16_t) + t.offsets.size() * sizeof(float);
   };
-  auto streamed = [&](const char* name) {
-    const auto solver = make_solver(name, model);
+  auto streamed = [&](SolverMethod method) {
+    const auto solver = make_solver(method, model);
     std::size_t total = 0;
     for (const auto range : solver->streamed_memory()) total += range.size();
     return total;
   };
-  CHECK(streamed("nonlinear") == bytes_of(model->triangle_nonlinear) + operators);
-  CHECK(streamed("dt") == bytes_of(model->triangle_gradient) + operators);
-  CHECK(streamed("linear") == 0);
-  CHECK(bytes_of(model->triangle_nonlinear) > 1'000'000);  // megabytes: more than a core's L2 keeps
+  CHECK(streamed(SolverMethod::kNonlinear) == bytes_of(model->blend.triangle_nonlinear) + operators);
+  CHECK(streamed(SolverMethod::kDt) == bytes_of(model->blend.triangle_gradient) + operators);
+  CHECK(streamed(SolverMethod::kLinear) == 0);
+  CHECK(bytes_of(model->blend.triangle_nonlinear) > 1'000'000);  // megabytes: more than a core's L2 keeps
 }
 
 #include "tests/alloc_counter.hpp"
@@ -282,8 +282,8 @@ TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers"
   const Rig& rig = face.rig();
   const auto layout = spread_marker_layout(rig, 60);
   const auto model = build_solver_model(rig, layout);
-  for (const char* name : {"nonlinear", "linear", "dt"}) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear, SolverMethod::kDt}) {
+    auto solver = make_solver(method, model);
     SolveResult out = solver->make_result();
     auto present = all_present(60);
     std::vector<Eigen::Matrix3Xd> frames;
@@ -298,9 +298,9 @@ TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers"
       }
       allocations = counter.count();
     }
-    INFO(name);
+    INFO(kSolverMethods.name(method));
     CHECK(allocations == 0);
-    CHECK_FALSE(out.held);
+    CHECK(out.status == 0);
   }
   // The counter itself works.
   test::CountAllocations counter;
@@ -308,15 +308,15 @@ TEST_CASE("solving a frame allocates nothing even with dropouts and NaN markers"
   CHECK(counter.count() >= 1);
 }
 
-#include "solver/collide.hpp"
+#include "solver/collide/metrics.hpp"
 
 TEST_CASE("collision handling removes the lip intersections the nonlinear blend makes") {
   const Rig& rig = BuiltinFace::instance().rig();
   const auto layout = spread_marker_layout(rig, 60);
   SolverParams without;
   without.collision_region = CollisionRegion::kNone;
-  auto handled = make_solver("nonlinear", build_solver_model(rig, layout));
-  auto unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+  auto handled = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout));
+  auto unhandled = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout, without));
   Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
   w[*rig.shape_index("mouthPucker")] = 1.0;
   w[*rig.shape_index("mouthClose")] = 1.0;
@@ -341,8 +341,8 @@ TEST_CASE("whole-face collision handling solves its pins per frame and removes t
   SolverParams face;
   face.collision_region = CollisionRegion::kFace;  // too many vertices to precompute columns for
   const auto model = build_solver_model(rig, layout, face);
-  REQUIRE_FALSE(model->collision_columns_precomputed());
-  auto solver = make_solver("nonlinear", model);
+  REQUIRE_FALSE(model->pin_columns_precomputed());
+  auto solver = make_solver(SolverMethod::kNonlinear, model);
   Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
   w[*rig.shape_index("mouthPucker")] = 1.0;
   w[*rig.shape_index("mouthClose")] = 1.0;
@@ -362,8 +362,8 @@ struct LipPoseSolves {
     SolverParams without = params;
     without.collision_region = CollisionRegion::kNone;
     model = build_solver_model(rig, layout, params);
-    handled = make_solver("nonlinear", model);
-    unhandled = make_solver("nonlinear", build_solver_model(rig, layout, without));
+    handled = make_solver(SolverMethod::kNonlinear, model);
+    unhandled = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout, without));
     with_handling = handled->make_result();
     without_handling = unhandled->make_result();
   }
@@ -460,7 +460,7 @@ TEST_CASE("ICT FaceKit lip poses with and without collision handling") {
   const Rig rig = load_rig(dir.string());
   LipPoseSolves solves(rig);
   std::vector<uint8_t> lip_region(std::size_t(rig.vertex_count()), 0);
-  for (const int v : solves.model->collision_vertices) lip_region[std::size_t(v)] = 1;
+  for (const int v : solves.model->collision.vertices) lip_region[std::size_t(v)] = 1;
   const std::vector<LipPoseSolves::Pose> poses{
       {{"mouthClose", 1.0}},
       {{"jawOpen", 0.3}, {"mouthClose", 1.0}},
@@ -525,4 +525,152 @@ TEST_CASE("SparseLdlt solves match Eigen's with 16-bit and 32-bit row indices") 
     factor.solve_in_place(one, one_work);
     CHECK((one - expected.row(1).transpose()).cwiseAbs().maxCoeff() < 1e-10);
   }
+}
+
+// ---- The solve's status bits (SolveResult::status, core/frame.hpp SolvedFlags) ----------
+
+TEST_CASE("a normal frame raises no status bit; too few markers raise kSolvedTooFewMarkers alone") {
+  const BuiltinFace& face = BuiltinFace::instance();
+  const Rig& rig = face.rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  const Eigen::Matrix3Xd targets = markers_of(face.articulated_pose(face.motion_weights(0.8)), layout);
+  std::vector<uint8_t> three(60, 0);
+  three[0] = three[1] = three[2] = 1;
+  std::vector<uint8_t> two = three;
+  two[2] = 0;
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear, SolverMethod::kDt}) {
+    INFO(kSolverMethods.name(method));
+    auto solver = make_solver(method, model);
+    SolveResult out = solver->make_result();
+    solver->solve(targets, all_present(60), out);
+    CHECK(out.status == 0);
+    CHECK(out.markers_used == 60);
+    const Eigen::Matrix3Xd solved = out.vertices;
+    solver->solve(targets, two, out);
+    CHECK(out.status == kSolvedTooFewMarkers);
+    CHECK(out.vertices == solved);  // the previous face is kept
+    solver->solve(targets, three, out);
+    CHECK((out.status & kSolvedTooFewMarkers) == 0);
+    CHECK(out.markers_used == 3);
+  }
+}
+
+TEST_CASE("Eq. 2's box QP stopped at an iteration cap of 1 raises kSolvedQpIterationCap") {
+  const BuiltinFace& face = BuiltinFace::instance();
+  const Rig& rig = face.rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  SolverParams capped;
+  capped.weight_qp_iteration_cap = 1;
+  const auto model = build_solver_model(rig, layout);
+  const auto capped_model = build_solver_model(rig, layout, capped);
+  const Eigen::Matrix3Xd targets = markers_of(face.articulated_pose(face.motion_weights(1.3)), layout);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kLinear, SolverMethod::kDt}) {
+    INFO(kSolverMethods.name(method));
+    auto solver = make_solver(method, model);
+    auto capped_solver = make_solver(method, capped_model);
+    SolveResult out = solver->make_result(), capped_out = capped_solver->make_result();
+    solver->solve(targets, all_present(60), out);
+    capped_solver->solve(targets, all_present(60), capped_out);
+    CHECK(out.status == 0);
+    CHECK(capped_out.status == kSolvedQpIterationCap);
+    // What it keeps is feasible, just not the optimum.
+    CHECK(capped_out.weights.minCoeff() >= 0.0);
+    CHECK(capped_out.weights.maxCoeff() <= 1.0);
+    CHECK((capped_out.weights - out.weights).cwiseAbs().maxCoeff() > 1e-6);
+  }
+  SolverParams negative;
+  negative.weight_qp_iteration_cap = -1;
+  CHECK_THROWS_WITH(build_solver_model(rig, layout, negative), Catch::Contains("weight_qp_iteration_cap -1 must be >= 0"));
+}
+
+TEST_CASE("a colliding pose that wants more pins than collision_max_pins raises kSolvedPinsBeyondCapacity") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+  w[*rig.shape_index("mouthPucker")] = 1.0;
+  w[*rig.shape_index("mouthClose")] = 1.0;
+  const Eigen::Matrix3Xd targets = markers_of(rig.linear_blend(w), layout);
+  SolverParams few;
+  few.collision_max_pins = 4;
+  auto by_default = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout));
+  auto limited = make_solver(SolverMethod::kNonlinear, build_solver_model(rig, layout, few));
+  SolveResult a = by_default->make_result(), b = limited->make_result();
+  by_default->solve_with_weights(w, targets, all_present(60), a);
+  limited->solve_with_weights(w, targets, all_present(60), b);
+  INFO("pins: " << a.collision_constraints << " by default, " << b.collision_constraints << " at most 4");
+  CHECK(a.collision_constraints > 4);
+  CHECK(a.collision_constraints < 64);
+  CHECK(a.status == 0);
+  CHECK(b.collision_constraints == 4);
+  CHECK(b.status == kSolvedPinsBeyondCapacity);
+  // The same capacity on a pose that needs none: no flag.
+  limited->solve_with_weights(Eigen::VectorXd::Zero(rig.shape_count()), markers_of(rig.neutral, layout), all_present(60), b);
+  CHECK(b.collision_constraints == 0);
+  CHECK(b.status == 0);
+}
+
+// A marker on a vertex no triangle uses: that vertex is held by the marker alone, so the
+// marker dropping out leaves Eq. 5 singular there and its low-rank correction with it.
+TEST_CASE("a missing marker whose vertex nothing else holds raises kSolvedSingularCorrection") {
+  Rig rig = BuiltinFace::instance().rig();
+  auto layout = spread_marker_layout(rig, 60);
+  const Eigen::Index stray = rig.vertex_count();
+  rig.neutral.conservativeResize(3, stray + 1);
+  rig.neutral.col(stray) = rig.neutral.rowwise().mean();
+  rig.deltas.conservativeResize(3 * (stray + 1), rig.shape_count());
+  rig.deltas.bottomRows(3).setZero();
+  layout.push_back(MarkerBinding::at_vertex("stray", int(stray)));
+  const auto model = build_solver_model(rig, layout);
+  const Eigen::Matrix3Xd targets = markers_of(rig.neutral, layout);
+  auto present = all_present(61);
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt}) {
+    INFO(kSolverMethods.name(method));
+    auto solver = make_solver(method, model);
+    SolveResult out = solver->make_result();
+    present[60] = 1;
+    solver->solve(targets, present, out);
+    CHECK(out.status == 0);
+    present[60] = 0;
+    solver->solve(targets, present, out);
+    CHECK(out.status == kSolvedSingularCorrection);
+    // Another marker missing instead: a regular correction.
+    present[60] = 1;
+    present[10] = 0;
+    solver->solve(targets, present, out);
+    CHECK(out.status == 0);
+    present[10] = 1;
+  }
+}
+
+// ---- The parameter tables (solver/params.hpp) ------------------------------------------
+
+TEST_CASE("solver methods and collision regions parse and print from one table") {
+  std::vector<std::string_view> names;
+  for (const auto& entry : kSolverMethods.entries()) {
+    names.push_back(entry.name);
+    CHECK(kSolverMethods.parse(entry.name) == entry.value);
+    CHECK(parse_solver_method(entry.name) == entry.value);
+    CHECK_FALSE(entry.description.empty());
+  }
+  CHECK(names == std::vector<std::string_view>{"nonlinear", "linear", "dt", "meshik"});
+  CHECK(solver_method_is_realtime(SolverMethod::kNonlinear));
+  CHECK(solver_method_is_realtime(SolverMethod::kLinear));
+  CHECK(solver_method_is_realtime(SolverMethod::kDt));
+  CHECK_FALSE(solver_method_is_realtime(SolverMethod::kMeshik));
+  CHECK_THROWS_WITH(parse_solver_method("Nonlinear"), Catch::Contains("unknown solver 'Nonlinear': choose nonlinear, linear, dt, meshik"));
+
+  names.clear();
+  for (const auto& entry : kCollisionRegions.entries()) {
+    names.push_back(entry.name);
+    CHECK(parse_collision_region(entry.name) == entry.value);
+    CHECK_FALSE(entry.description.empty());
+  }
+  CHECK(names == std::vector<std::string_view>{"none", "lips", "face"});
+  CHECK_THROWS_WITH(parse_collision_region("mouth"), Catch::Contains("unknown collision region 'mouth': choose none, lips, face"));
+
+  // Every solver calls itself by its table name.
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto model = build_solver_model(rig, spread_marker_layout(rig, 20));
+  for (const auto& entry : kSolverMethods.entries()) CHECK(make_solver(entry.value, model)->name() == entry.name);
 }

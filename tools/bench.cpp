@@ -50,9 +50,10 @@ Percentiles summarise(std::vector<double> values) {
 
 // The stages a solver reports: those with time in any frame; nonlinear always lists the
 // five of the paper's pipeline.
-bool reported_stage(const std::string& solver, SolveStage stage, const std::vector<double>& times) {
-  if (solver == "nonlinear" && (stage == SolveStage::kWeights || stage == SolveStage::kBlend || stage == SolveStage::kRhs ||
-                                stage == SolveStage::kBacksolve || stage == SolveStage::kCollide))
+bool reported_stage(SolverMethod method, SolveStage stage, const std::vector<double>& times) {
+  if (method == SolverMethod::kNonlinear &&
+      (stage == SolveStage::kWeights || stage == SolveStage::kBlend || stage == SolveStage::kRhs ||
+       stage == SolveStage::kBacksolve || stage == SolveStage::kCollide))
     return true;
   return std::any_of(times.begin(), times.end(), [](double t) { return t > 0; });
 }
@@ -97,10 +98,11 @@ void run_bench(const Options& o) {
   report["solvers"] = nlohmann::json::object();
 
   std::vector<std::string> lines;
-  for (const auto& name : solver_list) {
-    auto solver = make_solver(name, model);
+  for (const SolverMethod method : solver_list) {
+    const std::string name(kSolverMethods.name(method));
+    auto solver = make_solver(method, model);
     SolveResult result = solver->make_result();
-    const std::size_t frames = name == "meshik" ? std::min<std::size_t>(F, std::size_t(std::max(1L, o.meshik_frames))) : F;
+    const std::size_t frames = !solver_method_is_realtime(method) ? std::min<std::size_t>(F, std::size_t(std::max(1L, o.meshik_frames))) : F;
     std::vector<double> total_us(frames), cpu_us(frames);
     std::vector<std::vector<double>> stage_us(kSolveStageCount, std::vector<double>(frames));
     std::vector<double> collision_pairs(frames), collision_pins(frames);
@@ -115,7 +117,7 @@ void run_bench(const Options& o) {
       disable_allocation_counting();
       cpu_us[f] = double(thread_cpu_ns() - cpu_start) * 1e-3;
       allocations += counted_allocations() - before;
-      held += result.held;
+      held += (result.status & kSolvedTooFewMarkers) != 0;
       total_us[f] = double(result.total_ns) * 1e-3;
       for (std::size_t s = 0; s < kSolveStageCount; ++s) stage_us[s][f] = double(result.stage_ns[s]) * 1e-3;
       collision_pairs[f] = result.collision_pairs;
@@ -133,13 +135,13 @@ void run_bench(const Options& o) {
     std::string stage_text;
     for (std::size_t s = 0; s < kSolveStageCount; ++s) {
       const auto stage = SolveStage(s);
-      if (!reported_stage(name, stage, stage_us[s])) continue;
+      if (!reported_stage(method, stage, stage_us[s])) continue;
       const Percentiles p = summarise(stage_us[s]);
       const std::string stage_name(solve_stage_name(stage));
       entry["stages_us"][stage_name] = {{"median", p.median}, {"p99", p.p99}};
       stage_text += fmt::format("  {} {:.1f}", stage_name, p.median);
     }
-    if (reported_stage(name, SolveStage::kCollide, stage_us[std::size_t(SolveStage::kCollide)])) {
+    if (reported_stage(method, SolveStage::kCollide, stage_us[std::size_t(SolveStage::kCollide)])) {
       const Percentiles pairs = summarise(collision_pairs), pins = summarise(collision_pins);
       entry["collisions"] = {{"pairs", {{"median", pairs.median}, {"p99", pairs.p99}}},
                              {"pins", {{"median", pins.median}, {"p99", pins.p99}}}};

@@ -40,7 +40,7 @@ void add_demo_command(CLI::App& app, int& exit_code) {
     const auto model = build_solver_model(rig, layout);
     fmt::print("setup (precompute, factorisation): {:.0f} ms\n\n", double(monotonic_now_ns() - setup_start) / 1e6);
 
-    const char* names[] = {"nonlinear", "linear", "dt"};
+    const SolverMethod methods[] = {SolverMethod::kNonlinear, SolverMethod::kLinear, SolverMethod::kDt};
     struct Tally {
       std::unique_ptr<FaceSolver> solver;
       SolveResult result;
@@ -48,8 +48,8 @@ void add_demo_command(CLI::App& app, int& exit_code) {
       int64_t time_sum = 0, time_worst = 0;
     };
     std::vector<Tally> tallies;
-    for (const char* name : names) {
-      Tally t{make_solver(name, model), {}};
+    for (const SolverMethod method : methods) {
+      Tally t{make_solver(method, model), {}};
       t.result = t.solver->make_result();
       tallies.push_back(std::move(t));
     }
@@ -89,7 +89,7 @@ void add_demo_command(CLI::App& app, int& exit_code) {
     fmt::print("\n{:<10} {:>16} {:>15} {:>16} {:>14} {:>14}\n", "solver", "mean error mm", "worst frame mm",
                "jaw weight err", "mean solve us", "worst solve us");
     for (std::size_t i = 0; i < tallies.size(); ++i)
-      fmt::print("{:<10} {:>16.3f} {:>15.3f} {:>16.4f} {:>14.0f} {:>14.0f}\n", names[i], tallies[i].error_sum / frames,
+      fmt::print("{:<10} {:>16.3f} {:>15.3f} {:>16.4f} {:>14.0f} {:>14.0f}\n", tallies[i].solver->name(), tallies[i].error_sum / frames,
                  tallies[i].worst, tallies[i].jaw_error / frames, double(tallies[i].time_sum) / frames / 1e3,
                  double(tallies[i].time_worst) / 1e3);
     fmt::print("\nError is the mean distance of all {} vertices from the articulated ground truth (a real jaw hinge\n"

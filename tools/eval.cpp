@@ -15,7 +15,7 @@
 #include "core/error.hpp"
 #include "core/units.hpp"
 #include "formats/take.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/metrics.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/commands.hpp"
 #include "pipeline/settings.hpp"
@@ -131,10 +131,10 @@ void run_eval(const Options& o, const SolverParams& params) {
 
   const auto model = build_solver_model(rig, bindings, params);
   std::vector<SolverRun> runs;
-  for (const auto& name : solver_list) {
+  for (const SolverMethod method : solver_list) {
     SolverRun run;
-    run.name = name;
-    run.solver = make_solver(name, model);
+    run.name = kSolverMethods.name(method);
+    run.solver = make_solver(method, model);
     run.result = run.solver->make_result();
     runs.push_back(std::move(run));
   }
@@ -171,7 +171,7 @@ void run_eval(const Options& o, const SolverParams& params) {
     for (auto& run : runs) {
       if (o.truth_weights) run.solver->solve_with_weights(truth.weights[f], targets, present, run.result);
       else run.solver->solve(targets, present, run.result);
-      run.held += run.result.held;
+      run.held += (run.result.status & kSolvedTooFewMarkers) != 0;
       const Eigen::Matrix3Xd error = run.result.vertices - truth_pose_now;
       for (Eigen::Index v = 0; v < error.cols(); ++v) run.errors.add(error.col(v).norm() * mm_per_rig);
       if (f > 0) {

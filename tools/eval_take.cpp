@@ -11,7 +11,7 @@
 #include "formats/take.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
-#include "solver/collide.hpp"
+#include "solver/collide/metrics.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/align_support.hpp"
@@ -70,7 +70,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
                                          mapper.stable_markers_found(), cal.stable_markers.size()));
   const auto model = build_solver_model(rig, cal.bindings(), o.settings.params);
-  const auto names = select_solvers(o.solvers);
+  const auto methods = select_solvers(o.solvers);
 
   const Eigen::Index K = mapper.marker_count();
   std::vector<int> face_markers;  // held-out candidates: calibrated, in the take, not stable
@@ -78,13 +78,13 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     if (mapper.slots()[std::size_t(k)] >= 0 && !mapper.is_stable()[std::size_t(k)]) face_markers.push_back(int(k));
 
   std::vector<SolverRun> runs;
-  for (const auto& name : names) {
+  for (const SolverMethod method : methods) {
     SolverRun run;
-    run.name = name;
-    run.offline = name == "meshik";
-    run.full = make_solver(name, model);
+    run.name = kSolverMethods.name(method);
+    run.offline = !solver_method_is_realtime(method);
+    run.full = make_solver(method, model);
     run.result = run.full->make_result();
-    for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(name, model));
+    for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(method, model));
     run.held_result = run.full->make_result();
     runs.push_back(std::move(run));
   }
@@ -121,7 +121,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       const auto t0 = std::chrono::steady_clock::now();
       run.full->solve(mapped.targets, mapped.present, run.result);
       run.solve_ms.add(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-      run.held += run.result.held;
+      run.held += (run.result.status & kSolvedTooFewMarkers) != 0;
       for (Eigen::Index k = 0; k < K; ++k)
         if (mapped.present[std::size_t(k)])
           run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
@@ -146,7 +146,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
         std::copy(mapped.present.begin(), mapped.present.end(), present.begin());
         present[std::size_t(k)] = 0;
         run.held_out[i]->solve(mapped.targets, present, run.held_result);
-        if (run.held_result.held) continue;
+        if (run.held_result.status & kSolvedTooFewMarkers) continue;
         run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
       }
     }

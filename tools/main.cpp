@@ -1,5 +1,7 @@
 // facecap: the command-line tool (inspect, convert, synth, bench, eval, calibrate, ...).
 #include <cstdio>
+#include <exception>
+#include <new>
 
 #include <CLI/CLI.hpp>
 
@@ -41,6 +43,18 @@ int main(int argc, char** argv) {
     return status != 0 && app.get_subcommand("diff")->parsed() ? 2 : status;
   } catch (const facecap::Error& e) {
     std::fprintf(stderr, "facecap: error: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    // Readers bound every size by their input's, so this is a machine short of memory.
+    std::fprintf(stderr, "facecap: error: out of memory\n");
+    return 1;
+  } catch (const std::exception& e) {
+    // A library's own exception (std::filesystem, Eigen, CLI11 callbacks): still exit 1
+    // with its message rather than abort.
+    std::fprintf(stderr, "facecap: error: %s\n", e.what());
+    return 1;
+  } catch (...) {
+    std::fprintf(stderr, "facecap: error: unknown exception\n");
     return 1;
   }
   return exit_code;

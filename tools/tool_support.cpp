@@ -124,23 +124,20 @@ Eigen::Matrix3Xd marker_positions(const Eigen::Matrix3Xd& pose, const std::vecto
   return out;
 }
 
-std::vector<std::string> select_solvers(const std::string& option) {
-  const auto known = solver_names();
-  std::vector<std::string> out;
+std::vector<SolverMethod> select_solvers(const std::string& option) {
+  std::vector<SolverMethod> out;
   if (option == "all") {
-    for (auto name : known) out.emplace_back(name);
+    for (const auto& entry : kSolverMethods.entries()) out.push_back(entry.value);
     return out;
   }
   std::size_t start = 0;
   while (start <= option.size()) {
     const std::size_t comma = std::min(option.find(',', start), option.size());
     const std::string name = option.substr(start, comma - start);
-    if (std::find(known.begin(), known.end(), name) == known.end()) {
-      std::string list;
-      for (auto k : known) list += fmt::format("{}{}", list.empty() ? "" : ", ", k);
-      throw Error(fmt::format("unknown solver '{}': choose all or from {}", name, list));
-    }
-    if (std::find(out.begin(), out.end(), name) == out.end()) out.push_back(name);
+    const auto method = kSolverMethods.parse(name);
+    if (!method)
+      throw Error(fmt::format("unknown solver '{}': choose all or from {}", name, fmt::join(kSolverMethods.names(), ", ")));
+    if (std::find(out.begin(), out.end(), *method) == out.end()) out.push_back(*method);
     start = comma + 1;
   }
   return out;

@@ -52,9 +52,9 @@ Eigen::Matrix3Xd truth_pose(const Rig& rig, bool builtin, const Eigen::VectorXd&
 // Marker points (3 x K) of a pose (3 x N).
 Eigen::Matrix3Xd marker_positions(const Eigen::Matrix3Xd& pose, const std::vector<MarkerBinding>& markers);
 
-// "all" (every solver_names() entry) or a comma-separated list of names. Throws Error
-// naming an unknown solver.
-std::vector<std::string> select_solvers(const std::string& option);
+// "all" (every kSolverMethods row) or a comma-separated list of their names, in the
+// order given, each once. Throws Error naming an unknown solver and the allowed names.
+std::vector<SolverMethod> select_solvers(const std::string& option);
 
 // Nearest-rank percentile p (0..100) of values; reorders them. 0 for no values.
 double percentile(std::vector<double>& values, double p);

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
 #include "core/time.hpp"
@@ -15,6 +16,7 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
 void ReplaySource::open() {
   if (options_.file.empty()) throw Error("replay needs a file (source.replay.file)");
   take_ = formats::read_take(options_.file);
+  for (const auto& warning : take_.warnings) spdlog::warn("{}", warning);
   if (take_.frames.empty()) throw file_error(options_.file, "the take has no frames");
   formats::check_take_shape(take_, options_.file);
   const bool nominal_usable = take_.rate_hz > 0.0;
@@ -30,6 +32,9 @@ void ReplaySource::open() {
                                             : int64_t(i) * period_ns;
   if (options_.source_timestamps && !std::is_sorted(time_ns.begin(), time_ns.end()))
     throw file_error(options_.file, "frame timestamps go backwards: replay it with source_timestamps = false");
+  // (The readers re-time such frames when the take states a rate.)
+  if (n > 1 && time_ns.back() == 0)
+    throw file_error(options_.file, "all frames carry one timestamp and the take states no frame rate: nothing to pace them by");
 
   const auto start_ns = int64_t(std::llround(options_.start_s * double(kNsPerSecond)));
   const auto end_ns = options_.end_s > 0.0 ? int64_t(std::llround(options_.end_s * double(kNsPerSecond))) : INT64_MAX;

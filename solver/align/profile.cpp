@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include <fmt/format.h>
@@ -9,6 +10,7 @@
 
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "core/toml_reader.hpp"
 #include "core/units.hpp"
 
 namespace facecap::align {
@@ -62,8 +64,11 @@ std::string write_calibration_profile(const Calibration& c) {
   out(fmt::format("scale = {}\nrotation = [{}, {}, {}]\ntranslation = {}\n", c.take_to_rig.scale,
                   vec3(R.row(0).transpose()), vec3(R.row(1).transpose()), vec3(R.row(2).transpose()),
                   vec3(c.take_to_rig.translation)));
-  out("\n[fit]  # rig millimetres\n");
-  out(fmt::format("hull_rms_mm = {}\ntrimmed_rms_mm = {}\nstart = {}\n", c.hull_rms_mm, c.trimmed_rms_mm, c.start_index));
+  if (c.start_index >= 0) {  // only a calibration fitted to a take has a fit to report
+    out("\n[fit]  # rig millimetres\n");
+    out(fmt::format("hull_rms_mm = {}\ntrimmed_rms_mm = {}\nstart = {}\n", c.hull_rms_mm, c.trimmed_rms_mm,
+                    c.start_index));
+  }
   out("\n[stabilise]\nmarkers = [");
   for (std::size_t i = 0; i < c.stable_markers.size(); ++i) out((i ? ", " : "") + quote(c.stable_markers[i]));
   out("]\n");
@@ -188,13 +193,7 @@ bool is_hex16(const std::string& s) {
 }  // namespace
 
 Calibration read_calibration_profile(std::string_view text, const std::string& name) {
-  toml::table root;
-  try {
-    root = toml::parse(text, name);
-  } catch (const toml::parse_error& e) {
-    const auto& b = e.source().begin;
-    throw Error(std::string(e.description()), ErrorLocation{.file = name, .line = b.line, .column = b.column});
-  }
+  const toml::table root = parse_toml(text, name);
   Reader r(name);
   r.only_keys(root, {"version", "checksum", "rig", "source", "transform", "fit", "stabilise", "notes", "marker", "head_marker"}, "");
   const int64_t version = r.integer(root, "version", "");
@@ -249,7 +248,10 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     r.only_keys(fit, {"hull_rms_mm", "trimmed_rms_mm", "start"}, "fit.");
     c.hull_rms_mm = r.number(fit, "hull_rms_mm", "fit.");
     c.trimmed_rms_mm = r.number(fit, "trimmed_rms_mm", "fit.");
-    c.start_index = int(r.integer(fit, "start", "fit."));
+    const int64_t start = r.integer(fit, "start", "fit.");
+    if (start < 0 || start > std::numeric_limits<int>::max())
+      r.fail(fit.get("start"), "start must be a non-negative integer", "fit.start");
+    c.start_index = int(start);
   }
   const auto& stab = r.table(root, "stabilise", "");
   r.only_keys(stab, {"markers"}, "stabilise.");
@@ -275,7 +277,8 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     if (!va || va->size() != 3) r.fail(&verts, "vertices must be 3 integers", "marker.vertices");
     for (std::size_t i = 0; i < 3; ++i) {
       const toml::node* v = va->get(i);
-      if (!v->is_integer() || v->as_integer()->get() < 0) r.fail(v, "vertices must be 3 non-negative integers", "marker.vertices");
+      if (!v->is_integer() || v->as_integer()->get() < 0 || v->as_integer()->get() > std::numeric_limits<int>::max())
+        r.fail(v, "vertices must be 3 non-negative integers (vertex indices)", "marker.vertices");
       m.binding.vertices[i] = int(v->as_integer()->get());
     }
     m.binding.label = m.label;

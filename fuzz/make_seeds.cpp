@@ -1,0 +1,186 @@
+// Writes small valid inputs for every fuzz target (seeds/<target>/...) and the
+// dictionaries generated from tables in the code (seeds/dict/...), into the directory
+// given as the first argument. Run by the build (fuzz/CMakeLists.txt).
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <fmt/format.h>
+
+#include "config/config_file.hpp"
+#include "config/schema.hpp"
+#include "core/error.hpp"
+#include "core/io.hpp"
+#include "formats/arkit.hpp"
+#include "formats/c3d.hpp"
+#include "formats/livelinkface.hpp"
+#include "formats/recording.hpp"
+#include "formats/trc.hpp"
+#include "solver/align/profile.hpp"
+#include "solver/gltf_rig.hpp"
+#include "solver/obj_mesh.hpp"
+#include "solver/rig_cache.hpp"
+
+namespace fs = std::filesystem;
+using namespace facecap;
+using namespace facecap::formats;
+
+namespace {
+
+void write(const fs::path& path, std::string_view bytes) {
+  fs::create_directories(path.parent_path());
+  std::ofstream(path, std::ios::binary | std::ios::trunc).write(bytes.data(), std::streamsize(bytes.size()));
+}
+void write(const fs::path& path, const std::vector<char>& bytes) { write(path, std::string_view(bytes.data(), bytes.size())); }
+
+MarkerTake small_take(std::size_t frames, std::size_t markers) {
+  MarkerTake take;
+  take.rate_hz = 60.0;
+  take.units = "mm";
+  for (std::size_t k = 0; k < markers; ++k) take.labels.push_back(fmt::format("M{}", k));
+  for (std::size_t f = 0; f < frames; ++f) {
+    MarkerFrame& frame = append_empty_frame(take, int64_t(f) + 1, int64_t(f) * 16666667);
+    for (std::size_t k = 0; k < markers; ++k) {
+      if ((f + k) % 5 == 4) continue;  // stays missing
+      frame.markers[k].flags = 0;
+      frame.markers[k].position = Eigen::Vector3d(double(k), 10.0 + double(f), -0.5 * double(k + f));
+    }
+  }
+  return take;
+}
+
+// Two quads, two shapes: the smallest rig every rig format can hold.
+Rig small_rig() {
+  Rig rig;
+  rig.name = "tiny";
+  rig.neutral.resize(3, 6);
+  rig.neutral << 0, 1, 2, 0, 1, 2, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0, 0, 0;
+  rig.triangles.resize(3, 4);
+  rig.triangles << 0, 0, 1, 1, 1, 4, 2, 5, 4, 3, 5, 4;
+  rig.shape_names = {"jawOpen", "eyeBlink_L"};
+  rig.deltas = Eigen::MatrixXd::Zero(18, 2);
+  rig.deltas(3 * 4 + 2, 0) = 0.5;
+  rig.deltas(3 * 3 + 1, 1) = -0.25;
+  return rig;
+}
+
+void write_recordings(const fs::path& dir) {
+  fs::create_directories(dir);
+  const MarkerTake take = small_take(6, 3);
+  write_recording(dir / "markers.fcrec", take, "fuzz seed");
+  RecordingHeader header;
+  header.rig_name = "tiny";
+  header.units = "mm";
+  header.rate_hz = 60.0;
+  header.marker_labels = take.labels;
+  header.shape_names = {"jawOpen", "eyeBlink_L"};
+  header.calibration = "version = 1\n";
+  header.solver_settings = "[solver]\nmethod = \"ours\"\n";
+  {
+    RecordingWriter writer(dir / "solved.fcrec", header, RecordingWriter::Options{.overwrite = true});
+    SolvedFrame solved;
+    solved.resize(2, 6);
+    for (std::size_t f = 0; f < take.frames.size(); ++f) {
+      writer.append_marker_frame(take.frames[f]);
+      solved.frame_no = int64_t(f) + 1;
+      solved.weights[0] = 0.1f * float(f);
+      writer.append_solved_frame(solved);
+    }
+    writer.close();
+  }
+  // Cut off before its index: the reader scans the chunks instead.
+  auto bytes = read_file_bytes(dir / "solved.fcrec");
+  bytes.resize(bytes.size() * 2 / 3);
+  write(dir / "cut.fcrec", bytes);
+}
+
+align::Calibration small_calibration(const Rig& rig) {
+  align::Calibration c;
+  c.rig_name = rig.name;
+  c.rig_hash = rig.content_hash();
+  c.source_take = "take.trc";
+  c.source_frame = 12;
+  c.take_to_rig.scale = 0.1;
+  c.take_to_rig.translation = Eigen::Vector3d(1.0, -2.0, 0.5);
+  for (int k = 0; k < 3; ++k) {
+    align::MarkerCalibration m;
+    m.label = fmt::format("M{}", k);
+    m.binding = MarkerBinding{m.label, {k, k + 1, k + 3}, Eigen::Vector3d(0.5, 0.25, 0.25)};
+    m.neutral = Eigen::Vector3d(10.0 * k, 5.0, 1.0);
+    m.bound_point = c.take_to_rig.apply(m.neutral) - Eigen::Vector3d(0.01, 0.0, 0.0);
+    m.residual_mm = 0.1;
+    c.markers.push_back(m);
+  }
+  c.stable_markers = {"M0", "M1", "M2"};
+  c.notes = {"a note"};
+  return c;
+}
+
+void write_dictionaries(const fs::path& dir) {
+  std::string llf;
+  for (const auto& shape : kArkitShapes) llf += fmt::format("\"{}\"\n", shape.arkit);
+  for (auto angle : kLiveLinkAngleNames) llf += fmt::format("\"{}\"\n", angle);
+  llf += "\"Timecode\"\n\"BlendShapeCount\"\n\"23:59:59:59.999\"\n\"00:00:00:00.000\"\n";
+  write(dir / "livelinkface.dict", llf);
+  std::string keys;
+  for (const auto& key : config::config_schema()) keys += fmt::format("\"{}\"\n\"[{}]\"\n", key.name(), key.section());
+  keys += "\"=\"\n\"[[\"\n\"\\\"\"\n\"true\"\n\"1e309\"\n\"nan\"\n";
+  write(dir / "facecapd_config.dict", keys);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: %s SEED_DIR\n", argv[0]);
+    return 2;
+  }
+  const fs::path out = argv[1];
+  try {
+    const MarkerTake take = small_take(8, 4);
+    write(out / "c3d/small.c3d", write_c3d(take));
+    write(out / "c3d/empty.c3d", write_c3d(small_take(0, 2)));
+    write(out / "c3d/labels2.c3d", write_c3d(small_take(1, 260)));  // LABELS2 past 255 points
+    write(out / "trc/small.trc", write_trc(take, "small.trc"));
+    write_recordings(out / "fcrec");
+
+    FaceTake face;
+    for (int i = 0; i < 6; ++i) {
+      FaceFrame& f = face.frames.emplace_back();
+      f.timecode = *parse_livelink_timecode(fmt::format("23:59:59:{:02}.250", 54 + i));
+      f.tracked = i != 3;
+      f.weights.fill(0.125f * float(i % 3));
+    }
+    write(out / "livelinkface/small.csv", write_livelinkface(face));
+
+    const Rig rig = small_rig();
+    const std::string neutral = format_obj(rig.neutral, rig.triangles);
+    write(out / "obj/neutral.obj", neutral);
+    write(out / "obj/quads.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3/1/1 4/1/1\nf -1 -2 -3\n");
+    // A neutral, then a shape after the separator line the obj target splits at.
+    write(out / "obj/neutral_and_shape.obj", neutral + "#shape\n" + format_obj(rig.shape_positions(0), rig.triangles));
+    write(out / "rig_manifest/rig.toml",
+          "name = \"tiny\"\nneutral = \"neutral.obj\"\n[shapes]\njawOpen = \"jaw_open.obj\"\n\"eye blink\" = \"sub/blink.obj\"\n");
+    const fs::path gltf_dir = out / "gltf";
+    fs::create_directories(gltf_dir);
+    save_gltf_rig(rig, (gltf_dir / "tiny.gltf").string());
+    save_gltf_rig(rig, (gltf_dir / "tiny.glb").string());
+    write(out / "rig_cache/tiny.fcrig", serialize_rig(rig, RigCacheKey{0x1234}));
+
+    write(out / "facecapd_config/defaults.toml", config::render_documented_defaults());
+    write(out / "facecapd_config/small.toml",
+          "version = 1\n[loop]\nrate_hz = 240\n[source]\ndriver = \"sim\"\n[solver]\nmethod = \"ours\"\n");
+    const std::string profile = align::write_calibration_profile(small_calibration(rig));
+    write(out / "calibration_profile/profile.toml", profile);
+    // Without its checksum line, so that mutations are not all refused by the checksum.
+    const auto checksum_at = profile.find("checksum = ");
+    write(out / "calibration_profile/unchecked.toml",
+          profile.substr(0, checksum_at) + profile.substr(profile.find('\n', checksum_at) + 1));
+    write_dictionaries(out / "dict");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "fuzz_seeds: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,62 @@
+#pragma once
+// The solver's settings and its closed choices, readable without the solver itself (no
+// CHOLMOD, no Qhull): target facecap_solver_params links only facecap_core, so that the
+// configuration and the tools can parse, list and document solver names from the same
+// tables the solver uses. SolverParams' member initialisers are the defaults.
+#include <array>
+#include <cstdint>
+#include <string_view>
+
+#include "core/enum_table.hpp"
+
+namespace facecap {
+
+enum class SolverMethod : uint8_t { kNonlinear, kLinear, kDt, kMeshik };
+
+inline constexpr EnumTable kSolverMethods{std::array{
+    EnumEntry{SolverMethod::kNonlinear, "nonlinear",
+              "the paper's non-linear blendshape interpolation: Eq. 2 weights, Eq. 4 blend, Eq. 5 mesh, collisions"},
+    EnumEntry{SolverMethod::kLinear, "linear", "direct manipulation: the linear blend x0 + B w of the Eq. 2 weights"},
+    EnumEntry{SolverMethod::kDt, "dt", "deformation transfer (Sumner & Popovic 2004) through the same Eq. 5 solve"},
+    EnumEntry{SolverMethod::kMeshik, "meshik",
+              "MeshIK (Sumner et al. 2005), weights and mesh optimised together: an offline baseline, far too "
+              "slow for the loop"}}};
+
+// Whether a method keeps up with a fixed-rate loop. meshik does not: it takes M
+// back-substitutions per Gauss-Newton step, seconds a frame on a production rig.
+constexpr bool solver_method_is_realtime(SolverMethod method) noexcept { return method != SolverMethod::kMeshik; }
+
+// The triangles the collision stage checks.
+enum class CollisionRegion : uint8_t { kNone, kLips, kFace };
+
+inline constexpr EnumTable kCollisionRegions{std::array{
+    EnumEntry{CollisionRegion::kNone, "none", "no collision handling"},
+    EnumEntry{CollisionRegion::kLips, "lips", "the triangles around the mouth opening, found from the rig's shapes"},
+    EnumEntry{CollisionRegion::kFace, "face", "every triangle of the face (slower: pins are solved for as they occur)"}}};
+
+// The value named `name`; throws Error naming the allowed names when there is none.
+SolverMethod parse_solver_method(std::string_view name);
+CollisionRegion parse_collision_region(std::string_view name);
+
+struct SolverParams {
+  double alpha = 0.1;     // temporal weight regularisation (Eq. 2)
+  double mu = 0.001;      // weight magnitude regularisation (Eq. 2)
+  double beta = 100.0;    // marker pinning strength (Eq. 5)
+  CollisionRegion collision_region = CollisionRegion::kLips;
+  double collision_epsilon = 0.01;  // rig units: triangle pairs closer than this collide
+  // Vertices pinned per frame at most: bounds the collision stage's cost. Lip poses that
+  // need more keep some crossings (ICT: one pose in 41 needs 100) and are flagged
+  // kSolvedPinsBeyondCapacity.
+  int collision_max_pins = 64;
+  double active_weight = 1e-4;      // weights below this are left out of T(w)
+  // Gauss-Newton refinements of Eq. 2 for the nonlinear solver, fitting markers along
+  // the paths the rotations of Eq. 4 move them (a hinge swings, it does not slide);
+  // 0 gives the paper's linear fit.
+  int weight_refinements = 2;
+  // Iterations Eq. 2's box QP may take per solve; 0: 10 M + 10, far more than the few it
+  // takes. A solve stopped at the cap keeps its last feasible iterate and is flagged
+  // kSolvedQpIterationCap.
+  int weight_qp_iteration_cap = 0;
+};
+
+}  // namespace facecap
