@@ -23,7 +23,8 @@ set(modules
   "outputs/shm|outputs/api,client,formats,core"
   "outputs/recording|outputs/api,formats,core"
   "outputs|outputs/api,outputs/shm,outputs/recording,config,drivers/api,solver/params.hpp,client,formats,core"
-  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,drivers,drivers/api,drivers/sim,drivers/replay,config,solver,solver/params.hpp,formats,client,core"
+  "control|outputs/api,formats,core"
+  "daemon|control,pipeline,outputs,outputs/api,outputs/shm,outputs/recording,drivers,drivers/api,drivers/sim,drivers/replay,config,solver,solver/params.hpp,formats,client,core"
 )
 
 if(NOT SOURCE_DIR)
