@@ -19,6 +19,7 @@ packages=(
   catch2 libbenchmark-dev
   clang libclang-rt-dev  # scripts/fuzz: libFuzzer with ASan and UBSan
   systemd  # systemd-analyze: the test that checks systemd/facecapd.service
+  prometheus wrk  # promtool checks /metrics in the tests; wrk drives scripts/control_load.sh
 )
 
 install_packages() {
