@@ -55,6 +55,8 @@ class Body {
         object = json::parse(text);
       } catch (const json::parse_error& e) {
         return error_reply(400, fmt::format("the body is not valid JSON (at byte {})", e.byte));
+      } catch (const json::out_of_range&) {  // a number beyond double's range (fuzz finding: 1e309)
+        return error_reply(400, "the body holds a number too large for a double");
       }
     }
     if (!object.is_object()) return error_reply(400, "the body must be a JSON object");
