@@ -4,7 +4,8 @@
 // the client library (facecap_client.h) instead of touching these structs directly.
 //
 // A segment is one Header at offset 0, then shape_count names of shape_name_bytes each
-// (NUL-padded), then slot_count slots of slot_bytes each. A slot is a SlotHeader, then
+// (NUL-padded), then as many ARKit names ("" for a shape without one), then slot_count
+// slots of slot_bytes each. A slot is a SlotHeader, then
 // shape_count float weights, then vertex_count * 3 float vertex coordinates (x, y, z per
 // vertex); each part starts on a 64-byte boundary. All integers little-endian (the host).
 //
@@ -25,7 +26,7 @@ namespace facecap::shm {
 // "FCSHM\0\0\1" read as a little-endian integer.
 inline constexpr uint64_t kMagic = 0x0100004d48534346ull;
 // Bumped on any incompatible change; readers refuse other versions.
-inline constexpr uint32_t kLayoutVersion = 1;
+inline constexpr uint32_t kLayoutVersion = 2;  // 2: ARKit names
 inline constexpr uint32_t kAlignment = 64;
 inline constexpr uint32_t kShapeNameBytes = 64;  // 63 characters and a NUL, truncated
 inline constexpr uint32_t kRigNameBytes = 64;
@@ -66,7 +67,8 @@ struct alignas(64) Header {
   std::atomic<uint64_t> last_published;  // sequence of the newest complete slot, 0 = none yet
   std::atomic<uint32_t> writer_state;    // WriterState
   uint32_t reserved2;
-  uint8_t reserved_tail[256];  // room to grow without moving the slots
+  uint64_t arkit_names_offset;  // from the start of the segment
+  uint8_t reserved_tail[248];   // room to grow without moving the slots
 };
 
 struct alignas(64) SlotHeader {
@@ -111,6 +113,7 @@ static_assert(offsetof(Header, rig_name) == 112);
 static_assert(offsetof(Header, heartbeat_ns) == 176);
 static_assert(offsetof(Header, last_published) == 184);
 static_assert(offsetof(Header, writer_state) == 192);
+static_assert(offsetof(Header, arkit_names_offset) == 200);
 static_assert(sizeof(Header) == 512);
 
 static_assert(offsetof(SlotHeader, seqlock) == 0);
@@ -134,6 +137,7 @@ struct Geometry {
   uint32_t slot_vertices_offset = 0;
   uint32_t slot_bytes = 0;
   uint64_t shape_names_offset = 0;
+  uint64_t arkit_names_offset = 0;
   uint64_t slots_offset = 0;
   uint64_t total_bytes = 0;
 };
@@ -144,7 +148,8 @@ constexpr Geometry compute_geometry(uint32_t shape_count, uint32_t vertex_count,
   g.slot_vertices_offset = uint32_t(g.slot_weights_offset + align_up(uint64_t(shape_count) * sizeof(float)));
   g.slot_bytes = uint32_t(g.slot_vertices_offset + align_up(uint64_t(vertex_count) * 3 * sizeof(float)));
   g.shape_names_offset = align_up(sizeof(Header));
-  g.slots_offset = g.shape_names_offset + align_up(uint64_t(shape_count) * kShapeNameBytes);
+  g.arkit_names_offset = g.shape_names_offset + align_up(uint64_t(shape_count) * kShapeNameBytes);
+  g.slots_offset = g.arkit_names_offset + align_up(uint64_t(shape_count) * kShapeNameBytes);
   g.total_bytes = g.slots_offset + uint64_t(slot_count) * g.slot_bytes;
   return g;
 }

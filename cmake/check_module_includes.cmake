@@ -9,8 +9,9 @@
 cmake_minimum_required(VERSION 3.25)
 set(modules
   "core|"
-  "client|"
-  "formats|core"
+  "client|client/facecap_udp_layout.hpp"
+  "client/facecap_udp_layout.hpp|"
+  "formats|core,client/facecap_udp_layout.hpp"
   "solver/params.hpp|core"
   "solver|solver/params.hpp,core"
   "drivers/api|core"
@@ -22,9 +23,13 @@ set(modules
   "outputs/api|formats,core"
   "outputs/shm|outputs/api,client,formats,core"
   "outputs/recording|outputs/api,formats,core"
-  "outputs|outputs/api,outputs/shm,outputs/recording,config,drivers/api,solver/params.hpp,client,formats,core"
+  "outputs/net|outputs/api,formats,core"
+  "outputs/udp|outputs/net,outputs/api,formats,client/facecap_udp_layout.hpp,core"
+  "outputs/vmc|outputs/net,outputs/api,formats,core"
+  "outputs/livelink|outputs/net,outputs/api,formats,core"
+  "outputs|outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,config,drivers/api,solver/params.hpp,client,formats,core"
   "control|outputs/api,formats,core"
-  "daemon|control,pipeline,outputs,outputs/api,outputs/shm,outputs/recording,drivers,drivers/api,drivers/sim,drivers/replay,config,solver,solver/params.hpp,formats,client,core"
+  "daemon|control,pipeline,outputs,outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,drivers,drivers/api,drivers/sim,drivers/replay,config,solver,solver/params.hpp,formats,client,core"
 )
 
 if(NOT SOURCE_DIR)

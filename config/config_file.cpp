@@ -8,6 +8,7 @@
 
 #include <arpa/inet.h>
 #include <fmt/format.h>
+#include <net/if.h>
 #include <netinet/in.h>
 #include <toml++/toml.h>
 
@@ -152,6 +153,19 @@ class Loader {
                                                      c.outputs.shm.name));
     if (c.outputs.recording.enabled && c.outputs.recording.directory.empty())
       problem(where("outputs.recording.directory"), "recording is enabled but no directory is given");
+    check_network_output("udp", c.outputs.udp);
+    check_network_output("vmc", c.outputs.vmc);
+    check_network_output("livelink", c.outputs.livelink);
+    if (c.outputs.udp.enabled && !c.outputs.udp.multicast_interface.empty() &&
+        if_nametoindex(c.outputs.udp.multicast_interface.c_str()) == 0)
+      problem(where("outputs.udp.multicast_interface"),
+              fmt::format("this machine has no network interface \"{}\"", c.outputs.udp.multicast_interface));
+    if (c.outputs.vmc.enabled && c.outputs.vmc.names == VmcNames::kMap && c.outputs.vmc.map_file.empty())
+      problem(where("outputs.vmc.map_file"), "outputs.vmc.names is \"map\" but no map file is given");
+    if (c.outputs.livelink.enabled && (c.outputs.livelink.subject_name.empty() || c.outputs.livelink.subject_name.size() > 255))
+      problem(where("outputs.livelink.subject_name"), "the subject name must be 1 to 255 bytes");
+    if (c.outputs.livelink.enabled && c.outputs.livelink.device_id.size() > 255)
+      problem(where("outputs.livelink.device_id"), "the device id must be at most 255 bytes");
     if (c.control.http.enabled) {
       const std::optional<bool> loopback = is_loopback_address(c.control.http.address);
       if (!loopback)
@@ -169,6 +183,15 @@ class Loader {
       problem(where("quality.head_held_bad"), "must not be below quality.head_held_degraded");
     if (q.residual_p95_bad_mm < q.residual_p95_degraded_mm)
       problem(where("quality.residual_p95_bad_mm"), "must not be below quality.residual_p95_degraded_mm");
+  }
+
+  // An enabled network output needs an address it can send to.
+  void check_network_output(std::string_view name, const NetworkOutput& output) {
+    if (!output.enabled) return;
+    unsigned char parsed[sizeof(in6_addr)];
+    if (inet_pton(AF_INET, output.address.c_str(), parsed) != 1 && inet_pton(AF_INET6, output.address.c_str(), parsed) != 1)
+      problem(where(fmt::format("outputs.{}.address", name)),
+              fmt::format("\"{}\" is not a numeric IPv4 or IPv6 address", output.address));
   }
 
   void problem(ErrorLocation where, std::string what) { problems_.emplace_back(std::move(what), std::move(where)); }

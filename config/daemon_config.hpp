@@ -66,9 +66,47 @@ struct RecordingSection {
   bool vertices = false;
   int64_t queue_frames = 0;
 };
+// What [outputs.vmc] calls the shapes it sends.
+enum class VmcNames : uint8_t { kArkit, kRig, kMap };
+inline constexpr EnumTable kVmcNames{std::array{
+    EnumEntry{VmcNames::kArkit, "arkit",
+              "the 52 ARKit names in PascalCase (\"perfect sync\": JawOpen, EyeBlinkLeft, ...), mapped from the rig's"},
+    EnumEntry{VmcNames::kRig, "rig", "the rig's own shape names"},
+    EnumEntry{VmcNames::kMap, "map", "the names outputs.vmc.map_file gives the rig's shapes"},
+}};
+
+// The keys every network output has.
+struct NetworkOutput {
+  bool enabled = false;
+  std::string address;
+  int64_t port = 0;
+  double max_rate_hz = 0.0;
+};
+
+struct UdpSection : NetworkOutput {
+  bool vertices = false;
+  int64_t multicast_ttl = 0;
+  std::string multicast_interface;
+};
+
+struct VmcSection : NetworkOutput {
+  VmcNames names = VmcNames::kArkit;
+  std::string map_file;
+  bool root_pose = false;
+  double root_scale = 0.0;
+};
+
+struct LiveLinkSection : NetworkOutput {
+  std::string subject_name;
+  std::string device_id;
+};
+
 struct OutputsSection {
   ShmSection shm;
   RecordingSection recording;
+  UdpSection udp;
+  VmcSection vmc;
+  LiveLinkSection livelink;
 };
 
 

@@ -173,6 +173,61 @@ const std::vector<KeySpec>& schema_rows() {
        .description = "How far the recorder may fall behind before frames are dropped (and counted) rather than "
                       "slowing the loop."},
 
+      {FACECAP_KEY(outputs.udp.enabled), .default_value = false,
+       .description = "Send every solved frame as facecap's own UDP stream (docs/udp-stream.md), which the client "
+                      "library and `facecap subscribe --udp` receive."},
+      {FACECAP_KEY(outputs.udp.address), .default_value = std::string("127.0.0.1"),
+       .description = "Where to send: a unicast address (this machine by default) or a multicast group "
+                      "(224.0.0.0 to 239.255.255.255, ff00::/8) for any number of receivers. A numeric IPv4 or IPv6 "
+                      "address."},
+      {FACECAP_KEY(outputs.udp.port), .default_value = int64_t{39540}, .min = 1, .max = 65535,
+       .description = "UDP port of the receivers."},
+      {FACECAP_KEY(outputs.udp.max_rate_hz), .default_value = 0.0, .unit = "Hz", .min = 0, .max = 2000,
+       .description = "Send at most this many frames a second (every 2nd, 3rd, ... solved frame); 0 sends every one."},
+      {FACECAP_KEY(outputs.udp.vertices), .default_value = false,
+       .description = "Send the solved vertex positions as well as the weights (a 6,706-vertex face adds 80 KB, 59 "
+                      "datagrams, a frame: 19 MB/s at 240 Hz)."},
+      {FACECAP_KEY(outputs.udp.multicast_ttl), .default_value = int64_t{1}, .min = 0, .max = 255,
+       .description = "Hops a multicast datagram may take: 1 stays on the local network."},
+      {FACECAP_KEY(outputs.udp.multicast_interface), .default_value = std::string(),
+       .description = "Network interface to send multicast on, by name (\"eth0\"); empty for the system's choice."},
+
+      {FACECAP_KEY(outputs.vmc.enabled), .default_value = false,
+       .description = "Send blendshape weights as OSC with the VMC protocol (docs/outputs.md): per frame one bundle "
+                      "of /VMC/Ext/Blend/Val for each shape, then /VMC/Ext/Blend/Apply."},
+      {FACECAP_KEY(outputs.vmc.address), .default_value = std::string("127.0.0.1"),
+       .description = "Address of the VMC receiver (the \"marionette\"): numeric IPv4 or IPv6."},
+      {FACECAP_KEY(outputs.vmc.port), .default_value = int64_t{39539}, .min = 1, .max = 65535,
+       .description = "UDP port of the receiver; 39539 is the VMC protocol's."},
+      {FACECAP_KEY(outputs.vmc.max_rate_hz), .default_value = 0.0, .unit = "Hz", .min = 0, .max = 2000,
+       .description = "Send at most this many frames a second (every 2nd, 3rd, ... solved frame); 0 sends every one."},
+      {FACECAP_CHOICE_KEY(outputs.vmc.names, kVmcNames), .default_value = std::string("arkit"),
+       .description = "What the shapes are called in /VMC/Ext/Blend/Val."},
+      {FACECAP_KEY(outputs.vmc.map_file), .default_value = std::string(), .names_input_file = true,
+       .description = "With names = \"map\": a TOML file whose [names] table maps rig shape names to the names "
+                      "to send (jawOpen = \"A\"); shapes it leaves out are not sent."},
+      {FACECAP_KEY(outputs.vmc.root_pose), .default_value = false,
+       .description = "Also send the solved head pose as /VMC/Ext/Root/Pos (Unity's left-handed axes)."},
+      {FACECAP_KEY(outputs.vmc.root_scale), .default_value = 0.01, .unit = "m per rig unit", .min = 0, .max = 1000,
+       .description = "Metres per rig unit of the head position in /VMC/Ext/Root/Pos (0.01 for a rig in "
+                      "centimetres such as ICT FaceKit)."},
+
+      {FACECAP_KEY(outputs.livelink.enabled), .default_value = false,
+       .description = "Send Unreal Live Link Face packets (version 6, as the Live Link Face iPhone app does; "
+                      "docs/outputs.md): the 52 ARKit weights and the head's yaw, pitch and roll."},
+      {FACECAP_KEY(outputs.livelink.address), .default_value = std::string("127.0.0.1"),
+       .description = "Address of the machine running Unreal (or another Live Link Face receiver): numeric IPv4 or "
+                      "IPv6."},
+      {FACECAP_KEY(outputs.livelink.port), .default_value = int64_t{11111}, .min = 1, .max = 65535,
+       .description = "UDP port Unreal's Live Link Face source listens on."},
+      {FACECAP_KEY(outputs.livelink.max_rate_hz), .default_value = 0.0, .unit = "Hz", .min = 0, .max = 2000,
+       .description = "Send at most this many frames a second (every 2nd, 3rd, ... solved frame); 0 sends every one."},
+      {FACECAP_KEY(outputs.livelink.subject_name), .default_value = std::string("facecap"),
+       .description = "The Live Link subject the face appears as in Unreal."},
+      {FACECAP_KEY(outputs.livelink.device_id), .default_value = std::string(),
+       .description = "Device id sent with every packet; empty: a UUID made from this machine's /etc/machine-id and "
+                      "the subject name, the same at every start."},
+
       {FACECAP_KEY(control.status_interval_s), .default_value = 1.0, .unit = "s", .min = 0.1, .max = 60,
        .reload = Reload::kLive,
        .description = "How often facecapd updates systemd's STATUS= line (rate, overruns, latency)."},
@@ -233,6 +288,10 @@ const SectionSpec kSections[] = {
     {"outputs.shm", "The shared-memory output renderers read (docs/shm-format.md)."},
     {"outputs.recording", "Recording what the daemon receives and solves (.fcrec, docs/recording-format.md). "
                           "Formerly [recording], which is still read, with a warning."},
+    {"outputs.udp", "facecap's own UDP stream: weights, head pose and optionally vertices, unicast or multicast "
+                    "(docs/udp-stream.md)."},
+    {"outputs.vmc", "OSC with the VMC protocol, for VTuber software and VMC receivers (docs/outputs.md)."},
+    {"outputs.livelink", "Unreal Live Link Face packets (docs/outputs.md)."},
     {"control", "Supervision by systemd and run control."},
     {"control.http", "The control API over HTTP/JSON and WebSocket (docs/control-api.md)."},
     {"quality", "The capture-quality state (good / degraded / bad) that STATUS, the log, the stats file and the "

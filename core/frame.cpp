@@ -13,6 +13,23 @@ MarkerFrame make_marker_frame(const std::vector<std::string>& labels) {
   return frame;
 }
 
+void copy_solved_frame(const SolvedFrame& from, SolvedFrame& to) noexcept {
+  to.frame_no = from.frame_no;
+  to.source_time_ns = from.source_time_ns;
+  to.receive_time_ns = from.receive_time_ns;
+  to.solve_start_ns = from.solve_start_ns;
+  to.solve_end_ns = from.solve_end_ns;
+  to.timecode = from.timecode;
+  to.head_rotation = from.head_rotation;
+  to.head_translation = from.head_translation;
+  if (to.weights.size() == from.weights.size()) to.weights = from.weights;
+  if (to.vertices.cols() > 0 && to.vertices.cols() == from.vertices.cols()) to.vertices = from.vertices;
+  to.stage_ns = from.stage_ns;
+  to.collision_constraints = from.collision_constraints;
+  to.markers_used = from.markers_used;
+  to.flags = from.flags;
+}
+
 std::string_view solve_stage_name(SolveStage stage) noexcept {
   switch (stage) {
     case SolveStage::kStabilise: return "stabilise";

@@ -120,4 +120,9 @@ struct SolvedFrame {
   }
 };
 
+// Copies `from` into `to`, whose storage was sized beforehand (resize) so that nothing is
+// allocated: the weights when the sizes match, the vertices only when `to` has room for
+// the same count (a copy made without vertices keeps none). RT-safe.
+void copy_solved_frame(const SolvedFrame& from, SolvedFrame& to) noexcept;
+
 }  // namespace facecap

@@ -439,8 +439,14 @@ void Daemon::shutdown(const std::string& reason) {
     try {
       sink->stop();
       const outputs::SinkHealth h = sink->health();
-      spdlog::info("output {} stopped: {} frames offered, {} delivered, {} dropped{}", sink->description(), h.offered,
-                   h.delivered, h.dropped, h.errors ? fmt::format(", {} errors", h.errors) : "");
+      std::string delivery;
+      if (const LatencyHistogram* d = sink->delivery_latency(); d && h.delivered > 0) {
+        const LatencyHistogram::Snapshot snapshot = d->snapshot();
+        delivery = fmt::format(", received -> sent p50 {:.2f} p99 {:.2f} ms", ms(snapshot.quantile_ns(0.5)),
+                               ms(snapshot.quantile_ns(0.99)));
+      }
+      spdlog::info("output {} stopped: {} frames offered, {} delivered, {} dropped{}{}", sink->description(), h.offered,
+                   h.delivered, h.dropped, h.errors ? fmt::format(", {} errors", h.errors) : "", delivery);
     } catch (const std::exception& e) {
       spdlog::error("output {}: {}", sink->description(), e.what());
     }
@@ -593,11 +599,16 @@ void Daemon::write_stats_file(const Figures& f) const {
     const outputs::OutputSink& sink = *loop_->sinks()[i];
     const outputs::SinkHealth h = sink.health();
     const LatencyHistogram::Snapshot offer = loop_->sink_timing(i).offer_ns.snapshot();
-    outputs[std::string(sink.name())] = {
+    nlohmann::json& out = outputs[std::string(sink.name())] = {
         {"description", sink.description()}, {"offered", h.offered}, {"delivered", h.delivered},
-        {"dropped", h.dropped}, {"errors", h.errors}, {"failed", h.failed},
+        {"dropped", h.dropped}, {"errors", h.errors}, {"failed", h.failed}, {"bytes", h.bytes},
         {"offer_us", {{"p50", double(offer.quantile_ns(0.5)) / kNsPerUs}, {"p99", double(offer.quantile_ns(0.99)) / kNsPerUs},
                       {"max", double(loop_->sink_timing(i).max_ns.load()) / kNsPerUs}}}};
+    // Sinks that deliver on their own thread: marker frame received -> delivered (sent).
+    if (const LatencyHistogram* delivery = sink.delivery_latency()) {
+      const LatencyHistogram::Snapshot d = delivery->snapshot();
+      out["delivery_ms"] = {{"p50", ms(d.quantile_ns(0.5))}, {"p99", ms(d.quantile_ns(0.99))}, {"max", ms(d.quantile_ns(1.0))}};
+    }
   }
   j["outputs"] = outputs;
   nlohmann::json stages;

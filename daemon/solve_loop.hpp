@@ -15,7 +15,7 @@
 #include "core/frame.hpp"
 #include "core/realtime.hpp"
 #include "core/rt/handoff.hpp"
-#include "daemon/latency_histogram.hpp"
+#include "core/latency_histogram.hpp"
 #include "drivers/api/marker_source.hpp"
 #include "outputs/api/sink.hpp"
 #include "pipeline/solve_pipeline.hpp"

@@ -1,6 +1,8 @@
 #include "formats/arkit.hpp"
 
+#include <algorithm>
 #include <cctype>
+#include <cmath>
 
 namespace facecap::formats {
 
@@ -108,6 +110,43 @@ std::array<std::vector<std::size_t>, kArkitShapeCount> match_arkit_to_rig(
     }
   }
   return out;
+}
+
+std::vector<std::string> arkit_names_of(std::span<const std::string> rig_shape_names) {
+  std::vector<std::string> out;
+  out.reserve(rig_shape_names.size());
+  for (const std::string& name : rig_shape_names) out.emplace_back(rig_to_arkit_name(name).value_or(""));
+  return out;
+}
+
+ArkitWeights::ArkitWeights(std::span<const std::string> rig_shape_names) : binding_(match_arkit_to_rig(rig_shape_names)) {}
+
+float mean_weight(std::span<const std::size_t> shapes, std::span<const float> rig_weights) noexcept {
+  if (shapes.empty()) return 0.0f;
+  double sum = 0.0;
+  for (const std::size_t s : shapes) sum += s < rig_weights.size() ? double(rig_weights[s]) : 0.0;
+  return float(sum / double(shapes.size()));
+}
+
+float ArkitWeights::weight(std::size_t arkit_index, std::span<const float> rig_weights) const noexcept {
+  return mean_weight(binding_[arkit_index], rig_weights);
+}
+
+void ArkitWeights::map(std::span<const float> rig_weights, std::span<float, kArkitShapeCount> out) const noexcept {
+  for (std::size_t a = 0; a < kArkitShapeCount; ++a) out[a] = weight(a, rig_weights);
+}
+
+std::size_t ArkitWeights::realised() const noexcept {
+  std::size_t n = 0;
+  for (const auto& shapes : binding_) n += shapes.empty() ? 0 : 1;
+  return n;
+}
+
+std::array<float, 3> head_yaw_pitch_roll(const Eigen::Quaterniond& head_rotation) noexcept {
+  // R = Ry Rx Rz has R(1,2) = -sin(pitch), R(0,2) / R(2,2) = tan(yaw), R(1,0) / R(1,1) = tan(roll).
+  const Eigen::Matrix3d r = head_rotation.normalized().toRotationMatrix();
+  const double pitch = std::asin(std::clamp(-r(1, 2), -1.0, 1.0));
+  return {float(std::atan2(r(0, 2), r(2, 2))), float(pitch), float(std::atan2(r(1, 0), r(1, 1)))};
 }
 
 }  // namespace facecap::formats

@@ -9,6 +9,8 @@
 #include <string_view>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 namespace facecap::formats {
 
 inline constexpr std::size_t kArkitShapeCount = 52;
@@ -40,5 +42,36 @@ std::optional<std::string_view> rig_to_arkit_name(std::string_view rig_name) noe
 // the shape of the same rig name, else its _L and _R halves (the ICT face splits
 // browInnerUp and cheekPuff). Empty when the rig has neither (ICT lacks tongueOut).
 std::array<std::vector<std::size_t>, kArkitShapeCount> match_arkit_to_rig(std::span<const std::string> rig_shape_names);
+
+// For each rig shape, its ARKit name ("EyeBlinkLeft" for eyeBlink_L), or "" when ARKit has
+// no shape of that name (the ICT face's browInnerUp_L is half of BrowInnerUp).
+std::vector<std::string> arkit_names_of(std::span<const std::string> rig_shape_names);
+
+// The mean of the weights of `shapes` (indices into rig_weights), 0 for none: one value
+// from the rig shapes that realise it. RT-safe.
+float mean_weight(std::span<const std::size_t> shapes, std::span<const float> rig_weights) noexcept;
+
+// The 52 ARKit weights of a solved frame: per ARKit shape, the mean of the rig weights
+// that realise it (match_arkit_to_rig), 0 for a shape the rig lacks. What facecap solve
+// writes to Live Link Face CSV and the Live Link and VMC outputs send.
+class ArkitWeights {
+ public:
+  // Not RT-safe.
+  explicit ArkitWeights(std::span<const std::string> rig_shape_names);
+  // out[a] for ARKit shape a (kArkitShapes order) from the rig's weights (rig shape
+  // order, as many as the rig has shapes). RT-safe.
+  void map(std::span<const float> rig_weights, std::span<float, kArkitShapeCount> out) const noexcept;
+  float weight(std::size_t arkit_index, std::span<const float> rig_weights) const noexcept;
+  // How many of the 52 the rig realises.
+  std::size_t realised() const noexcept;
+
+ private:
+  std::array<std::vector<std::size_t>, kArkitShapeCount> binding_;
+};
+
+// The head's yaw (about the rig's Y axis, up), pitch (about X) and roll (about Z, the
+// direction the face looks), in radians, of R = Ry(yaw) Rx(pitch) Rz(roll): the first
+// three of kLiveLinkAngleNames. Pitch is within [-pi/2, pi/2]. RT-safe.
+std::array<float, 3> head_yaw_pitch_roll(const Eigen::Quaterniond& head_rotation) noexcept;
 
 }  // namespace facecap::formats

@@ -3,6 +3,7 @@
 // format (C3D, recordings). Every read checks the buffer end, so a parser built on
 // ByteReader cannot read out of bounds on any input; failures throw Error naming the
 // source and the byte offset.
+#include <algorithm>
 #include <bit>
 #include <cstdint>
 #include <cstring>
@@ -74,11 +75,11 @@ class ByteReader {
   RealFormat reals_;
 };
 
-// Appends little-endian values to a byte vector (the byte order of our own formats and
-// of the C3D files we write).
+// Appends values to a byte vector, little-endian (our own formats, the C3D files we
+// write) unless told big-endian (network formats: Live Link, OSC).
 class ByteWriter {
  public:
-  explicit ByteWriter(std::vector<char>& out) : out_(out) {}
+  explicit ByteWriter(std::vector<char>& out, ByteOrder order = ByteOrder::kLittle) : out_(out), order_(order) {}
   std::size_t size() const noexcept { return out_.size(); }
   void u8(uint8_t v) { out_.push_back(static_cast<char>(v)); }
   void i8(int8_t v) { u8(static_cast<uint8_t>(v)); }
@@ -92,21 +93,30 @@ class ByteWriter {
   void f64(double v) { put(v); }
   void bytes(std::string_view s) { out_.insert(out_.end(), s.begin(), s.end()); }
   void zeros(std::size_t count) { out_.insert(out_.end(), count, '\0'); }
-  // Overwrites a value written earlier (sizes and offsets known only later).
+  // Overwrites a value written earlier (sizes and offsets known only later, or a value
+  // slot of a packet encoded once and refreshed per frame). RT-safe.
   template <typename T>
   void patch(std::size_t offset, T value) noexcept {
-    std::memcpy(out_.data() + offset, &value, sizeof(T));
+    store(out_.data() + offset, value);
   }
 
  private:
   template <typename T>
   void put(T v) {
-    static_assert(std::endian::native == std::endian::little, "facecap assumes a little-endian host");
     const auto at = out_.size();
     out_.resize(at + sizeof(T));
-    std::memcpy(out_.data() + at, &v, sizeof(T));
+    store(out_.data() + at, v);
+  }
+  template <typename T>
+  void store(char* at, T v) const noexcept {
+    static_assert(std::endian::native == std::endian::little, "facecap assumes a little-endian host");
+    char bytes[sizeof(T)];
+    std::memcpy(bytes, &v, sizeof(T));
+    if (order_ == ByteOrder::kBig) std::reverse(bytes, bytes + sizeof(T));
+    std::memcpy(at, bytes, sizeof(T));
   }
   std::vector<char>& out_;
+  ByteOrder order_;
 };
 
 }  // namespace facecap::formats

@@ -18,6 +18,7 @@
 #include "formats/livelinkface.hpp"
 #include "formats/recording.hpp"
 #include "formats/trc.hpp"
+#include "formats/udp_stream.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/gltf_rig.hpp"
 #include "solver/obj_mesh.hpp"
@@ -118,6 +119,34 @@ align::Calibration small_calibration(const Rig& rig) {
   return c;
 }
 
+// The udp_stream_reassembly target's input: datagrams, each a little-endian u16 length
+// and its bytes. A schema, then a frame of a small rig with vertices (several chunks).
+void write_udp_stream(const fs::path& dir) {
+  const Rig rig = small_rig();
+  udp_stream::StreamSchema schema{.rig_hash = 0x1234, .rig_name = rig.name, .shape_names = rig.shape_names,
+                                  .arkit_names = {"JawOpen", "EyeBlinkLeft"}, .vertex_count = 400,
+                                  .frame_rate_hz = 240.0};
+  std::vector<char> message;
+  const uint32_t schema_id = udp_stream::encode_schema(schema, 0, message);
+  std::string stream;
+  const auto append = [&](const std::vector<std::vector<char>>& datagrams) {
+    for (const auto& d : datagrams) {
+      stream += char(d.size() & 0xff);
+      stream += char(d.size() >> 8);
+      stream.append(d.data(), d.size());
+    }
+  };
+  append(udp_stream::datagrams(udp::kSchemaMessage, 7, 0, message));
+  write(dir / "schema.bin", stream);
+  SolvedFrame frame;
+  frame.resize(2, 400);
+  frame.weights << 0.25f, 0.75f;
+  frame.vertices.setConstant(1.5f);
+  udp_stream::encode_frame(frame, {.schema_id = schema_id, .rig_hash = 0x1234, .publish_time_ns = 1000}, true, message);
+  append(udp_stream::datagrams(udp::kFrameMessage, 7, 1, message));
+  write(dir / "schema_and_frame.bin", stream);
+}
+
 void write_dictionaries(const fs::path& dir) {
   std::string llf;
   for (const auto& shape : kArkitShapes) llf += fmt::format("\"{}\"\n", shape.arkit);
@@ -178,6 +207,7 @@ int main(int argc, char** argv) {
     const auto checksum_at = profile.find("checksum = ");
     write(out / "calibration_profile/unchecked.toml",
           profile.substr(0, checksum_at) + profile.substr(profile.find('\n', checksum_at) + 1));
+    write_udp_stream(out / "udp_stream_reassembly");
     // Control API requests (the target's token is "s3cret" for inputs of odd length).
     write(out / "control_request/status.http", "GET /status HTTP/1.1\r\nHost: x\r\n\r\n");
     write(out / "control_request/stream.http",

@@ -19,6 +19,7 @@ packages=(
   catch2 libbenchmark-dev
   clang libclang-rt-dev  # scripts/fuzz: libFuzzer with ASan and UBSan
   systemd  # systemd-analyze: the test that checks systemd/facecapd.service
+  liblo-tools  # oscdump: the tests decode facecapd's VMC output with liblo
   prometheus wrk  # promtool checks /metrics in the tests; wrk drives scripts/control_load.sh
 )
 
@@ -49,7 +50,12 @@ case "$mode" in
     exec "$build_dir/tools/facecap" daemon-demo "$@"
     ;;
   test)
+    # Node.js and npm for the tests' npm peers (tests/peers: the osc package that decodes
+    # the VMC output); a Node.js installed otherwise is used as it is.
+    command -v node >/dev/null || packages+=(nodejs)
+    command -v npm >/dev/null || packages+=(npm)
     install_packages
+    (cd "$here/tests/peers" && npm ci --no-audit --no-fund --loglevel=error)
     build
     cd "$build_dir"
     exec ctest --output-on-failure --parallel "$(nproc)" "$@"

@@ -13,7 +13,7 @@
 #include "core/log.hpp"
 #include "core/time.hpp"
 #include "daemon/daemon.hpp"
-#include "daemon/latency_histogram.hpp"
+#include "core/latency_histogram.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"

@@ -10,10 +10,16 @@
 #include "config/schema.hpp"
 #include "control/stream_sink.hpp"
 #include "core/time.hpp"
+#include "daemon/io_thread.hpp"
 #include "daemon/solve_loop.hpp"
+#include "formats/arkit.hpp"
+#include "outputs/livelink/livelink_protocol.hpp"
+#include "outputs/net/net_sink.hpp"
 #include "outputs/recording/recorder.hpp"
 #include "outputs/recording/take_recorder.hpp"
 #include "outputs/shm/shm_sink.hpp"
+#include "outputs/udp/udp_stream_protocol.hpp"
+#include "outputs/vmc/vmc_protocol.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/recording_header.hpp"
 #include "pipeline/settings.hpp"
@@ -73,7 +79,7 @@ TEST_CASE("the counter sees allocations by new and by malloc") {
   std::free(q);
 }
 
-TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, shm, recorder and solver swap") {
+TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, every output and solver swap") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
   const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
@@ -90,12 +96,33 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, s
   r.header = pipeline::make_recording_header(*rig, calibration, source, "test", 120.0, "");
   r.vertices = true;
   outputs::Recorder recorder(r, rig->vertex_count());
+  // The network outputs, sending to loopback ports nobody listens on: their send errors
+  // happen on the I/O thread, which may allocate; the solve thread only queues and wakes.
+  IoThread io;
+  io.start();
+  constexpr uint16_t kDiscardPort = 9;
+  auto net_spec = [&](uint16_t port, bool vertices) {
+    outputs::NetSinkSpec spec;
+    spec.destination = {"127.0.0.1", port};
+    spec.shape_count = Eigen::Index(rig->shape_count());
+    spec.vertex_count = vertices ? Eigen::Index(rig->vertex_count()) : 0;
+    spec.periodic_interval_ns = kNsPerSecond;
+    return spec;
+  };
+  formats::udp_stream::StreamSchema schema;
+  schema.shape_names = rig->shape_names;
+  schema.vertex_count = uint32_t(rig->vertex_count());
+  outputs::NetSink udp(io.context(), net_spec(kDiscardPort, true), std::make_unique<outputs::UdpStreamProtocol>(schema, true));
+  outputs::NetSink vmc(io.context(), net_spec(kDiscardPort, false),
+                       std::make_unique<outputs::VmcProtocol>(outputs::arkit_vmc_shapes(rig->shape_names), outputs::VmcRootPose{true, 0.01}));
+  outputs::NetSink livelink(io.context(), net_spec(kDiscardPort, false),
+                            std::make_unique<outputs::LiveLinkProtocol>(outputs::LiveLinkSpec{"", "facecap", rig->shape_names, 120.0}));
   LoopOptions options;
   options.realtime.fifo = false;
   options.prefetch_lead_ns = 800'000;
   const pipeline::SolveSettings settings = pipeline::solve_settings(c);
   SolveLoop loop(options, sim, std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, settings),
-                 {&shm, &recorder});
+                 {&shm, &recorder, &udp, &vmc, &livelink});
   sim.start({.epoch_ns = monotonic_now_ns()});
 
   const Counted first = run_ticks(loop, 120, loop.period_ns());
@@ -114,6 +141,12 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, s
   sim.stop();
   recorder.stop();
   CHECK(recorder.counters().marker_frames + recorder.counters().dropped == 180);
+  for (outputs::NetSink* sink : {&udp, &vmc, &livelink}) {
+    sink->stop();
+    INFO(sink->name());
+    CHECK(sink->health().offered == 180);
+    CHECK(sink->health().delivered + sink->health().dropped == 180);
+  }
 }
 
 TEST_CASE("a tick pulling from a replay allocates nothing") {

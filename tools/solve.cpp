@@ -94,7 +94,7 @@ void run_solve(const Options& o) {
                                          solve.mapper().stable_markers_found(), cal.stable_markers.size()));
   const std::string method(solve.method());
 
-  const auto arkit = formats::match_arkit_to_rig(rig.shape_names);
+  const formats::ArkitWeights arkit(rig.shape_names);
   formats::FaceTake face;
   face.rate_hz = take.rate_hz;
   std::unique_ptr<formats::RecordingWriter> recording;
@@ -114,21 +114,13 @@ void run_solve(const Options& o) {
     held_head += (solved.flags & kSolvedHeadPoseHeld) != 0;
     held_face += (solved.flags & kSolvedTooFewMarkers) != 0;
     if (csv) {
-      const Eigen::Vector3d euler = solved.head_rotation.toRotationMatrix().eulerAngles(1, 0, 2);  // yaw (Y), pitch (X), roll (Z)
-      auto wrap = [](double a) { return a > std::numbers::pi / 2 ? a - std::numbers::pi : a < -std::numbers::pi / 2 ? a + std::numbers::pi : a; };
       formats::FaceFrame out;
       out.source_time_ns = frame.source_time_ns;
       out.timecode = frame.timecode.valid() ? frame.timecode : timecode_at(frame.source_time_ns);
-      const Eigen::VectorXd& weights = solve.result().weights;
-      for (std::size_t a = 0; a < formats::kArkitShapeCount; ++a) {
-        double w = 0;
-        for (std::size_t s : arkit[a]) w += weights[Eigen::Index(s)];
-        out.weights[a] = arkit[a].empty() ? 0.0f : float(w / double(arkit[a].size()));
-      }
+      arkit.map(std::span<const float>(solved.weights.data(), std::size_t(solved.weights.size())), out.weights);
       out.angles = {};
-      out.angles[0] = float(wrap(euler[0]));
-      out.angles[1] = float(wrap(euler[1]));
-      out.angles[2] = float(wrap(euler[2]));
+      const std::array<float, 3> head = formats::head_yaw_pitch_roll(solved.head_rotation);
+      std::copy(head.begin(), head.end(), out.angles.begin());
       face.frames.push_back(out);
     } else {
       recording->append_marker_frame(frame);
@@ -143,8 +135,7 @@ void run_solve(const Options& o) {
   } else {
     recording->close();
   }
-  std::size_t mapped_shapes = 0;
-  for (const auto& a : arkit) mapped_shapes += !a.empty();
+  const std::size_t mapped_shapes = arkit.realised();
   fmt::print("{} -> {}: {} frames with {} ({}; {} of 52 ARKit shapes on the rig); head pose held in {}, face held in {}{}\n",
              o.take, o.output, take.frames.size(), method, settings.origin, mapped_shapes, held_head, held_face,
              o.check_labels ? fmt::format(", {} markers relabelled", relabelled) : std::string());

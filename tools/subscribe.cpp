@@ -27,6 +27,13 @@ int64_t percentile(std::vector<int64_t>& values, double q) {
 }
 
 client::Subscriber open_with_retry(const SubscriptionOptions& options) {
+  if (!options.udp_address.empty()) {
+    try {
+      return client::Subscriber::udp(options.udp_address, options.udp_interface);
+    } catch (const std::runtime_error& e) {
+      throw Error(e.what());
+    }
+  }
   const int64_t give_up = monotonic_now_ns() + int64_t(options.open_timeout_s * kNsPerSecond);
   for (;;) {
     try {
@@ -55,9 +62,17 @@ std::string busiest_shapes(const client::Subscriber& sub, const std::vector<floa
 
 SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
   client::Subscriber sub = open_with_retry(options);
-  if (!options.json)
-    fmt::print("shm {}: rig {}, {} shapes, {} vertices, writer pid {}, {:g} Hz\n", options.shm_name, sub.rig_name(),
-               sub.shape_count(), sub.vertex_count(), sub.writer_pid(), sub.nominal_rate_hz());
+  const bool udp = !options.udp_address.empty();
+  auto describe_writer = [&] {
+    if (options.json) return;
+    if (udp)
+      fmt::print("udp {}: rig {}, {} shapes, {} vertices, {:g} Hz\n", options.udp_address, sub.rig_name(), sub.shape_count(),
+                 sub.vertex_count(), sub.nominal_rate_hz());
+    else
+      fmt::print("shm {}: rig {}, {} shapes, {} vertices, writer pid {}, {:g} Hz\n", options.shm_name, sub.rig_name(),
+                 sub.shape_count(), sub.vertex_count(), sub.writer_pid(), sub.nominal_rate_hz());
+  };
+  if (!udp) describe_writer();  // over UDP the shapes come with the first schema
   SubscriptionSummary summary;
   std::vector<int64_t> window_latency, all_latency;
   std::vector<float> last_weights;
@@ -79,12 +94,12 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
       last_weights.assign(frame.weights, frame.weights + frame.shape_count);
       if (options.on_frame) options.on_frame(frame);
     } else if (status == FACECAP_RESTARTED) {
-      if (!options.json) fmt::print("writer restarted: now pid {}, {} shapes\n", sub.writer_pid(), sub.shape_count());
+      describe_writer();
     } else if (status == FACECAP_ERR_WRITER_GONE) {
       if (!options.json) fmt::print("writer stopped\n");
       break;
     } else if (status != FACECAP_NO_FRAME) {
-      throw Error(fmt::format("reading shm {}: {}", options.shm_name, facecap_status_string(status)));
+      throw Error(fmt::format("reading {}: {}", udp ? options.udp_address : options.shm_name, facecap_status_string(status)));
     }
     if (now - window_start >= kNsPerSecond) {
       const double seconds = double(now - window_start) / kNsPerSecond;
@@ -93,7 +108,8 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
       const double p99 = double(percentile(window_latency, 0.99)) / kNsPerMs;
       if (options.json) {
         nlohmann::json j = {{"t", double(now - start) / kNsPerSecond}, {"fps", fps}, {"latency_p50_ms", p50},
-                            {"latency_p99_ms", p99}, {"dropped", window_dropped}, {"frame_no", frame.frame_no}};
+                            {"latency_p99_ms", p99}, {"dropped", window_dropped}, {"frame_no", frame.frame_no},
+                            {"incomplete", sub.incomplete_frames()}};
         fmt::print("{}\n", j.dump());
       } else {
         fmt::print("{:5.1f} s  {:6.1f} fps  publish->read p50 {:.3f} ms p99 {:.3f} ms  dropped {}  frame {}{}{}\n",
@@ -110,23 +126,31 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
   summary.seconds = double(monotonic_now_ns() - start) / kNsPerSecond;
   summary.latency_p50_ns = percentile(all_latency, 0.5);
   summary.latency_p99_ns = percentile(all_latency, 0.99);
+  summary.incomplete = sub.incomplete_frames();
   return summary;
 }
 
 void add_subscribe_command(CLI::App& app, int& exit_code) {
   auto opts = std::make_shared<SubscriptionOptions>();
-  auto* cmd = app.add_subcommand("subscribe", "Read facecapd's shared memory and print frame rate, latency and drops");
-  cmd->add_option("--shm", opts->shm_name, "Shared-memory name (outputs.shm.name)")->required();
+  auto* cmd = app.add_subcommand("subscribe", "Read facecapd's shared memory or UDP stream and print frame rate, latency and drops");
+  auto* shm = cmd->add_option("--shm", opts->shm_name, "Shared-memory name (outputs.shm.name)");
+  auto* udp = cmd->add_option("--udp", opts->udp_address,
+                              "Receive the UDP stream on ADDRESS:PORT (outputs.udp: 127.0.0.1:39540, 0.0.0.0:PORT, or a "
+                              "multicast group)");
+  shm->excludes(udp);
+  cmd->add_option("--interface", opts->udp_interface, "With --udp and a multicast group: the interface to join it on")->needs(udp);
   cmd->add_option("--seconds", opts->seconds, "Stop after this long (0: until the writer stops or Ctrl-C)");
   cmd->add_option("--open-timeout", opts->open_timeout_s, "Seconds to keep trying to open while facecapd starts");
   cmd->add_flag("--json", opts->json, "One JSON object per second");
   cmd->callback([opts, &exit_code] {
+    if (opts->shm_name.empty() && opts->udp_address.empty()) throw CLI::RequiredError("--shm or --udp");
     std::signal(SIGINT, [](int) { interrupted.store(true); });
     const SubscriptionSummary s = run_subscription(*opts);
     if (!opts->json)
-      fmt::print("{} frames in {:.1f} s ({:.1f} fps), publish->read p50 {:.3f} ms p99 {:.3f} ms, {} dropped\n", s.frames,
+      fmt::print("{} frames in {:.1f} s ({:.1f} fps), publish->read p50 {:.3f} ms p99 {:.3f} ms, {} dropped{}\n", s.frames,
                  s.seconds, s.seconds > 0 ? double(s.frames) / s.seconds : 0.0, double(s.latency_p50_ns) / kNsPerMs,
-                 double(s.latency_p99_ns) / kNsPerMs, s.dropped);
+                 double(s.latency_p99_ns) / kNsPerMs, s.dropped,
+                 opts->udp_address.empty() ? "" : fmt::format(", {} incomplete", s.incomplete));
     exit_code = s.frames > 0 ? 0 : 1;
   });
 }

@@ -13,6 +13,7 @@
 #include <string_view>
 
 #include "core/frame.hpp"
+#include "core/latency_histogram.hpp"
 
 namespace facecap::outputs {
 
@@ -22,6 +23,7 @@ struct SinkHealth {
   uint64_t delivered = 0;  // frames that reached the destination (published, written, sent)
   uint64_t dropped = 0;    // frames offered but not delivered (queue full, write failed after queuing)
   uint64_t errors = 0;     // failures of the destination (disk full, socket errors)
+  uint64_t bytes = 0;      // bytes sent (network outputs; 0 where not counted)
   bool failed = false;     // the sink gave up after an error (a stopped recording); the loop goes on
 };
 
@@ -48,6 +50,10 @@ class OutputSink {
 
   // Safe from any thread. RT-safe.
   virtual SinkHealth health() const noexcept = 0;
+  // For a sink that delivers on its own thread: from a frame's arrival at facecapd
+  // (MarkerFrame::receive_time_ns) to its delivery (the last datagram sent), per frame
+  // delivered; nullptr for a sink whose delivery the loop's own latency covers. Any thread.
+  virtual const LatencyHistogram* delivery_latency() const noexcept { return nullptr; }
   // Delivers what is queued, closes, joins its thread. Idempotent. Not RT-safe; throws
   // Error when what was queued could not be delivered (the recording's last write).
   virtual void stop() = 0;

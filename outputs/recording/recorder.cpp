@@ -16,25 +16,6 @@ constexpr int64_t kPollNs = 2 * kNsPerMs;
 // Buffered chunks reach the kernel at least this often, bounding what a crash loses.
 constexpr int64_t kFlushIntervalNs = kNsPerSecond;
 
-// Everything, the vertices only when `to` has room for them, into storage of the same
-// sizes. RT-safe.
-void copy_solved(const SolvedFrame& from, SolvedFrame& to) noexcept {
-  to.frame_no = from.frame_no;
-  to.source_time_ns = from.source_time_ns;
-  to.receive_time_ns = from.receive_time_ns;
-  to.solve_start_ns = from.solve_start_ns;
-  to.solve_end_ns = from.solve_end_ns;
-  to.timecode = from.timecode;
-  to.head_rotation = from.head_rotation;
-  to.head_translation = from.head_translation;
-  if (to.weights.size() == from.weights.size()) to.weights = from.weights;
-  if (to.vertices.cols() > 0 && to.vertices.cols() == from.vertices.cols()) to.vertices = from.vertices;
-  to.stage_ns = from.stage_ns;
-  to.collision_constraints = from.collision_constraints;
-  to.markers_used = from.markers_used;
-  to.flags = from.flags;
-}
-
 SolvedFrame sized_frame(Eigen::Index shape_count, Eigen::Index vertex_count) {
   SolvedFrame frame;
   frame.resize(shape_count, vertex_count);
@@ -78,7 +59,7 @@ void Recorder::offer(const MarkerFrame& markers, const SolvedFrame& solved) noex
   slot->has_markers = options_.markers;
   slot->has_solved = options_.solved;
   if (options_.markers) slot->markers = markers;
-  if (options_.solved) copy_solved(solved, slot->solved);
+  if (options_.solved) copy_solved_frame(solved, slot->solved);
   queue_.commit_push();
 }
 

@@ -111,6 +111,7 @@ ShmWriter::ShmWriter(const ShmOutputSpec& spec) : name_(shm_object_name(spec.nam
   header_->slot_weights_offset = geometry.slot_weights_offset;
   header_->slot_vertices_offset = geometry.slot_vertices_offset;
   header_->shape_names_offset = geometry.shape_names_offset;
+  header_->arkit_names_offset = geometry.arkit_names_offset;
   header_->slots_offset = geometry.slots_offset;
   header_->writer_pid = ::getpid();
   header_->writer_generation = (uint64_t(std::random_device{}()) << 32) ^ std::random_device{}() ^ uint64_t(monotonic_now_ns());
@@ -122,6 +123,8 @@ ShmWriter::ShmWriter(const ShmOutputSpec& spec) : name_(shm_object_name(spec.nam
   for (uint32_t i = 0; i < shape_count; ++i) {
     char* text = reinterpret_cast<char*>(base_ + geometry.shape_names_offset + uint64_t(i) * kShapeNameBytes);
     std::snprintf(text, kShapeNameBytes, "%s", spec.shape_names[i].c_str());
+    char* arkit = reinterpret_cast<char*>(base_ + geometry.arkit_names_offset + uint64_t(i) * kShapeNameBytes);
+    std::snprintf(arkit, kShapeNameBytes, "%s", i < spec.arkit_names.size() ? spec.arkit_names[i].c_str() : "");
   }
   for (uint32_t s = 0; s < spec.slot_count; ++s) new (base_ + geometry.slots_offset + uint64_t(s) * geometry.slot_bytes) SlotHeader{};
   // Last: a reader that sees the magic sees every field above.

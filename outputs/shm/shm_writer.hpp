@@ -17,6 +17,7 @@ namespace facecap::outputs {
 struct ShmOutputSpec {
   std::string name;                      // "facecap" or "/facecap"
   std::vector<std::string> shape_names;  // M
+  std::vector<std::string> arkit_names;  // parallel to shape_names, "" where none (formats::arkit_names_of)
   uint32_t vertex_count = 0;             // N, 0 to publish weights only
   uint32_t slot_count = 8;
   double nominal_rate_hz = 0.0;

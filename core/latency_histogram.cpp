@@ -1,6 +1,6 @@
-#include "daemon/latency_histogram.hpp"
+#include "core/latency_histogram.hpp"
 
-namespace facecap::daemon {
+namespace facecap {
 
 std::size_t LatencyHistogram::bucket_of(int64_t ns) noexcept {
   const int64_t us = ns < 0 ? 0 : ns / 1000;
@@ -54,4 +54,4 @@ LatencyHistogram::Snapshot LatencyHistogram::Snapshot::since(const Snapshot& ear
   return d;
 }
 
-}  // namespace facecap::daemon
+}  // namespace facecap

@@ -6,7 +6,7 @@
 #include <atomic>
 #include <cstdint>
 
-namespace facecap::daemon {
+namespace facecap {
 
 class LatencyHistogram {
  public:
@@ -35,4 +35,4 @@ class LatencyHistogram {
   std::array<std::atomic<uint64_t>, kBucketCount> counts_{};
 };
 
-}  // namespace facecap::daemon
+}  // namespace facecap
