@@ -34,7 +34,8 @@ set(modules
   "outputs/vmc|outputs/net,outputs/api,formats,core"
   "outputs/livelink|outputs/net,outputs/api,formats,core"
   "outputs|outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,config,drivers/api,solver/params.hpp,client,formats,core"
-  "daemon|pipeline,outputs,outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,drivers,drivers/api,drivers/sim,drivers/replay,drivers/natnet,drivers/device,drivers/usb,drivers/hid,drivers/v4l2,config,solver,solver/params.hpp,formats,client,core"
+  "control|outputs/api,formats,core"
+  "daemon|control,pipeline,outputs,outputs/api,outputs/shm,outputs/recording,outputs/net,outputs/udp,outputs/vmc,outputs/livelink,drivers,drivers/api,drivers/sim,drivers/replay,drivers/natnet,drivers/device,drivers/usb,drivers/hid,drivers/v4l2,config,solver,solver/params.hpp,formats,client,core"
 )
 
 if(NOT SOURCE_DIR)

@@ -9,6 +9,7 @@
 #include <arpa/inet.h>
 #include <fmt/format.h>
 #include <net/if.h>
+#include <netinet/in.h>
 #include <toml++/toml.h>
 
 #include "client/facecap_shm_layout.hpp"
@@ -58,6 +59,15 @@ const std::set<std::string, std::less<>>& section_paths() {
     return out;
   }();
   return sections;
+}
+
+// Whether an IP address literal is loopback (127.0.0.0/8, ::1); nullopt when it is not one.
+std::optional<bool> is_loopback_address(const std::string& address) {
+  in_addr v4{};
+  if (inet_pton(AF_INET, address.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+  in6_addr v6{};
+  if (inet_pton(AF_INET6, address.c_str(), &v6) == 1) return IN6_IS_ADDR_LOOPBACK(&v6) != 0;
+  return std::nullopt;
 }
 
 std::size_t edit_distance(std::string_view a, std::string_view b) {
@@ -177,6 +187,23 @@ class Loader {
       problem(where("outputs.livelink.subject_name"), "the subject name must be 1 to 255 bytes");
     if (c.outputs.livelink.enabled && c.outputs.livelink.device_id.size() > 255)
       problem(where("outputs.livelink.device_id"), "the device id must be at most 255 bytes");
+    if (c.control.http.enabled) {
+      const std::optional<bool> loopback = is_loopback_address(c.control.http.address);
+      if (!loopback)
+        problem(where("control.http.address"),
+                fmt::format("\"{}\" is not an IPv4 or IPv6 address", c.control.http.address));
+      else if (!*loopback && c.control.http.token_file.empty())
+        problem(where("control.http.token_file"),
+                fmt::format("the control API listens on {}, which is not loopback: a bearer token is required "
+                            "(set control.http.token_file)", c.control.http.address));
+    }
+    const QualitySection& q = c.quality;
+    if (q.markers_used_bad > q.markers_used_degraded)
+      problem(where("quality.markers_used_bad"), "must not be above quality.markers_used_degraded");
+    if (q.head_held_bad < q.head_held_degraded)
+      problem(where("quality.head_held_bad"), "must not be below quality.head_held_degraded");
+    if (q.residual_p95_bad_mm < q.residual_p95_degraded_mm)
+      problem(where("quality.residual_p95_bad_mm"), "must not be below quality.residual_p95_degraded_mm");
   }
 
   // An enabled network output needs an address it can send to.

@@ -28,6 +28,7 @@ struct RigSection {
 
 struct CalibrationSection {
   std::string file;
+  std::string profiles_directory;
   int64_t face_markers = 0;
   int64_t head_markers = 0;
   bool stabilise_head = true;
@@ -111,9 +112,27 @@ struct OutputsSection {
 };
 
 
+struct HttpSection {
+  bool enabled = false;
+  std::string address;
+  int64_t port = 0;
+  std::string token_file;
+};
+
 struct ControlSection {
   double status_interval_s = 0.0;
   double run_seconds = 0.0;
+  HttpSection http;
+};
+
+// The capture-quality state's thresholds (good / degraded / bad), per status window.
+struct QualitySection {
+  double markers_used_degraded = 0.0;  // fractions of the calibration's face markers
+  double markers_used_bad = 0.0;
+  double head_held_degraded = 0.0;     // fractions of the solved frames
+  double head_held_bad = 0.0;
+  double residual_p95_degraded_mm = 0.0;
+  double residual_p95_bad_mm = 0.0;
 };
 
 struct LoggingSection {
@@ -131,6 +150,7 @@ struct DaemonConfig {
   LoopSection loop;
   OutputsSection outputs;
   ControlSection control;
+  QualitySection quality;
   LoggingSection logging;
 };
 

@@ -181,6 +181,10 @@ const std::vector<KeySpec>& schema_rows() {
                       "hand-written file naming which rig point each marker sits on, the head markers, and the "
                       "transform from marker space to rig space. Empty: the default marker set, in rig space, which "
                       "the sim produces."},
+      {FACECAP_KEY(calibration.profiles_directory), .default_value = std::string("profiles"),
+       .description = "Where actor profiles live (relative to the working directory; the systemd unit runs in "
+                      "/var/lib/facecap): the control API lists them (GET /actors), loads one by name (POST /actor) "
+                      "and saves a calibration made on the box there (POST /calibrate with \"save\")."},
       {FACECAP_KEY(calibration.face_markers), .default_value = int64_t{48}, .min = 3, .max = 1000,
        .description = "Face markers of the default marker set, spread evenly over the rig (labels M000, M001, ...)."},
       {FACECAP_KEY(calibration.head_markers), .default_value = int64_t{4}, .min = 0, .max = 16,
@@ -336,6 +340,36 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(control.run_seconds), .default_value = 0.0, .unit = "s", .min = 0, .max = 1e7,
        .description = "Stop cleanly after this long (benchmarks, tests); 0 runs until stopped."},
 
+      {FACECAP_KEY(control.http.enabled), .default_value = false,
+       .description = "Serve the control API (docs/control-api.md): status, Prometheus metrics, actors, calibration "
+                      "and takes over HTTP/JSON, and a WebSocket stream of solved frames; `facecap ctl` drives it."},
+      {FACECAP_KEY(control.http.address), .default_value = std::string("127.0.0.1"),
+       .description = "IP address the control API listens on (an address, not a host name). Any address but "
+                      "loopback (127.0.0.0/8, ::1) needs control.http.token_file."},
+      {FACECAP_KEY(control.http.port), .default_value = int64_t{8765}, .min = 0, .max = 65535,
+       .description = "TCP port of the control API; 0 picks a free one (logged)."},
+      {FACECAP_KEY(control.http.token_file), .default_value = std::string(), .names_input_file = true,
+       .description = "File holding the bearer token every request must carry (`Authorization: Bearer <token>`); "
+                      "required when the address is not loopback. Empty: no token on loopback."},
+
+      {FACECAP_KEY(quality.markers_used_degraded), .default_value = 0.9, .min = 0, .max = 1, .reload = Reload::kLive,
+       .description = "The capture is degraded when the solve uses fewer than this fraction of the calibration's "
+                      "face markers (on average over a status window)."},
+      {FACECAP_KEY(quality.markers_used_bad), .default_value = 0.6, .min = 0, .max = 1, .reload = Reload::kLive,
+       .description = "The capture is bad when the solve uses fewer than this fraction of the face markers."},
+      {FACECAP_KEY(quality.head_held_degraded), .default_value = 0.05, .min = 0, .max = 1, .reload = Reload::kLive,
+       .description = "The capture is degraded when more than this fraction of a window's frames held the head pose "
+                      "(too few head markers to fit it)."},
+      {FACECAP_KEY(quality.head_held_bad), .default_value = 0.5, .min = 0, .max = 1, .reload = Reload::kLive,
+       .description = "The capture is bad when more than this fraction of the frames held the head pose."},
+      {FACECAP_KEY(quality.residual_p95_degraded_mm), .default_value = 1.5, .unit = "mm", .min = 0, .max = 1000,
+       .reload = Reload::kLive,
+       .description = "The capture is degraded when the 95th percentile of the markers' fit residuals (solved surface "
+                      "point vs marker target) over a window is above this."},
+      {FACECAP_KEY(quality.residual_p95_bad_mm), .default_value = 4.0, .unit = "mm", .min = 0, .max = 1000,
+       .reload = Reload::kLive,
+       .description = "The capture is bad when the residuals' 95th percentile is above this."},
+
       {FACECAP_CHOICE_KEY(logging.level, kLogLevels), .default_value = std::string("info"),
        .reload = Reload::kLive, .description = "Least severe log level written."},
       {FACECAP_KEY(logging.stats_interval_s), .default_value = 10.0, .unit = "s", .min = 0, .max = 86400,
@@ -370,6 +404,9 @@ const SectionSpec kSections[] = {
     {"outputs.vmc", "OSC with the VMC protocol, for VTuber software and VMC receivers (docs/outputs.md)."},
     {"outputs.livelink", "Unreal Live Link Face packets (docs/outputs.md)."},
     {"control", "Supervision by systemd and run control."},
+    {"control.http", "The control API over HTTP/JSON and WebSocket (docs/control-api.md)."},
+    {"quality", "The capture-quality state (good / degraded / bad) that STATUS, the log, the stats file and the "
+                "control API show for each status window; the worst criterion decides."},
     {"logging", "Logs and figures."},
 };
 

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -106,12 +107,21 @@ struct SolvedFrame {
   Eigen::Matrix3Xf vertices;         // 3 x N, rig units, head space
   std::array<int64_t, kSolveStageCount> stage_ns{};
   uint32_t collision_constraints = 0;
-  uint32_t markers_used = 0;
+  uint32_t markers_used = 0;      // face markers the solve pinned
+  uint32_t markers_expected = 0;  // face markers the calibration binds
   uint32_t flags = 0;
+  // Operator telemetry per source marker slot (MarkerFrame::markers order): the marker's
+  // target in rig space (head frame, rig units) and the fit residual, the distance in mm
+  // from the solved surface point it is bound to. NaN for slots missing this frame or not
+  // bound to the face (head markers, labels the calibration lacks).
+  Eigen::Matrix3Xf marker_targets;
+  Eigen::VectorXf marker_residual_mm;
 
-  void resize(Eigen::Index shapes, Eigen::Index vertex_count) {
+  void resize(Eigen::Index shapes, Eigen::Index vertex_count, Eigen::Index marker_slots = 0) {
     weights.setZero(shapes);
     vertices.setZero(3, vertex_count);
+    marker_targets.setConstant(3, marker_slots, std::numeric_limits<float>::quiet_NaN());
+    marker_residual_mm.setConstant(marker_slots, std::numeric_limits<float>::quiet_NaN());
   }
 };
 

@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <bit>
 #include <cerrno>
 #include <csignal>
 #include <fstream>
@@ -8,6 +9,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include "core/error.hpp"
 #include "core/io.hpp"
@@ -17,6 +19,7 @@
 #include "outputs/recording/recorder.hpp"
 #include "outputs/table.hpp"
 #include "pipeline/recording_header.hpp"
+#include "control/status.hpp"
 #include "pipeline/settings.hpp"
 #include "solver/builtin_face.hpp"
 
@@ -78,8 +81,10 @@ struct Daemon::Sample {
   drivers::SourceHealth source;
   uint64_t outputs_dropped = 0;
   std::array<uint64_t, kSolvedFlagCount> flagged{};
+  uint64_t markers_used = 0, markers_expected = 0;
   LatencyHistogram::Snapshot latency;
   std::array<LatencyHistogram::Snapshot, kLatencyStageCount> latency_chain;
+  LatencyHistogram::Snapshot residuals_nm;
 };
 
 Daemon::Daemon(DaemonOptions options, config::LoadedConfig config)
@@ -100,33 +105,45 @@ void Daemon::start() {
   }
 
   rig_ = load_configured_rig(c.rig);
-  calibration_ = pipeline::load_calibration(pipeline::calibration_spec(c), *rig_);
-  source_ = drivers::make_source(c.source, {.rig = rig_, .markers = pipeline::rest_marker_set(calibration_)});
+  pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig_);
+  source_ = drivers::make_source(c.source, {.rig = rig_, .markers = pipeline::rest_marker_set(calibration)});
   source_->open();
   spdlog::info("source {}", source_->description());
-  const pipeline::SourceDescription source{source_->info().labels, source_->info().units};
+  const drivers::SourceInfo& info = source_->info();
+  const pipeline::SourceDescription source{info.labels, info.units};
 
   const int64_t build_start = monotonic_now_ns();
-  auto solve = std::make_unique<pipeline::SolvePipeline>(*rig_, calibration_, source, pipeline::solve_settings(c));
-  log_pipeline(*solve, ms(monotonic_now_ns() - build_start) / 1000.0);
+  auto solve = std::make_unique<pipeline::SolvePipeline>(*rig_, calibration, source, pipeline::solve_settings(c));
+  log_pipeline(*solve, calibration, ms(monotonic_now_ns() - build_start) / 1000.0);
 
   const bool lockstep = c.loop.mode == config::LoopMode::kLockstep;
   outputs::SinkContext context;
-  context.header = pipeline::make_recording_header(*rig_, calibration_, source, source_->description(),
-                                                   lockstep ? source_->info().nominal_rate_hz : c.loop.rate_hz,
+  context.header = pipeline::make_recording_header(*rig_, calibration, source, source_->description(),
+                                                   pipeline::recorded_rate_hz(info.nominal_rate_hz, c.loop.rate_hz, lockstep),
                                                    pipeline::solve_settings_toml(c));
   context.vertex_count = uint32_t(rig_->vertex_count());
   context.loop_rate_hz = c.loop.rate_hz;
   io_ = std::make_unique<IoThread>();
   context.io = &io_->context();
   sinks_ = outputs::make_outputs(c, context);
+  if (c.control.http.enabled) {
+    control::StreamSchema schema{rig_->name, context.header.rig_units, rig_->shape_names, info.labels,
+                                 uint32_t(rig_->vertex_count()), {}};
+    schema.triangles.reserve(std::size_t(rig_->triangles.size()));
+    for (Eigen::Index t = 0; t < rig_->triangles.cols(); ++t)
+      for (int corner = 0; corner < 3; ++corner) schema.triangles.push_back(int32_t(rig_->triangles(corner, t)));
+    auto stream = std::make_unique<control::StreamSink>(std::move(schema), kStreamSlots);
+    stream_ = stream.get();
+    sinks_.push_back(std::move(stream));
+  }
   io_->start();
   std::vector<outputs::OutputSink*> sinks;
   for (const auto& sink : sinks_) {
     spdlog::info("output {}", sink->description());
-    if (const auto* recorder = dynamic_cast<const outputs::Recorder*>(sink.get())) recording_file_ = recorder->file();
+    if (auto* takes = dynamic_cast<outputs::TakeRecorder*>(sink.get())) takes_ = takes;
     sinks.push_back(sink.get());
   }
+  if (takes_) recording_file_ = takes_->file();
 
   LoopOptions loop_options;
   loop_options.rate_hz = c.loop.rate_hz;
@@ -135,6 +152,10 @@ void Daemon::start() {
   loop_options.prefetch_lead_ns = c.loop.prefetch_lead_us * kNsPerUs;
   loop_options.realtime = {.fifo = c.loop.realtime, .priority = int(c.loop.priority), .cpus = c.loop.cpu_affinity};
   loop_ = std::make_unique<SolveLoop>(loop_options, *source_, std::move(solve), std::move(sinks));
+  const std::string actor = c.calibration.file.empty() ? std::string() : std::filesystem::path(c.calibration.file).stem().string();
+  controller_ = std::make_unique<Controller>(
+      ControllerParts{.rig = rig_, .source = source_.get(), .loop = loop_.get(), .takes = takes_, .config = &config_.values},
+      std::move(calibration), actor);
   loop_->start();
   start_ns_ = monotonic_now_ns();
   start_sample_ = std::make_unique<Sample>(take_sample());
@@ -145,6 +166,37 @@ void Daemon::start() {
   next_watchdog_ns_ = start_ns_;
   spdlog::info("solve loop {} at {:g} Hz{}", loop_options.lockstep ? "in lockstep" : "running", c.loop.rate_hz,
                loop_options.lockstep ? " nominal" : "");
+  if (c.control.http.enabled) start_control();
+}
+
+// The control API on the I/O thread; its token read once, here.
+void Daemon::start_control() {
+  const config::HttpSection& http = config_.values.control.http;
+  std::string token;
+  if (!http.token_file.empty()) {
+    const std::vector<char> bytes = read_file_bytes(http.token_file);
+    token.assign(bytes.begin(), bytes.end());
+    token.erase(token.find_last_not_of(" \t\r\n") + 1);
+    token.erase(0, token.find_first_not_of(" \t\r\n"));
+    if (token.empty()) throw file_error(http.token_file, "the control API's token file is empty");
+  }
+  publish_status(monotonic_now_ns());
+  server_ = std::make_unique<control::ControlServer>(
+      io_->context(),
+      control::ServerOptions{.address = http.address, .port = uint16_t(http.port), .token = std::move(token),
+                             .version = options_.version.empty() ? std::string("facecapd") : options_.version},
+      board_, commands_, stream_);
+  spdlog::info("control API on http://{}:{}{}", http.address.find(':') == std::string::npos ? http.address : "[" + http.address + "]",
+               server_->port(), http.token_file.empty() ? "" : " (bearer token required)");
+}
+
+uint16_t Daemon::control_port() const noexcept { return server_ ? server_->port() : 0; }
+
+// Commands the control API queued, handed to the controller on this thread.
+void Daemon::serve_commands() {
+  while (std::optional<control::Command> command = commands_.pop()) controller_->execute(std::move(*command));
+  controller_->poll();
+  if (takes_ && !takes_->file().empty()) recording_file_ = takes_->file();
 }
 
 Daemon::Sample Daemon::take_sample() const {
@@ -161,8 +213,11 @@ Daemon::Sample Daemon::take_sample() const {
   s.source = source_->health();
   for (const auto& sink : sinks_) s.outputs_dropped += sink->health().dropped;
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) s.flagged[bit] = counters.flagged_frames[bit].load();
+  s.markers_used = counters.markers_used.load();
+  s.markers_expected = counters.markers_expected.load();
   s.latency = loop_->latency();
   for (std::size_t i = 0; i < kLatencyStageCount; ++i) s.latency_chain[i] = loop_->latency(LatencyStage(i));
+  s.residuals_nm = loop_->residuals_nm();
   return s;
 }
 
@@ -190,14 +245,36 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
   f.source_errors = to.source.errors - from.source.errors;
   f.outputs_dropped = to.outputs_dropped - from.outputs_dropped;
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) f.flagged_frames[bit] = to.flagged[bit] - from.flagged[bit];
+  CaptureFigures& capture = f.capture;
+  capture.frames = f.frames_solved;
+  if (f.frames_solved > 0) {
+    const double frames = double(f.frames_solved);
+    capture.markers_used = double(to.markers_used - from.markers_used) / frames;
+    capture.markers_expected = double(to.markers_expected - from.markers_expected) / frames;
+    capture.head_held_fraction = double(f.flagged_frames[std::countr_zero(uint32_t(kSolvedHeadPoseHeld))]) / frames;
+    capture.face_held_fraction = double(f.flagged_frames[std::countr_zero(uint32_t(kSolvedTooFewMarkers))]) / frames;
+  }
+  const LatencyHistogram::Snapshot residuals = to.residuals_nm.since(from.residuals_nm);
+  capture.residuals = residuals.total();
+  capture.residual_p50_mm = double(residuals.quantile_ns(0.50)) / 1e6;  // nanometres recorded
+  capture.residual_p95_mm = double(residuals.quantile_ns(0.95)) / 1e6;
+  capture.residual_max_mm = double(residuals.quantile_ns(1.0)) / 1e6;
   return f;
 }
 
 Figures Daemon::figures_since_start() const { return figures_between(*start_sample_, take_sample()); }
 
+QualityAssessment Daemon::quality(const Figures& window) const {
+  return assess_quality(window.capture, config_.values.quality);
+}
+
 std::string Daemon::status_line(const Figures& w) const {
-  std::string line = fmt::format("{:.1f} fps, latency p50 {:.2f} ms p99 {:.2f} ms, {} overruns", w.solved_fps,
-                                 ms(w.latency_p50_ns), ms(w.latency_p99_ns), loop_->counters().missed_deadlines.load());
+  std::string line = fmt::format("{:.1f} fps, latency p50 {:.2f} ms p99 {:.2f} ms, {} overruns, capture {}", w.solved_fps,
+                                 ms(w.latency_p50_ns), ms(w.latency_p99_ns), loop_->counters().missed_deadlines.load(),
+                                 quality(w).describe());
+  if (w.capture.frames > 0)
+    line += fmt::format(", markers {:.1f}/{:.0f}", w.capture.markers_used, w.capture.markers_expected);
+  if (w.capture.residuals > 0) line += fmt::format(", residual p95 {:.2f} mm", w.capture.residual_p95_mm);
   if (const std::string chain = latency_chain_text(w); !chain.empty()) line += ", " + chain;
   if (w.source_overwritten + w.source_late > 0)
     line += fmt::format(", source frames lost {}", w.source_overwritten + w.source_late);
@@ -229,7 +306,8 @@ std::string Daemon::flagged_text(const Figures& w) {
   return text;
 }
 
-void Daemon::log_pipeline(const pipeline::SolvePipeline& solve, double build_seconds) const {
+void Daemon::log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::Calibration& calibration_,
+                          double build_seconds) const {
   const pipeline::MarkerMapper& mapper = solve.mapper();
   spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes) built in {:.2f} s; calibration {}: {} of {} markers "
                "in the source, head stabilisation {}{}", solve.method(), rig_->name, rig_->vertex_count(),
@@ -261,14 +339,17 @@ bool Daemon::reload() {
     reloads_rejected_.fetch_add(1, std::memory_order_release);
     return false;
   }
-  bool rebuild = false;
+  bool rebuild = false, calibration_changed = false;
   for (const config::KeySpec* key : config::changed_keys(config_.values, fresh.values)) {
     const config::Value value = config::get_value(*key, fresh.values);
     switch (key->reload) {
       case config::Reload::kRestart:
         spdlog::warn("{} changed to {}: takes effect after a restart", key->path, config::format_value(value));
         continue;
-      case config::Reload::kRebuild: rebuild = true; break;
+      case config::Reload::kRebuild:
+        rebuild = true;
+        calibration_changed = calibration_changed || key->path == "calibration.file";
+        break;
       case config::Reload::kLive: break;
     }
     config::set_value(*key, config_.values, value);
@@ -277,40 +358,10 @@ bool Daemon::reload() {
     spdlog::info("{} = {}", key->path, config::format_value(value));
   }
   apply_live_settings();
-  if (rebuild) start_rebuild();
+  if (rebuild) controller_->rebuild_for_reload(calibration_changed);
   notifier_.ready(last_status_);
   reloads_accepted_.fetch_add(1, std::memory_order_release);
   return true;
-}
-
-// The new calibration and solver are built on another thread (seconds for a large rig);
-// the loop adopts the result between two frames.
-void Daemon::start_rebuild() {
-  if (rebuild_.valid()) {
-    rebuild_again_ = true;  // after the one in flight, with the configuration as it is then
-    return;
-  }
-  spdlog::info("rebuilding the solver aside");
-  rebuild_ = std::async(std::launch::async, [rig = rig_, info = source_->info(), config = config_.values] {
-    pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(config), *rig);
-    auto solve = std::make_unique<pipeline::SolvePipeline>(*rig, calibration, pipeline::SourceDescription{info.labels, info.units},
-                                                           pipeline::solve_settings(config));
-    return Rebuilt{std::move(solve), std::move(calibration)};
-  });
-}
-
-void Daemon::adopt_rebuilt_pipeline() {
-  if (!rebuild_.valid() || rebuild_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
-  try {
-    Rebuilt rebuilt = rebuild_.get();
-    calibration_ = std::move(rebuilt.calibration);
-    loop_->offer_pipeline(std::move(rebuilt.pipeline));
-    spdlog::info("new solver handed to the loop ({}, calibration {})", kSolverMethods.name(config_.values.solver.method),
-                 calibration_.source_take);
-  } catch (const std::exception& e) {
-    spdlog::error("rebuilding the solver failed; the running one stays: {}", e.what());
-  }
-  if (std::exchange(rebuild_again_, false)) start_rebuild();
 }
 
 void Daemon::supervise_once(int64_t now_ns) {
@@ -338,10 +389,18 @@ void Daemon::supervise_once(int64_t now_ns) {
   }
   if (now_ns >= next_status_ns_) {
     const Sample sample = take_sample();
-    last_status_ = status_line(figures_between(*status_sample_, sample));
+    status_window_ = figures_between(*status_sample_, sample);
+    last_status_ = status_line(status_window_);
     // Before READY (a device waited for), systemd shows why the service is still starting.
     if (ready_sent_) notifier_.status(last_status_);
     else if (!sample.source.state.empty()) notifier_.status(fmt::format("starting: {}", sample.source.state.view()));
+    const QualityAssessment quality = this->quality(status_window_);
+    ++quality_windows_[std::size_t(quality.state)];
+    if (quality.state != status_quality_.state) {
+      if (quality.state == CaptureQuality::kGood) spdlog::info("capture quality good again");
+      else spdlog::warn("capture quality {}", quality.describe());
+    }
+    status_quality_ = quality;
     *status_sample_ = sample;
     next_status_ns_ = now_ns + int64_t(c.control.status_interval_s * kNsPerSecond);
   }
@@ -353,6 +412,11 @@ void Daemon::supervise_once(int64_t now_ns) {
                  ms(f.latency_p99_ns), ms(f.latency_max_ns), f.missed_deadlines, f.late_start_misses, f.idle_ticks,
                  f.cpu_percent);
     if (const std::string chain = latency_chain_text(f); !chain.empty()) spdlog::info("latency {}", chain);
+    if (f.capture.frames > 0)
+      spdlog::info("markers used {:.1f} of {:.0f}, head pose held in {:.1f}% and face in {:.1f}% of frames, fit residual "
+                   "p50 {:.2f} p95 {:.2f} max {:.2f} mm; capture {}", f.capture.markers_used, f.capture.markers_expected,
+                   100.0 * f.capture.head_held_fraction, 100.0 * f.capture.face_held_fraction, f.capture.residual_p50_mm,
+                   f.capture.residual_p95_mm, f.capture.residual_max_mm, quality(f).describe());
     if (const std::string flagged = flagged_text(f); !flagged.empty()) spdlog::warn("frames flagged: {}", flagged);
     if (f.outputs_dropped > 0) spdlog::warn("{} frames dropped by the outputs", f.outputs_dropped);
     if (f.source_errors > 0) spdlog::warn("{} source errors (malformed input, device errors)", f.source_errors);
@@ -360,8 +424,9 @@ void Daemon::supervise_once(int64_t now_ns) {
     *stats_sample_ = sample;
     next_stats_ns_ = now_ns + int64_t(c.logging.stats_interval_s * kNsPerSecond);
   }
-  adopt_rebuilt_pipeline();
+  serve_commands();
   loop_->collect_retired();
+  if (server_ && now_ns >= next_publish_ns_) publish_status(now_ns);
 }
 
 int Daemon::run() {
@@ -400,6 +465,8 @@ void Daemon::shutdown(const std::string& reason) {
   const int64_t begin = monotonic_now_ns();
   notifier_.stopping();
   spdlog::info("stopping: {}", reason);
+  if (server_) server_->stop();
+  while (std::optional<control::Command> command = commands_.pop()) command->reply(control::error_reply(503, "facecapd is stopping"));
   loop_->request_stop();
   loop_->join();
   source_->stop();
@@ -427,12 +494,103 @@ void Daemon::shutdown(const std::string& reason) {
   if (const std::string chain = latency_chain_text(run); !chain.empty()) spdlog::info("latency {}", chain);
   if (const std::string flagged = flagged_text(run); !flagged.empty()) spdlog::info("frames flagged: {}", flagged);
   write_stats_file(run);
+  if (takes_ && !takes_->file().empty()) recording_file_ = takes_->file();
+  controller_.reset();  // waits for work in flight; replies go to the I/O thread, still running
   loop_.reset();
+  server_.reset();
   io_->stop();  // after every sink stopped: none has work left on it
   sinks_.clear();
   io_.reset();
   source_.reset();
   spdlog::info("stopped in {:.0f} ms", ms(monotonic_now_ns() - begin));
+}
+
+namespace {
+
+// Every key's value and where it came from.
+nlohmann::json config_json(const config::LoadedConfig& loaded) {
+  nlohmann::json values = nlohmann::json::object(), origins = nlohmann::json::object();
+  for (const config::KeySpec& key : config::config_schema()) {
+    const std::string path(key.path);
+    std::visit([&](const auto& value) { values[path] = value; }, config::get_value(key, loaded.values));
+    const config::KeyOrigin& origin = loaded.origin_of(key.path);
+    origins[path] = origin.origin == config::Origin::kFile      ? fmt::format("file {}:{}", origin.where.file, origin.where.line)
+                    : origin.origin == config::Origin::kCommandLine ? std::string("--set")
+                                                                    : std::string("default");
+  }
+  return {{"file", loaded.file}, {"values", values}, {"origins", origins}};
+}
+
+}  // namespace
+
+// What the control API serves, from the counters now and the last status window.
+void Daemon::publish_status(int64_t now_ns) {
+  const config::DaemonConfig& c = config_.values;
+  const Figures& w = status_window_;
+  control::StatusReport r;
+  r.version = options_.version;
+  r.pid = int64_t(::getpid());
+  r.uptime_s = double(now_ns - start_ns_) / kNsPerSecond;
+  r.source_driver = drivers::kDriverIds.name(c.source.driver);
+  r.source_description = source_->description();
+  r.source_rate_hz = source_->info().nominal_rate_hz;
+  const drivers::SourceHealth source = source_->health();
+  r.source_delivered = source.frames_delivered;
+  r.source_overwritten = source.frames_overwritten;
+  r.source_late = source.frames_late;
+  r.source_errors = source.errors;
+  r.source_finished = source.finished;
+  r.rig_name = rig_->name;
+  r.rig_hash = rig_->content_hash();
+  r.rig_vertices = rig_->vertex_count();
+  r.rig_shapes = rig_->shape_count();
+  r.solver = kSolverMethods.name(c.solver.method);
+  controller_->report(r);
+  r.mode = config::kLoopModes.name(c.loop.mode);
+  r.rate_hz = c.loop.rate_hz;
+  r.window_s = w.seconds;
+  r.solved_fps = w.solved_fps;
+  r.cpu_percent = w.cpu_percent;
+  r.latency_p50_ms = ms(w.latency_p50_ns);
+  r.latency_p99_ms = ms(w.latency_p99_ns);
+  r.latency_max_ms = ms(w.latency_max_ns);
+  r.window_missed_deadlines = w.missed_deadlines;
+  r.markers_used = w.capture.markers_used;
+  r.markers_expected = w.capture.markers_expected;
+  r.head_held_fraction = w.capture.head_held_fraction;
+  r.face_held_fraction = w.capture.face_held_fraction;
+  r.residual_p50_mm = w.capture.residual_p50_mm;
+  r.residual_p95_mm = w.capture.residual_p95_mm;
+  r.residual_max_mm = w.capture.residual_max_mm;
+  r.quality = kCaptureQualities.name(status_quality_.state);
+  r.quality_reasons = status_quality_.reasons;
+  const LoopCounters& counters = loop_->counters();
+  r.ticks = counters.ticks.load();
+  r.frames_solved = counters.frames_solved.load();
+  r.idle_ticks = counters.idle_ticks.load();
+  r.missed_deadlines = counters.missed_deadlines.load();
+  r.late_start_misses = counters.late_start_misses.load();
+  r.skipped_ticks = counters.skipped_ticks.load();
+  r.pipeline_swaps = counters.pipeline_swaps.load();
+  r.swap_misses = counters.swap_misses.load();
+  r.reloads_accepted = reloads_accepted();
+  r.reloads_rejected = reloads_rejected();
+  for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit)
+    r.flagged_frames.emplace_back(solved_flag_name(bit), counters.flagged_frames[bit].load());
+  for (std::size_t i = 0; i < loop_->sinks().size(); ++i) {
+    const outputs::OutputSink& sink = *loop_->sinks()[i];
+    const outputs::SinkHealth h = sink.health();
+    const LatencyHistogram::Snapshot offer = loop_->sink_timing(i).offer_ns.snapshot();
+    r.outputs.push_back({std::string(sink.name()), sink.description(), h.offered, h.delivered, h.dropped, h.errors,
+                         h.failed, double(offer.quantile_ns(0.5)) / kNsPerUs, double(offer.quantile_ns(0.99)) / kNsPerUs,
+                         double(loop_->sink_timing(i).max_ns.load()) / kNsPerUs});
+  }
+  auto published = std::make_shared<control::Published>();
+  published->status_json = control::status_json(r).dump() + "\n";
+  published->metrics_text = control::metrics_text(r);
+  published->config_json = config_json(config_).dump() + "\n";
+  board_.publish(std::move(published));
+  next_publish_ns_ = now_ns + kPublishIntervalNs;
 }
 
 void Daemon::write_stats_file(const Figures& f) const {
@@ -468,6 +626,18 @@ void Daemon::write_stats_file(const Figures& f) const {
   nlohmann::json flagged = nlohmann::json::object();
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) flagged[std::string(solved_flag_name(bit))] = f.flagged_frames[bit];
   j["flagged_frames"] = flagged;
+  const QualityAssessment run_quality = quality(f);
+  j["capture"] = {{"markers_used", f.capture.markers_used},
+                  {"markers_expected", f.capture.markers_expected},
+                  {"head_held_fraction", f.capture.head_held_fraction},
+                  {"face_held_fraction", f.capture.face_held_fraction},
+                  {"residual_mm", {{"p50", f.capture.residual_p50_mm}, {"p95", f.capture.residual_p95_mm},
+                                   {"max", f.capture.residual_max_mm}}},
+                  {"quality", kCaptureQualities.name(run_quality.state)},
+                  {"quality_reasons", run_quality.reasons}};
+  nlohmann::json windows = nlohmann::json::object();
+  for (const auto& entry : kCaptureQualities.entries()) windows[std::string(entry.name)] = quality_windows_[std::size_t(entry.value)];
+  j["quality_windows"] = windows;
   nlohmann::json outputs = nlohmann::json::object();
   for (std::size_t i = 0; i < loop_->sinks().size(); ++i) {
     const outputs::OutputSink& sink = *loop_->sinks()[i];

@@ -13,11 +13,19 @@
 #include <vector>
 
 #include "config/config_file.hpp"
+#include "control/commands.hpp"
+#include "control/server.hpp"
+#include "control/status.hpp"
+#include "control/stream_sink.hpp"
+#include "core/time.hpp"
+#include "daemon/capture_quality.hpp"
+#include "daemon/controller.hpp"
 #include "daemon/io_thread.hpp"
 #include "daemon/solve_loop.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "drivers/api/marker_source.hpp"
 #include "outputs/api/sink.hpp"
+#include "outputs/recording/take_recorder.hpp"
 #include "pipeline/calibration.hpp"
 
 namespace facecap::daemon {
@@ -27,6 +35,13 @@ struct LatencyFigures {
   uint64_t frames = 0;
   int64_t p50_ns = 0, p99_ns = 0, max_ns = 0;
 };
+
+// Control commands waiting for the supervisor at most; more are refused (503).
+inline constexpr std::size_t kCommandQueueCapacity = 32;
+// Frames the WebSocket stream's queue holds between the solve thread and the I/O thread.
+inline constexpr std::size_t kStreamSlots = 8;
+// How often the supervisor publishes the control API's status (and after every command).
+inline constexpr int64_t kPublishIntervalNs = 100 * kNsPerMs;
 
 // A window's or a whole run's figures.
 struct Figures {
@@ -48,6 +63,7 @@ struct Figures {
   uint64_t source_errors = 0;
   uint64_t outputs_dropped = 0;  // over every output
   std::array<uint64_t, kSolvedFlagCount> flagged_frames{};  // solved frames with each SolvedFlags bit
+  CaptureFigures capture;        // markers used, held frames, fit residuals
 };
 
 // What `facecapd --check-config` checks beyond the file itself: loads the configured rig
@@ -59,6 +75,7 @@ struct DaemonOptions {
   std::string config_file;                // re-read on SIGHUP; empty: defaults
   std::vector<std::string> overrides;     // --set key=value, re-applied on reload
   bool handle_signals = true;             // SIGTERM/SIGINT/SIGHUP are blocked and awaited here
+  std::string version;                    // "facecapd 0.1.0 (git ...)", for the control API
 };
 
 class Daemon {
@@ -85,10 +102,13 @@ class Daemon {
   const SolveLoop* loop() const noexcept { return loop_.get(); }
   drivers::MarkerSource* source() noexcept { return source_.get(); }
   const Rig& rig() const noexcept { return *rig_; }
-  const pipeline::Calibration& calibration() const noexcept { return calibration_; }
-  // The run's recording (empty when not recording); still known after the run.
+  // The run's last take (empty when none was recorded); still known after the run.
   const std::filesystem::path& recording_file() const noexcept { return recording_file_; }
+  // The control API's port (0 when it is off): the one picked when control.http.port is 0.
+  uint16_t control_port() const noexcept;
   Figures figures_since_start() const;
+  // The capture quality of a window's figures against the [quality] thresholds.
+  QualityAssessment quality(const Figures& window) const;
   std::string status_line(const Figures& window) const;
 
  private:
@@ -98,12 +118,14 @@ class Daemon {
   Sample take_sample() const;
   Figures figures_between(const Sample& from, const Sample& to) const;
   void supervise_once(int64_t now_ns);
-  void start_rebuild();
-  void adopt_rebuilt_pipeline();
+  void start_control();
+  void serve_commands();
+  void publish_status(int64_t now_ns);
   void apply_live_settings();
   void shutdown(const std::string& reason);
   void write_stats_file(const Figures& run) const;
-  void log_pipeline(const pipeline::SolvePipeline& solve, double build_seconds) const;
+  void log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::Calibration& calibration,
+                    double build_seconds) const;
   static std::string flagged_text(const Figures& window);
   static std::string latency_chain_text(const Figures& window);
 
@@ -111,18 +133,22 @@ class Daemon {
   config::LoadedConfig config_;
   SystemdNotifier notifier_;
   std::shared_ptr<const Rig> rig_;
-  pipeline::Calibration calibration_;
   std::unique_ptr<drivers::MarkerSource> source_;
-  std::unique_ptr<IoThread> io_;  // before the sinks: they schedule work on it
+  std::unique_ptr<IoThread> io_;  // before the sinks and the server: they schedule work on it
   std::vector<std::unique_ptr<outputs::OutputSink>> sinks_;
+  outputs::TakeRecorder* takes_ = nullptr;  // among sinks_, when recording is possible
   std::filesystem::path recording_file_;
-  std::unique_ptr<SolveLoop> loop_;  // last: it borrows the members above
-  struct Rebuilt {
-    std::unique_ptr<pipeline::SolvePipeline> pipeline;
-    pipeline::Calibration calibration;
-  };
-  std::future<Rebuilt> rebuild_;  // in flight
-  bool rebuild_again_ = false;    // a reload arrived while one was in flight
+  std::unique_ptr<SolveLoop> loop_;  // borrows the members above
+  std::unique_ptr<Controller> controller_;  // borrows the loop
+  // The control API (control.http.enabled): what it reports, what it asks, its sockets.
+  control::StatusBoard board_;
+  control::CommandQueue commands_{kCommandQueueCapacity};
+  control::StreamSink* stream_ = nullptr;  // among sinks_
+  std::unique_ptr<control::ControlServer> server_;
+  int64_t next_publish_ns_ = 0;
+  Figures status_window_;  // the last STATUS window's figures
+  QualityAssessment status_quality_;
+  std::array<uint64_t, 3> quality_windows_{};  // status windows in each quality state
 
   std::atomic<bool> stop_requested_{false};
   std::atomic<bool> reload_requested_{false};

@@ -11,6 +11,7 @@
 #include "config/config_file.hpp"
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/version.hpp"
 #include "daemon/daemon.hpp"
 #include "drivers/table.hpp"
 
@@ -45,6 +46,8 @@ int main(int argc, char** argv) {
   app.add_flag("--print-config-reference", print_reference, "Print the key reference (Markdown, as in docs/config.md)");
   app.add_flag("--list-drivers", list_drivers, "List the marker source drivers");
   app.add_flag("--allow-root", allow_root, "Run even as root (not recommended: see docs/daemon.md)");
+  const std::string version = fmt::format("facecapd {}", version_string());
+  app.set_version_flag("--version", version, "Print the version (and the git commit it was built from) and exit");
   CLI11_PARSE(app, argc, argv);
 
   configure_log_output();
@@ -103,7 +106,8 @@ int main(int argc, char** argv) {
   }
 
   try {
-    daemon::Daemon d({.config_file = config_file, .overrides = overrides, .handle_signals = true}, std::move(loaded));
+    daemon::Daemon d({.config_file = config_file, .overrides = overrides, .handle_signals = true, .version = version},
+                     std::move(loaded));
     d.start();
     return d.run();
   } catch (const Error& e) {

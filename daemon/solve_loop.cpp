@@ -103,7 +103,10 @@ void SolveLoop::offer_pipeline(std::unique_ptr<pipeline::SolvePipeline> pipeline
 void SolveLoop::collect_retired() { pipeline_handoff_.collect(); }
 
 void SolveLoop::adopt_offered_pipeline() noexcept {
-  if (pipeline_handoff_.adopt(pipeline_)) add(counters_.pipeline_swaps);
+  if (pipeline_handoff_.adopt(pipeline_)) {
+    add(counters_.pipeline_swaps);
+    swap_ticks_watched_ = 2;
+  }
 }
 
 void SolveLoop::record_stage(LoopStage stage, int64_t ns) noexcept {
@@ -121,6 +124,13 @@ void SolveLoop::follow_source_phase(int64_t waited_ns) noexcept {
   if (error > period_ns_ / 2) error -= period_ns_;
   const int64_t limit = period_ns_ / kMaxPhaseStepDivisor;
   phase_correction_ns_ = std::clamp(int64_t(-kPhaseGain * double(error)), -limit, limit);
+}
+
+void SolveLoop::record_telemetry() noexcept {
+  add(counters_.markers_used, solved_frame_.markers_used);
+  add(counters_.markers_expected, solved_frame_.markers_expected);
+  for (const float residual_mm : solved_frame_.marker_residual_mm)
+    if (!std::isnan(residual_mm)) residual_nm_.record(int64_t(std::llround(double(residual_mm) * 1e6)));
 }
 
 bool SolveLoop::tick(int64_t now_ns) noexcept {
@@ -146,6 +156,7 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
   }
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit)
     if (solved_frame_.flags & (1u << bit)) add(counters_.flagged_frames[bit]);
+  record_telemetry();
 
   int64_t offered_ns = solved_ns;
   for (std::size_t i = 0; i < sinks_.size(); ++i) {
@@ -195,6 +206,10 @@ void SolveLoop::run_fixed_rate(int64_t epoch_ns) noexcept {
     store_max(counters_.max_tick_ns, end_ns - wake_ns);
     const rt::TickOutcome outcome = grid.advance(wake_ns, end_ns, phase_correction_ns_);
     phase_correction_ns_ = 0;
+    if (swap_ticks_watched_ > 0) {
+      --swap_ticks_watched_;
+      if (outcome.missed) add(counters_.swap_misses);
+    }
     if (outcome.missed) {
       add(counters_.missed_deadlines);
       if (outcome.started_late) add(counters_.late_start_misses);

@@ -60,12 +60,18 @@ struct LoopCounters {
   std::atomic<int64_t> max_wake_late_ns{0};     // worst wake-up after a deadline
   std::atomic<int64_t> max_tick_ns{0};          // longest tick, wake-up to the end of its work
   std::atomic<uint64_t> pipeline_swaps{0};
+  // Missed deadlines of the ticks that adopted a new pipeline and of the tick after each
+  // (its caches cold): what a swap (reload, actor, calibration) cost the loop.
+  std::atomic<uint64_t> swap_misses{0};
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_total_ns{};
   std::array<std::atomic<int64_t>, kLoopStageCount> stage_max_ns{};
   std::array<std::atomic<int64_t>, kSolveStageCount> solver_stage_total_ns{};
   // Solved frames with each SolvedFlags bit set (bit i: solved_flag_name(i)).
   std::array<std::atomic<uint64_t>, kSolvedFlagCount> flagged_frames{};
   std::atomic<uint64_t> solved_sequence{0};     // bumps per solved frame; the watchdog checks it moves
+  // Operator telemetry: face markers used and expected, summed over the solved frames.
+  std::atomic<uint64_t> markers_used{0};
+  std::atomic<uint64_t> markers_expected{0};
 };
 
 // What one output's offer() costs the solve thread. Written by the solve thread only.
@@ -102,6 +108,9 @@ class SolveLoop {
   LatencyHistogram::Snapshot latency(LatencyStage stage) const noexcept {
     return latency_chain_[std::size_t(stage)].snapshot();
   }
+  // Every fit residual of every solved frame, in nanometres: the histogram's buckets,
+  // 1 us wide below 1 ms, ..., are 1 um wide below 1 mm, 10 um below 10 mm, ...
+  LatencyHistogram::Snapshot residuals_nm() const noexcept { return residual_nm_.snapshot(); }
   // The outputs in offer order, and what each costs the solve thread.
   std::span<outputs::OutputSink* const> sinks() const noexcept { return sinks_; }
   const SinkTiming& sink_timing(std::size_t i) const noexcept { return sink_timing_[i]; }
@@ -128,6 +137,8 @@ class SolveLoop {
   void run_lockstep() noexcept;
   void adopt_offered_pipeline() noexcept;
   void record_stage(LoopStage stage, int64_t ns) noexcept;
+  // Markers used and expected, and each fit residual, of the frame just solved. RT-safe.
+  void record_telemetry() noexcept;
   void follow_source_phase(int64_t waited_ns) noexcept;
 
   LoopOptions options_;
@@ -138,6 +149,7 @@ class SolveLoop {
   int64_t period_ns_;
   bool phase_lock_ = false;
   int64_t phase_correction_ns_ = 0;  // applied to the next deadline
+  int swap_ticks_watched_ = 0;       // ticks left whose misses count as swap_misses
 
   MarkerFrame marker_frame_;
   SolvedFrame solved_frame_;
@@ -147,6 +159,7 @@ class SolveLoop {
   LoopCounters counters_;
   LatencyHistogram latency_;  // received -> offered to every output
   std::array<LatencyHistogram, kLatencyStageCount> latency_chain_;
+  LatencyHistogram residual_nm_;
   RealtimeReport realtime_report_;
   std::atomic<bool> realtime_ready_{false};
   std::atomic<bool> stop_requested_{false};

@@ -114,6 +114,8 @@ void encode_header(ByteWriter& w, const RecordingHeader& h, int64_t created_unix
   // Format version 2 appends:
   put_string(w, h.rig_units);
   put_string(w, h.solver_settings);
+  // Format version 3 appends the slate:
+  for (const std::string* field : {&h.take, &h.actor, &h.scene, &h.shot, &h.notes}) put_string(w, *field);
 }
 
 void decode_header(ByteReader& r, RecordingHeader& h) {
@@ -130,6 +132,8 @@ void decode_header(ByteReader& r, RecordingHeader& h) {
     h.rig_units = get_string(r, "rig units");
     h.solver_settings = get_string(r, "solver settings");
   }
+  if (h.format_version >= 3)
+    for (std::string* field : {&h.take, &h.actor, &h.scene, &h.shot, &h.notes}) *field = get_string(r, "slate");
   // Later format versions may append fields; this reader ignores them.
 }
 

@@ -20,7 +20,8 @@
 namespace facecap::formats {
 
 // 2: HEAD gains rig_units and solver_settings (version 1 readers skip them).
-inline constexpr uint16_t kRecordingFormatVersion = 2;
+// 3: HEAD gains the slate: take, actor, scene, shot, notes (older readers skip them).
+inline constexpr uint16_t kRecordingFormatVersion = 3;
 // Readers of this version understand files whose minimum reader version is <= this.
 inline constexpr uint16_t kRecordingReaderVersion = 1;
 
@@ -39,6 +40,8 @@ struct RecordingHeader {
   // Format version 2 (empty when read from version 1):
   std::string rig_units;                   // the solved frames' length unit ("mm", "cm", "m")
   std::string solver_settings;             // the [solver] section the frames were solved with (TOML)
+  // Format version 3 (empty when read from older versions): the slate.
+  std::string take, actor, scene, shot, notes;
 };
 
 enum class ChunkKind : uint8_t { kMarkerFrame, kSolvedFrame };

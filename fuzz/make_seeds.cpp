@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <tuple>
 
 #include <fmt/format.h>
 
@@ -254,6 +255,18 @@ int main(int argc, char** argv) {
           profile.substr(0, checksum_at) + profile.substr(profile.find('\n', checksum_at) + 1));
     write_udp_stream(out / "udp_stream_reassembly");
     write(out / "natnet_serve_requests/conversation.bin", natnet_conversation());
+    // Control API requests (the target's token is "s3cret" for inputs of odd length).
+    write(out / "control_request/status.http", "GET /status HTTP/1.1\r\nHost: x\r\n\r\n");
+    write(out / "control_request/stream.http",
+          "GET /stream?rate=20&vertices=1 HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer s3cret\r\n\r\n");
+    for (const auto& [name, target, body] : {std::tuple{"actor", "/actor", R"({"name": "alice"})"},
+                                             {"calibrate", "/calibrate", R"({"seconds": 2.5, "save": "bob"})"},
+                                             {"record_start", "/record/start",
+                                              R"({"take": "t1", "actor": "a", "scene": "s", "shot": "2", "notes": "n", "markers_only": true})"},
+                                             {"record_stop", "/record/stop", "{}"}})
+      write(out / fmt::format("control_request/{}.http", name),
+            fmt::format("POST {} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{}",
+                        target, std::string_view(body).size(), body));
     write_dictionaries(out / "dict");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "fuzz_seeds: %s\n", e.what());

@@ -7,7 +7,7 @@
 #include "formats/arkit.hpp"
 #include "outputs/livelink/livelink_protocol.hpp"
 #include "outputs/net/net_sink.hpp"
-#include "outputs/recording/recorder.hpp"
+#include "outputs/recording/take_recorder.hpp"
 #include "outputs/shm/shm_sink.hpp"
 #include "outputs/udp/udp_stream_protocol.hpp"
 #include "outputs/vmc/vmc_protocol.hpp"
@@ -29,17 +29,13 @@ std::unique_ptr<OutputSink> make_shm(const config::DaemonConfig& c, const SinkCo
   return std::make_unique<ShmSink>(spec);
 }
 
+// Present when recording from the start or when the control API may start takes.
 std::unique_ptr<OutputSink> make_recording(const config::DaemonConfig& c, const SinkContext& context) {
   const config::RecordingSection& s = c.outputs.recording;
-  if (!s.enabled) return nullptr;
-  RecorderOptions options;
-  options.file = new_recording_path(s.directory);
-  options.header = context.header;
-  options.queue_frames = std::size_t(s.queue_frames);
-  options.markers = s.markers;
-  options.solved = s.solved;
-  options.vertices = s.vertices;
-  return std::make_unique<Recorder>(std::move(options), context.vertex_count);
+  if (!s.enabled && !c.control.http.enabled) return nullptr;
+  auto takes = std::make_unique<TakeRecorder>(context.vertex_count, s.solved && s.vertices);
+  if (s.enabled) takes->start_take(take_options(c, context.header, new_recording_path(s.directory)));
+  return takes;
 }
 
 // What the network outputs share: the destination, the queue's frames, the rate limit.
@@ -112,6 +108,18 @@ const OutputEntry kOutputs[] = {
 }  // namespace
 
 std::span<const OutputEntry> output_table() noexcept { return kOutputs; }
+
+RecorderOptions take_options(const config::DaemonConfig& c, formats::RecordingHeader header, std::filesystem::path file) {
+  const config::RecordingSection& s = c.outputs.recording;
+  RecorderOptions options;
+  options.file = std::move(file);
+  options.header = std::move(header);
+  options.queue_frames = std::size_t(s.queue_frames);
+  options.markers = s.markers;
+  options.solved = s.solved;
+  options.vertices = s.vertices;
+  return options;
+}
 
 std::vector<std::unique_ptr<OutputSink>> make_outputs(const config::DaemonConfig& config, const SinkContext& context) {
   std::vector<std::unique_ptr<OutputSink>> sinks;

@@ -11,6 +11,7 @@
 #include "config/daemon_config.hpp"
 #include "outputs/api/sink.hpp"
 #include "outputs/api/sink_context.hpp"
+#include "outputs/recording/recorder.hpp"
 
 namespace facecap::outputs {
 
@@ -26,5 +27,9 @@ std::span<const OutputEntry> output_table() noexcept;
 
 // Every enabled output, in table order. Throws Error naming the output that failed.
 std::vector<std::unique_ptr<OutputSink>> make_outputs(const config::DaemonConfig& config, const SinkContext& context);
+
+// A take's recorder options from [outputs.recording]: what to record, the queue, the file.
+RecorderOptions take_options(const config::DaemonConfig& config, formats::RecordingHeader header,
+                             std::filesystem::path file);
 
 }  // namespace facecap::outputs

@@ -1,5 +1,7 @@
 #include "pipeline/recording_header.hpp"
 
+#include <algorithm>
+
 #include "core/units.hpp"
 #include "solver/align/profile.hpp"
 
@@ -20,6 +22,11 @@ formats::RecordingHeader make_recording_header(const Rig& rig, const align::Cali
   h.shape_names = rig.shape_names;
   h.solver_settings = std::move(solver_settings);
   return h;
+}
+
+double recorded_rate_hz(double source_rate_hz, double loop_rate_hz, bool lockstep) {
+  if (source_rate_hz <= 0.0) return 0.0;
+  return lockstep ? source_rate_hz : std::min(source_rate_hz, loop_rate_hz);
 }
 
 }  // namespace facecap::pipeline

@@ -1,5 +1,7 @@
 #include "pipeline/solve_pipeline.hpp"
 
+#include <limits>
+
 #include "core/time.hpp"
 #include "solver/marker_layout.hpp"
 
@@ -30,8 +32,11 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
       solver_(make_solver(settings.method, build_solver_model(rig, calibration.bindings(), settings.params))),
       mapped_(mapper_.make_output()),
       result_(solver_->make_result()),
+      bindings_(calibration.bindings()),
+      rig_mm_per_unit_(calibration.rig_mm_per_unit),
       shape_count_(rig.shape_count()),
-      vertex_count_(rig.vertex_count()) {
+      vertex_count_(rig.vertex_count()),
+      source_slots_(Eigen::Index(source.labels.size())) {
   label_markers_ = settings.label_markers;
   if (settings.check_labels || label_markers_) {
     // The labeller's markers: the source's slots for the check, the calibration's when
@@ -56,7 +61,7 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
 
 SolvedFrame SolvePipeline::make_solved_frame(bool with_vertices) const {
   SolvedFrame frame;
-  frame.resize(shape_count_, with_vertices ? vertex_count_ : 0);
+  frame.resize(shape_count_, with_vertices ? vertex_count_ : 0, source_slots_);
   return frame;
 }
 
@@ -92,10 +97,29 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.stage_ns[std::size_t(SolveStage::kCorrespond)] = checked_ns - out.solve_start_ns;
   out.stage_ns[std::size_t(SolveStage::kStabilise)] = mapped_ns - checked_ns;
   out.markers_used = result_.markers_used;
+  out.markers_expected = uint32_t(bindings_.size());
   out.collision_constraints = result_.collision_constraints;
   out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | (mapped_.markers_implausible > 0 ? kSolvedImplausibleMarker : 0u) |
               result_.status;
+  record_fit_residuals(out);
   out.solve_end_ns = monotonic_now_ns();
+}
+
+// Each bound marker present this frame: its target and its distance from the solved
+// surface point it is bound to (a held face keeps the previous mesh, so its residuals
+// show how far the face is from the markers now). RT-safe.
+void SolvePipeline::record_fit_residuals(SolvedFrame& out) const noexcept {
+  if (out.marker_residual_mm.size() != source_slots_ || out.marker_targets.cols() != source_slots_) return;
+  out.marker_targets.setConstant(std::numeric_limits<float>::quiet_NaN());
+  out.marker_residual_mm.setConstant(std::numeric_limits<float>::quiet_NaN());
+  const std::span<const int> slots = mapper_.slots();
+  for (std::size_t k = 0; k < bindings_.size(); ++k) {
+    const auto slot = Eigen::Index(slots[k]);
+    if (slot < 0 || !mapped_.present[k]) continue;
+    const Eigen::Vector3d target = mapped_.targets.col(Eigen::Index(k));
+    out.marker_targets.col(slot) = target.cast<float>();
+    out.marker_residual_mm[slot] = float((binding_point(bindings_[k], result_.vertices) - target).norm() * rig_mm_per_unit_);
+  }
 }
 
 }  // namespace facecap::pipeline

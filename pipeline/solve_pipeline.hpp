@@ -48,10 +48,13 @@ class SolvePipeline {
   SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                 const SolveSettings& settings);
 
-  // Solves one marker frame into `out`, which make_solved_frame() sized. RT-safe.
+  // Solves one marker frame into `out`, which make_solved_frame() sized, with its
+  // telemetry: markers used of expected, the status bits, and per marker slot the target
+  // and the fit residual (solved surface point vs target, mm). RT-safe.
   void process(const MarkerFrame& markers, SolvedFrame& out) noexcept;
 
-  // A frame sized for this rig (vertices only when wanted). Not RT-safe.
+  // A frame sized for this rig and the source's marker slots (vertices only when
+  // wanted). Not RT-safe.
   SolvedFrame make_solved_frame(bool with_vertices) const;
 
   // What a loop prefetches ahead of a frame (FaceSolver::streamed_memory). RT-safe.
@@ -65,6 +68,8 @@ class SolvePipeline {
   std::string_view method() const noexcept { return solver_->name(); }
 
  private:
+  void record_fit_residuals(SolvedFrame& out) const noexcept;
+
   MarkerMapper mapper_;
   std::unique_ptr<FaceSolver> solver_;
   std::optional<align::MarkerLabeller> labeller_;
@@ -74,8 +79,11 @@ class SolvePipeline {
   MappedFrame mapped_;
   SolveResult result_;
   align::LabelStats label_stats_;
+  std::vector<MarkerBinding> bindings_;  // per calibration marker, for the fit residuals
+  double rig_mm_per_unit_ = 1.0;
   Eigen::Index shape_count_ = 0;
   Eigen::Index vertex_count_ = 0;
+  Eigen::Index source_slots_ = 0;
 };
 
 }  // namespace facecap::pipeline

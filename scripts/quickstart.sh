@@ -22,6 +22,7 @@ packages=(
   clang libclang-rt-dev  # scripts/fuzz: libFuzzer with ASan and UBSan
   systemd  # systemd-analyze: the test that checks systemd/facecapd.service
   liblo-tools  # oscdump: the tests decode facecapd's VMC output with liblo
+  prometheus wrk  # promtool checks /metrics in the tests; wrk drives scripts/control_load.sh
 )
 
 install_packages() {

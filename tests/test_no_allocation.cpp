@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "config/schema.hpp"
+#include "control/stream_sink.hpp"
 #include "core/time.hpp"
 #include "daemon/io_thread.hpp"
 #include "daemon/solve_loop.hpp"
@@ -15,6 +16,7 @@
 #include "outputs/livelink/livelink_protocol.hpp"
 #include "outputs/net/net_sink.hpp"
 #include "outputs/recording/recorder.hpp"
+#include "outputs/recording/take_recorder.hpp"
 #include "outputs/shm/shm_sink.hpp"
 #include "outputs/udp/udp_stream_protocol.hpp"
 #include "outputs/vmc/vmc_protocol.hpp"
@@ -203,4 +205,58 @@ TEST_CASE("the plausibility gate allocates nothing, accepting or refusing marker
   }
   CHECK(flagged == 1);
   CHECK(allocations == 0);
+}
+
+TEST_CASE("runtime takes, the control stream and the operator telemetry allocate nothing on the solve thread") {
+  const config::DaemonConfig c = config::default_config();
+  const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
+  drivers::SimOptions sim_options = c.source.sim;
+  sim_options.dropout_probability = 0.3;  // markers missing: fewer used, residuals of the rest
+  drivers::SimSource sim(sim_options, rig, pipeline::rest_marker_set(calibration));
+  sim.open();
+  const pipeline::SourceDescription source{sim.info().labels, sim.info().units};
+  outputs::TakeRecorder takes(rig->vertex_count(), true);
+  control::StreamSink stream({rig->name, "cm", rig->shape_names, sim.info().labels, uint32_t(rig->vertex_count()), {}}, 8);
+  stream.set_rate(1000.0);  // a client listening: every frame copied
+  LoopOptions options;
+  options.realtime.fifo = false;
+  SolveLoop loop(options, sim,
+                 std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, pipeline::solve_settings(c)),
+                 {&takes, &stream});
+  sim.start({.epoch_ns = monotonic_now_ns()});
+
+  const Counted between_takes = run_ticks(loop, 30, loop.period_ns());
+  CHECK(between_takes.allocations == 0);
+  // Drained by this thread, as the I/O thread does, between the counted ticks.
+  const auto drain = [&] {
+    uint64_t n = 0;
+    for (; stream.front(); stream.pop()) ++n;
+    return n;
+  };
+  CHECK(drain() > 0);
+
+  outputs::RecorderOptions take;
+  take.file = test::scratch_dir("noalloc-takes") / "take.fcrec";
+  take.header = pipeline::make_recording_header(*rig, calibration, source, "test", 120.0, "");
+  take.vertices = true;
+  takes.start_take(take);  // adopted by the next tick
+  const Counted recording = run_ticks(loop, 60, loop.period_ns());
+  drain();
+  CHECK(takes.recording());
+  REQUIRE(takes.stop_take());  // let go of by the next tick
+  const Counted after_stop = run_ticks(loop, 30, loop.period_ns());
+  drain();
+  CHECK(recording.allocations == 0);
+  CHECK(after_stop.allocations == 0);
+  const std::optional<outputs::TakeSummary> summary = takes.finish_stopped();
+  REQUIRE(summary);
+  CHECK(summary->counters.marker_frames + summary->counters.dropped >= 60);
+  CHECK(summary->counters.marker_frames + summary->counters.dropped <= 61);
+  // The telemetry was recorded on those ticks: markers used of expected, residuals.
+  CHECK(loop.counters().markers_expected.load() == 48 * loop.counters().frames_solved.load());
+  CHECK(loop.counters().markers_used.load() < loop.counters().markers_expected.load());
+  CHECK(loop.residuals_nm().total() > 0);
+  sim.stop();
+  takes.stop();
 }

@@ -22,5 +22,6 @@ void add_diff_command(CLI::App& app, int& exit_code);
 #if FACECAP_WITH_NATNET
 void add_natnet_serve_command(CLI::App& app, int& exit_code);
 #endif
+void add_ctl_command(CLI::App& app, int& exit_code);
 
 }  // namespace facecap::tools

@@ -7,6 +7,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/version.hpp"
 #include "tools/commands.hpp"
 
 int main(int argc, char** argv) {
@@ -14,6 +15,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   std::string log_level = "warn";
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error, off")->capture_default_str();
+  app.set_version_flag("--version", "facecap " + std::string(facecap::version_string()),
+                       "Print the version (and the git commit it was built from) and exit");
 
   int exit_code = 0;
   // The ordered command table.
@@ -33,6 +36,7 @@ int main(int argc, char** argv) {
 #if FACECAP_WITH_NATNET
   facecap::tools::add_natnet_serve_command(app, exit_code);
 #endif
+  facecap::tools::add_ctl_command(app, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -41,7 +41,10 @@ class Handoff {
   }
 
   // Producer: destroys what the consumer retired. Not RT-safe (frees).
-  void collect() { std::unique_ptr<T> retired(retired_.exchange(nullptr, std::memory_order_acq_rel)); }
+  void collect() { take_retired(); }
+  // Producer: what the consumer retired, handed back rather than destroyed (empty when
+  // nothing was). Not RT-safe.
+  std::unique_ptr<T> take_retired() { return std::unique_ptr<T>(retired_.exchange(nullptr, std::memory_order_acq_rel)); }
 
   // Whether an offer is waiting to be adopted. Any thread.
   bool pending() const noexcept { return offered_.load(std::memory_order_acquire) != nullptr; }

@@ -133,15 +133,41 @@ RecorderCounters Recorder::counters() const noexcept {
           dropped_.load(std::memory_order_relaxed), errors_.load(std::memory_order_relaxed)};
 }
 
+namespace {
+
+std::filesystem::path unique_path(const std::filesystem::path& directory, const std::string& stem) {
+  std::filesystem::path path = directory / (stem + ".fcrec");
+  for (int n = 2; std::filesystem::exists(path); ++n) path = directory / fmt::format("{}-{}.fcrec", stem, n);
+  return path;
+}
+
+// Letters, digits, '.' and '-' only, no leading '.', at most 64 bytes.
+std::string safe_part(std::string_view text) {
+  std::string out;
+  for (const char c : text.substr(0, 64)) {
+    const bool safe = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' || c == '-';
+    out += safe ? c : '-';
+  }
+  while (!out.empty() && out.front() == '.') out.front() = '-';
+  return out;
+}
+
+}  // namespace
+
+std::filesystem::path new_take_path(const std::filesystem::path& directory, const formats::RecordingHeader& slate) {
+  std::string stem;
+  for (const std::string* field : {&slate.scene, &slate.shot, &slate.take})
+    if (!field->empty()) stem += (stem.empty() ? "" : "_") + safe_part(*field);
+  return unique_path(directory, stem.empty() ? "take" : stem);
+}
+
 std::filesystem::path new_recording_path(const std::filesystem::path& directory) {
   const std::time_t now = std::time(nullptr);
   std::tm local{};
   localtime_r(&now, &local);
   char stamp[32];
   std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &local);
-  std::filesystem::path path = directory / fmt::format("facecapd-{}.fcrec", stamp);
-  for (int n = 2; std::filesystem::exists(path); ++n) path = directory / fmt::format("facecapd-{}-{}.fcrec", stamp, n);
-  return path;
+  return unique_path(directory, fmt::format("facecapd-{}", stamp));
 }
 
 }  // namespace facecap::outputs

@@ -75,5 +75,9 @@ class Recorder final : public OutputSink {
 
 // "facecapd-20240131-142501.fcrec" (local time), made unique with -2, -3, ... if taken.
 std::filesystem::path new_recording_path(const std::filesystem::path& directory);
+// A take's file from its slate: "<scene>_<shot>_<take>.fcrec" (the fields given, each
+// reduced to letters, digits, '.', '-' and at most 64 bytes; other bytes become '-'),
+// made unique with -2, -3, ... if taken.
+std::filesystem::path new_take_path(const std::filesystem::path& directory, const formats::RecordingHeader& slate);
 
 }  // namespace facecap::outputs

@@ -1,0 +1,69 @@
+#pragma once
+// What the control API asks of the supervisor, and the bounded queue that carries it.
+// The I/O thread parses a request into a Command and pushes it; the supervisor pops it
+// on its own thread, does the work (long work on a worker thread) and calls `reply`
+// once, from whichever thread finished. A full queue refuses the command (503) rather
+// than growing. Nothing here is real-time code; the solve thread never sees it.
+#include <cstddef>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <variant>
+
+#include <nlohmann/json.hpp>
+
+namespace facecap::control {
+
+// An HTTP status and a JSON body.
+struct Reply {
+  int status = 200;
+  nlohmann::json body;
+};
+// {"error": what} with a 4xx/5xx status.
+Reply error_reply(int status, std::string what);
+using ReplyFn = std::function<void(Reply)>;
+
+struct ListActors {};
+// An actor's profile by name (in calibration.profiles_directory) or by path.
+struct SelectActor {
+  std::string name;
+  std::string file;
+};
+// Capture `seconds` of the live source, calibrate on its most neutral stretch, swap the
+// result in; save it as profile `save` when given.
+struct Calibrate {
+  double seconds = 3.0;
+  std::string save;
+};
+// A take and its slate.
+struct StartRecording {
+  std::string take, actor, scene, shot, notes;
+  bool markers_only = false;  // raw markers only: a new actor with no profile yet
+};
+struct StopRecording {};
+
+using Request = std::variant<ListActors, SelectActor, Calibrate, StartRecording, StopRecording>;
+
+struct Command {
+  Request request;
+  ReplyFn reply;
+};
+
+class CommandQueue {
+ public:
+  explicit CommandQueue(std::size_t capacity) : capacity_(capacity) {}
+
+  // False (the command not taken) when the queue is full. Any thread.
+  bool push(Command command);
+  // The oldest command, if any. Any thread.
+  std::optional<Command> pop();
+
+ private:
+  std::size_t capacity_;
+  std::mutex mutex_;
+  std::deque<Command> commands_;
+};
+
+}  // namespace facecap::control

@@ -1,0 +1,454 @@
+// The control API: request handling on bytes (routes, JSON bodies, tokens, a full queue),
+// then facecapd in-process on the sim with the API on: status, Prometheus metrics checked
+// by promtool, takes, markers-only takes, calibration on the box, actor swaps, the
+// WebSocket stream; the capture-quality state of the issue's motivating failure; --version.
+#include <cstdio>
+#include <regex>
+#include <thread>
+
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/websocket.hpp>
+#include <catch2/catch.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "config/config_file.hpp"
+#include "control/api.hpp"
+#include "control/http_client.hpp"
+#include "core/error.hpp"
+#include "core/time.hpp"
+#include "daemon/daemon.hpp"
+#include "formats/recording.hpp"
+#include "pipeline/recording_header.hpp"
+#include "tests/test_support.hpp"
+
+using namespace facecap;
+using Catch::Contains;
+using nlohmann::json;
+namespace fs = std::filesystem;
+namespace http = boost::beast::http;
+
+namespace {
+
+control::HttpRequest request(http::verb method, std::string target, std::string body = {}, std::string token = {}) {
+  control::HttpRequest r{method, target, 11};
+  if (!token.empty()) r.set(http::field::authorization, "Bearer " + token);
+  r.body() = std::move(body);
+  r.prepare_payload();
+  return r;
+}
+
+struct Api {
+  control::StatusBoard board;
+  control::CommandQueue queue{2};
+  control::ApiContext context{board, queue, "", "test"};
+  std::optional<control::HttpResponse> later;
+
+  std::optional<control::HttpResponse> handle(const control::HttpRequest& r) {
+    return control::handle_request(r, context, [this](control::HttpResponse response) { later = std::move(response); });
+  }
+  // The status and the JSON error of an immediate answer.
+  std::pair<int, std::string> refusal(const control::HttpRequest& r) {
+    const auto response = handle(r);
+    REQUIRE(response);
+    const json body = json::parse(response->body());
+    return {int(response->result_int()), body.value("error", "")};
+  }
+};
+
+// facecapd in-process on the sim, its supervisor on a thread of the test.
+class RunningDaemon {
+ public:
+  explicit RunningDaemon(std::vector<std::string> overrides)
+      : daemon_({.handle_signals = false, .version = "facecapd test"}, config::load_config("", overrides)) {
+    daemon_.start();
+    thread_ = std::thread([this] { status_ = daemon_.run(); });
+  }
+  ~RunningDaemon() { stop(); }
+  int stop() {
+    if (thread_.joinable()) {
+      daemon_.request_stop();
+      thread_.join();
+    }
+    return status_;
+  }
+  daemon::Daemon& operator*() { return daemon_; }
+  daemon::Daemon* operator->() { return &daemon_; }
+
+ private:
+  daemon::Daemon daemon_;
+  std::thread thread_;
+  int status_ = -1;
+};
+
+std::string unique_shm(const std::string& what) { return fmt::format("facecap-test-{}-{}", ::getpid(), what); }
+
+json get_json(control::HttpClient& client, const std::string& target) {
+  const control::HttpResult r = client.request("GET", target);
+  INFO(target << ": " << r.body);
+  REQUIRE(r.status == 200);
+  return json::parse(r.body);
+}
+
+json post(control::HttpClient& client, const std::string& target, const json& body, int want_status = 200) {
+  const control::HttpResult r = client.request("POST", target, body.dump());
+  INFO("POST " << target << " " << body.dump() << ": " << r.body);
+  REQUIRE(r.status == want_status);
+  return json::parse(r.body);
+}
+
+// Bytes sent as they are on a new connection; what comes back until the server closes.
+std::string raw_exchange(uint16_t port, const std::string& bytes) {
+  boost::asio::io_context io;
+  boost::asio::ip::tcp::socket socket(io);
+  socket.connect({boost::asio::ip::make_address("127.0.0.1"), port});
+  boost::asio::write(socket, boost::asio::buffer(bytes));
+  std::string answer;
+  boost::system::error_code ec;
+  char buffer[4096];
+  while (std::size_t n = socket.read_some(boost::asio::buffer(buffer), ec)) answer.append(buffer, n);
+  return answer;
+}
+
+// `promtool check metrics` of text: its exit status and what it said.
+std::pair<int, std::string> promtool_check(const std::string& text, const fs::path& dir) {
+  test::write_text(dir / "metrics.txt", text);
+  int status = 0;
+  const std::string said = test::run_and_capture(fmt::format("promtool check metrics < '{}' 2>&1", (dir / "metrics.txt").string()), &status);
+  return {WEXITSTATUS(status), said};
+}
+
+bool have_promtool() { return std::system("command -v promtool > /dev/null 2>&1") == 0; }
+
+}  // namespace
+
+TEST_CASE("the API answers malformed requests with the right 4xx and a JSON error") {
+  Api api;
+  CHECK(api.refusal(request(http::verb::get, "/nope")) == std::pair{404, std::string("no route /nope")});
+  {
+    const auto response = api.handle(request(http::verb::delete_, "/status"));
+    REQUIRE(response);
+    CHECK(response->result_int() == 405);
+    CHECK((*response)[http::field::allow] == "GET");
+  }
+  CHECK(api.refusal(request(http::verb::post, "/actor", "{\"name\": ")) ==
+        std::pair{400, std::string("the body is not valid JSON (at byte 10)")});
+  CHECK(api.refusal(request(http::verb::post, "/calibrate", R"({"seconds": 1e309})")) ==
+        std::pair{400, std::string("the body holds a number too large for a double")});  // fuzz finding: threw
+  CHECK(api.refusal(request(http::verb::post, "/actor", "[1, 2]")) == std::pair{400, std::string("the body must be a JSON object")});
+  CHECK(api.refusal(request(http::verb::post, "/actor", R"({"nmae": "alice"})")) ==
+        std::pair{400, std::string("unknown field \"nmae\" (allowed: file, name)")});
+  CHECK(api.refusal(request(http::verb::post, "/actor", R"({"name": "../etc/passwd"})")).first == 400);
+  CHECK(api.refusal(request(http::verb::post, "/actor", R"({"name": "a", "file": "b"})")).first == 400);
+  CHECK(api.refusal(request(http::verb::post, "/calibrate", R"({"seconds": 100})")) ==
+        std::pair{400, std::string("\"seconds\" must be a number from 0.5 to 30")});
+  CHECK(api.refusal(request(http::verb::post, "/record/start", R"({"scene": "s"})")).second == "\"take\" is required: the take's name");
+  CHECK(api.refusal(request(http::verb::post, "/record/start", R"({"take": 7})")).second == "\"take\" must be a string");
+  CHECK(api.refusal(request(http::verb::post, "/record/stop", R"({"now": true})")).first == 400);
+  CHECK(api.refusal(request(http::verb::get, "/stream")).first == 400);  // not an upgrade
+  CHECK(api.queue.pop() == std::nullopt);  // nothing malformed reached the supervisor
+
+  // Commands go to the queue; its replies come later; a full queue refuses with 503.
+  CHECK_FALSE(api.handle(request(http::verb::post, "/record/start", R"({"take": "t1", "markers_only": true})")));
+  CHECK_FALSE(api.handle(request(http::verb::get, "/actors")));
+  CHECK(api.refusal(request(http::verb::post, "/record/stop")).first == 503);
+  std::optional<control::Command> command = api.queue.pop();
+  REQUIRE(command);
+  const auto* start = std::get_if<control::StartRecording>(&command->request);
+  REQUIRE(start);
+  CHECK(start->take == "t1");
+  CHECK(start->markers_only);
+  command->reply({200, {{"file", "t1.fcrec"}}});
+  REQUIRE(api.later);
+  CHECK(api.later->result_int() == 200);
+  CHECK(json::parse(api.later->body())["file"] == "t1.fcrec");
+
+  // Reads come from the board.
+  api.board.publish(std::make_shared<control::Published>(control::Published{"{\"x\":1}\n", "m 1\n", "{}\n"}));
+  const auto status = api.handle(request(http::verb::get, "/status?pretty"));
+  REQUIRE(status);
+  CHECK(status->result_int() == 200);
+  CHECK(status->body() == "{\"x\":1}\n");
+  CHECK((*status)[http::field::content_type] == "application/json");
+  const auto metrics = api.handle(request(http::verb::get, "/metrics"));
+  REQUIRE(metrics);
+  CHECK(metrics->body() == "m 1\n");
+  CHECK((*metrics)[http::field::content_type].starts_with("text/plain; version=0.0.4"));
+}
+
+TEST_CASE("a bearer token is required when one is set: missing and wrong give 401, right passes") {
+  Api api;
+  api.context.token = "s3cret";
+  auto missing = api.handle(request(http::verb::get, "/status"));
+  REQUIRE(missing);
+  CHECK(missing->result_int() == 401);
+  CHECK((*missing)[http::field::www_authenticate] == "Bearer realm=\"facecap\"");
+  auto wrong = api.handle(request(http::verb::get, "/status", "", "s3cree"));
+  REQUIRE(wrong);
+  CHECK(wrong->result_int() == 401);
+  CHECK((*wrong)[http::field::www_authenticate] == "Bearer realm=\"facecap\", error=\"invalid_token\"");
+  CHECK(api.refusal(request(http::verb::get, "/nope", "", "s3cret")).first == 404);  // past the token: routed
+  auto right = api.handle(request(http::verb::get, "/status", "", "s3cret"));
+  REQUIRE(right);
+  CHECK(right->result_int() == 200);
+  CHECK(std::holds_alternative<control::HttpResponse>(control::accept_stream(request(http::verb::get, "/stream"), api.context)));
+}
+
+TEST_CASE("the stream's query: rate and vertices, bounded") {
+  Api api;
+  const auto ok = control::accept_stream(request(http::verb::get, "/stream?rate=12.5&vertices=1"), api.context);
+  REQUIRE(std::holds_alternative<control::StreamRequest>(ok));
+  CHECK(std::get<control::StreamRequest>(ok).rate_hz == 12.5);
+  CHECK(std::get<control::StreamRequest>(ok).vertices);
+  for (const char* bad : {"/stream?rate=0", "/stream?rate=500", "/stream?rate=x", "/stream?vertices=yes", "/stream?fps=3"}) {
+    INFO(bad);
+    const auto refused = control::accept_stream(request(http::verb::get, bad), api.context);
+    REQUIRE(std::holds_alternative<control::HttpResponse>(refused));
+    CHECK(std::get<control::HttpResponse>(refused).result_int() == 400);
+  }
+}
+
+TEST_CASE("facecapd refuses a control API on a non-loopback address without a token") {
+  CHECK_THROWS_WITH(config::load_config("", {"control.http.enabled=true", "control.http.address=0.0.0.0"}),
+                    Contains("[control.http.token_file]: the control API listens on 0.0.0.0, which is not loopback: a "
+                             "bearer token is required"));
+  CHECK_THROWS_WITH(config::load_config("", {"control.http.enabled=true", "control.http.address=localhost"}),
+                    Contains("\"localhost\" is not an IPv4 or IPv6 address"));
+  CHECK_NOTHROW(config::load_config("", {"control.http.enabled=true", "control.http.address=::1"}));
+  CHECK_NOTHROW(config::load_config("", {"control.http.enabled=true", "control.http.address=127.0.0.2"}));
+}
+
+TEST_CASE("a recording's rate is the source's: 60 Hz under a 120 Hz loop records 60 Hz") {
+  CHECK(pipeline::recorded_rate_hz(60, 120, false) == 60);
+  CHECK(pipeline::recorded_rate_hz(240, 120, false) == 120);  // every other frame
+  CHECK(pipeline::recorded_rate_hz(240, 120, true) == 240);   // lockstep: every frame
+  CHECK(pipeline::recorded_rate_hz(0, 120, false) == 0);      // unknown: readers use the frames' times
+}
+
+TEST_CASE("metrics text passes promtool check metrics") {
+  if (!have_promtool()) {
+    WARN("SKIPPED: promtool (Debian package prometheus) is not installed");
+    return;
+  }
+  control::StatusReport r;
+  r.version = "facecapd \"quoted\" \\ 1";
+  r.rig_name = "builtin";
+  r.quality = "degraded";
+  r.flagged_frames = {{"head_pose_held", 3}, {"too_few_markers", 0}};
+  r.outputs = {{.name = "shm", .offered = 10, .delivered = 10}, {.name = "recording", .offered = 10, .delivered = 9, .dropped = 1}};
+  const auto [status, said] = promtool_check(control::metrics_text(r), test::scratch_dir("promtool-unit"));
+  INFO(said);
+  CHECK(status == 0);
+  CHECK(said.empty());
+}
+
+TEST_CASE("control API end to end on the sim: status, metrics, takes, calibration, actor swap, stream, tokens") {
+  const fs::path dir = test::scratch_dir("control-e2e");
+  test::write_text(dir / "token", "s3cret\n");
+  // A 60 Hz source under a 120 Hz loop, no dropouts so that the neutral capture is whole.
+  RunningDaemon d({"outputs.shm.name=" + unique_shm("control"), "control.http.enabled=true", "control.http.port=0",
+                   "control.http.token_file=" + (dir / "token").string(), "control.status_interval_s=0.25",
+                   "source.sim.rate_hz=60", "source.sim.dropout_probability=0",
+                   "outputs.recording.directory=" + (dir / "takes").string(),
+                   "calibration.profiles_directory=" + (dir / "profiles").string()});
+  const uint16_t port = d->control_port();
+  REQUIRE(port != 0);
+  control::HttpClient client("127.0.0.1", port, "s3cret");
+  std::this_thread::sleep_for(std::chrono::milliseconds(600));
+
+  // Tokens, routes and bodies as the server sees them.
+  CHECK(control::HttpClient("127.0.0.1", port).request("GET", "/status").status == 401);
+  CHECK(control::HttpClient("127.0.0.1", port, "wrong").request("GET", "/status").status == 401);
+  CHECK(client.request("GET", "/no/such/route").status == 404);
+  CHECK(client.request("POST", "/record/start", "{\"take\": ").status == 400);
+  CHECK_THAT(raw_exchange(port, "GARBAGE\r\n\r\n"), Contains("HTTP/1.1 400 Bad Request") && Contains("malformed HTTP request"));
+  CHECK_THAT(raw_exchange(port, fmt::format("POST /actor HTTP/1.1\r\nContent-Length: {}\r\n\r\n", 1 << 20)),
+             Contains("HTTP/1.1 413"));
+
+  json status = get_json(client, "/status");
+  CHECK(status["version"] == "facecapd test");
+  CHECK(status["source"]["driver"] == "sim");
+  CHECK(status["source"]["rate_hz"] == 60.0);
+  CHECK(status["rig"]["name"] == "builtin");
+  CHECK(status["calibration"]["markers"] == 48);
+  CHECK(status["window"]["quality"] == "good");
+  CHECK(status["window"]["markers_expected"] == 48.0);
+  CHECK(status["window"]["solved_fps"].get<double>() == Approx(60).epsilon(0.1));
+  CHECK(status["outputs"].size() == 3);  // shm, recording, stream
+  CHECK(status["recording"]["active"] == false);
+  CHECK(get_json(client, "/config")["values"]["control.http.port"] == 0);
+
+  const control::HttpResult metrics = client.request("GET", "/metrics");
+  REQUIRE(metrics.status == 200);
+  CHECK_THAT(metrics.body, Contains("facecap_frames_solved_total ") && Contains("facecap_capture_quality{state=\"good\"} 1"));
+  if (have_promtool()) {
+    const auto [checked, said] = promtool_check(metrics.body, dir);
+    INFO(said);
+    CHECK(checked == 0);
+    CHECK(said.empty());
+  } else {
+    WARN("promtool (Debian package prometheus) is not installed: metrics not checked by it");
+  }
+
+  // A take with its slate: the file is named from it, the HEAD holds it, the rate is the source's.
+  const json started = post(client, "/record/start", {{"take", "t/1"}, {"scene", "s 1"}, {"shot", "2"}, {"notes", "first"}});
+  CHECK(started["file"] == (dir / "takes" / "s-1_2_t-1.fcrec").string());
+  CHECK(post(client, "/record/start", {{"take", "again"}}, 409)["error"] == "a take is being recorded: stop it first");
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));
+  CHECK(get_json(client, "/status")["recording"]["active"] == true);
+  const json stopped = post(client, "/record/stop", json::object());
+  CHECK(stopped["marker_frames"].get<uint64_t>() > 20);
+  CHECK(post(client, "/record/stop", json::object(), 409)["error"] == "no take is being recorded");
+  {
+    formats::RecordingReader take(stopped["file"].get<std::string>());
+    CHECK_FALSE(take.truncated());
+    CHECK(take.header().format_version == 3);
+    CHECK(take.header().take == "t/1");
+    CHECK(take.header().scene == "s 1");
+    CHECK(take.header().shot == "2");
+    CHECK(take.header().notes == "first");
+    CHECK(take.header().rate_hz == 60.0);
+    CHECK(take.solved_frame_count() == take.marker_frame_count());
+    CHECK(take.marker_frame_count() == stopped["marker_frames"].get<uint64_t>());
+    // Recorded frames 1/60 s apart on the source's clock.
+    MarkerFrame a, b;
+    take.read_marker_frame(0, a);
+    take.read_marker_frame(take.marker_frame_count() - 1, b);
+    CHECK(double(b.source_time_ns - a.source_time_ns) / double(b.frame_no - a.frame_no) == Approx(1e9 / 60).epsilon(0.001));
+  }
+
+  // A new actor with no profile: markers only.
+  post(client, "/record/start", {{"take", "newface"}, {"actor", "bob"}, {"markers_only", true}});
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const json markers_only = post(client, "/record/stop", json::object());
+  {
+    formats::RecordingReader take(markers_only["file"].get<std::string>());
+    CHECK(take.header().actor == "bob");
+    CHECK(take.header().rig_name.empty());
+    CHECK(take.header().calibration.empty());
+    CHECK(take.solved_frame_count() == 0);
+    CHECK(take.marker_frame_count() > 5);
+  }
+
+  // Calibration on the box, saved as a profile, then swapped for the default and back.
+  const json calibrated = post(client, "/calibrate", {{"seconds", 2.0}, {"save", "alice"}});
+  CHECK(calibrated["actor"] == "alice");
+  CHECK(calibrated["frames"].get<uint64_t>() >= 100);
+  CHECK(calibrated["residual_mm"]["median"].get<double>() < 1.0);
+  CHECK(calibrated["markers_in_source"] == 52);
+  CHECK(fs::exists(dir / "profiles" / "alice.toml"));
+  CHECK(post(client, "/calibrate", {{"seconds", 1.0}, {"save", "alice"}}, 409)["error"].get<std::string>().starts_with("profile \"alice\" exists"));
+  const json actors = get_json(client, "/actors");
+  REQUIRE(actors["actors"].size() == 1);
+  CHECK(actors["actors"][0]["name"] == "alice");
+  CHECK(actors["actors"][0]["usable"] == true);
+  CHECK(post(client, "/actor", {{"name", "carol"}}, 404)["error"].get<std::string>().starts_with("no profile \"carol\""));
+  const json swapped = post(client, "/actor", {{"name", "alice"}});
+  CHECK(swapped["markers"] == 52);
+  CHECK(swapped["head_stabilised"] == true);
+  std::this_thread::sleep_for(std::chrono::milliseconds(600));
+  status = get_json(client, "/status");
+  CHECK(status["actor"] == "alice");
+  CHECK(status["window"]["markers_expected"] == 52.0);
+  CHECK(status["window"]["quality"] == "good");
+  CHECK(status["totals"]["pipeline_swaps"] == 2);
+  INFO("missed deadlines over the run: " << status["totals"]["missed_deadlines"]);
+  CHECK(status["totals"]["swap_misses"] == 0);  // no swap cost a deadline
+
+  // The WebSocket stream at 20 frames a second, with vertices.
+  {
+    namespace websocket = boost::beast::websocket;
+    boost::asio::io_context io;
+    boost::asio::ip::tcp::socket socket(io);
+    socket.connect({boost::asio::ip::make_address("127.0.0.1"), port});
+    websocket::stream<boost::asio::ip::tcp::socket> ws(std::move(socket));
+    ws.set_option(websocket::stream_base::decorator(
+        [](websocket::request_type& r) { r.set(http::field::authorization, "Bearer s3cret"); }));
+    ws.handshake("127.0.0.1", "/stream?rate=20&vertices=1");
+    boost::beast::flat_buffer buffer;
+    ws.read(buffer);
+    const json schema = json::parse(boost::beast::buffers_to_string(buffer.data()));
+    CHECK(schema["type"] == "schema");
+    CHECK(schema["shapes"].size() == 45);
+    CHECK(schema["markers"].size() == 52);
+    CHECK(schema["vertex_count"] == 6174);
+    CHECK(schema["triangles"].size() % 3 == 0);
+    int frames = 0, statuses = 0;
+    int64_t first_ns = 0, last_ns = 0;
+    const int64_t until = monotonic_now_ns() + 1500 * kNsPerMs;
+    while (monotonic_now_ns() < until) {
+      buffer.clear();
+      ws.read(buffer);
+      const json message = json::parse(boost::beast::buffers_to_string(buffer.data()));
+      if (message["type"] == "status") {
+        ++statuses;
+        CHECK(message["status"]["actor"] == "alice");
+        continue;
+      }
+      REQUIRE(message["type"] == "frame");
+      CHECK(message["weights"].size() == 45);
+      CHECK(message["vertices"].size() == 3 * 6174);
+      CHECK(message["markers"]["residual_mm"].size() == 52);
+      CHECK(message["telemetry"]["markers_expected"] == 52);
+      (frames == 0 ? first_ns : last_ns) = message["receive_time_ns"].get<int64_t>();
+      ++frames;
+    }
+    ws.close(websocket::close_code::normal);
+    REQUIRE(frames > 2);
+    const double rate = double(frames - 1) / (double(last_ns - first_ns) / 1e9);
+    INFO(frames << " frames at " << rate << " per second");
+    CHECK(rate == Approx(20).epsilon(0.25));
+    CHECK(statuses >= 1);
+  }
+  CHECK(d.stop() == 0);
+}
+
+TEST_CASE("with 90% of markers missing, the capture reads bad and STATUS says why (the issue's motivating failure)") {
+  for (const double dropout : {0.005, 0.9}) {
+    RunningDaemon d({"outputs.shm.name=" + unique_shm(fmt::format("quality{}", dropout)),
+                     fmt::format("source.sim.dropout_probability={}", dropout), "control.status_interval_s=0.25"});
+    std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+    const daemon::Figures f = d->figures_since_start();
+    const std::string status = d->status_line(f);
+    INFO(status);
+    CHECK(f.solved_fps == Approx(120).epsilon(0.1));  // the loop keeps its rate either way
+    if (dropout < 0.5) {
+      CHECK(d->quality(f).state == daemon::CaptureQuality::kGood);
+      CHECK_THAT(status, Contains("capture good"));
+      CHECK(f.capture.markers_used > 47.0);
+    } else {
+      CHECK(d->quality(f).state == daemon::CaptureQuality::kBad);
+      CHECK(f.capture.markers_used < 8.0);  // 4.8 of 48 expected
+      CHECK(f.capture.head_held_fraction > 0.95);
+      CHECK_THAT(status, Contains("capture bad: ") && Contains(" of 48 markers used (") &&
+                             Contains("head pose held in 100% of frames"));
+    }
+    CHECK(d.stop() == 0);
+  }
+}
+
+TEST_CASE("facecapd --version and facecap --version give the version and, in a checkout, the commit") {
+  const fs::path dir = test::scratch_dir("version");
+  const test::Run daemon = test::run_built("daemon/facecapd", dir, {"--version"});
+  const test::Run tool = test::run_facecap(dir, {"--version"});
+  CHECK(daemon.exit_code == 0);
+  CHECK(tool.exit_code == 0);
+  CHECK_THAT(daemon.out, Catch::StartsWith("facecapd 0.1.0"));
+  CHECK_THAT(tool.out, Catch::StartsWith("facecap 0.1.0"));
+  int status = 0;
+  test::run_and_capture(fmt::format("git -C '{}' rev-parse --git-dir > /dev/null 2>&1", FACECAP_SOURCE_DIR), &status);
+  if (WEXITSTATUS(status) != 0) {
+    WARN("not a git checkout: only the version is checked");
+    return;
+  }
+  // The commit the binaries were built from (HEAD may have moved since): 12 hex digits,
+  // "-dirty" with uncommitted changes, and a commit of this repository.
+  for (const std::string& out : {daemon.out, tool.out}) {
+    std::smatch commit;
+    REQUIRE(std::regex_search(out, commit, std::regex(R"(\(git ([0-9a-f]{12})(-dirty)?\))")));
+    test::run_and_capture(fmt::format("git -C '{}' cat-file -e '{}^{{commit}}' 2>&1", FACECAP_SOURCE_DIR, commit[1].str()), &status);
+    CHECK(WEXITSTATUS(status) == 0);
+  }
+}
