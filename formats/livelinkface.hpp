@@ -14,6 +14,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/frame.hpp"
 #include "core/time.hpp"
 #include "formats/arkit.hpp"
 
@@ -47,5 +48,20 @@ std::string write_livelinkface(const FaceTake& take);
 // "HH:MM:SS:FF.fff" <-> Timecode at kLiveLinkTimecodeRate.
 std::optional<Timecode> parse_livelink_timecode(std::string_view text) noexcept;
 std::string format_livelink_timecode(const Timecode& timecode);
+
+// The Live Link timecode of a time of day (ns; wraps at 24 h), rounded to the nearest
+// thousandth of a 60 fps frame as the CSV writes it, so a frame a hair before a frame
+// boundary is that frame (.000), not the one before (.999). Frames of a take up to
+// 60 Hz each get their own HH:MM:SS:FF.
+Timecode livelink_timecode_at(int64_t time_of_day_ns) noexcept;
+// A timecode at any rate as time of day in ns (frames and subframe at tc.rate_hz).
+int64_t timecode_time_ns(const Timecode& timecode) noexcept;
+
+// One CSV row from a solved frame: each ARKit weight the mean of the rig shapes
+// `arkit_to_rig` (match_arkit_to_rig) gives it, 0 for none; head yaw, pitch and roll
+// from the head rotation (eyes 0); the frame's timecode re-based to 60 fps, or its
+// source time when it has none.
+FaceFrame face_frame_from_solved(const SolvedFrame& solved,
+                                 const std::array<std::vector<std::size_t>, kArkitShapeCount>& arkit_to_rig);
 
 }  // namespace facecap::formats

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "core/io.hpp"
 #include "core/units.hpp"
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
@@ -149,6 +150,14 @@ double percentile(std::vector<double>& values, double p) {
   const std::size_t index = std::size_t(std::max(rank, 1.0)) - 1;
   std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(index), values.end());
   return values[index];
+}
+
+void write_live_link_csv(const std::filesystem::path& path, const formats::FaceTake& face) {
+  if (face.rate_hz > formats::kLiveLinkTimecodeRate + 0.5)
+    fmt::print(stderr, "facecap: warning: {}: {:g} Hz is above the Live Link Face timecode's {} fps: consecutive rows share "
+               "a timecode frame and differ in its fraction\n", path.string(), face.rate_hz, formats::kLiveLinkTimecodeRate);
+  const std::string text = formats::write_livelinkface(face);
+  write_file_atomically(path, std::span<const char>(text.data(), text.size()));
 }
 
 }  // namespace facecap::tools
