@@ -35,8 +35,10 @@ TEST_CASE("meshik matches the articulated jaw at least as well as the paper's no
   // The paper's pipeline: Eq. 2 weights, then Eq. 4-5 (no refinement of the weights).
   SolverParams paper;
   paper.weight_refinements = 0;
+  SolverParams refined;
+  refined.weight_refinements = 2;  // two steps along the hinge's marker paths
   const auto paper_model = build_solver_model(rig, layout, paper);
-  const auto model = build_solver_model(rig, layout);
+  const auto model = build_solver_model(rig, layout, refined);
   auto run = [&](const std::shared_ptr<const SolverModel>& m) {
     auto solver = make_solver(SolverMethod::kNonlinear, m);
     SolveResult out = solver->make_result();

@@ -69,7 +69,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   if (!mapper.stabilising() && o.settings.mapper.stabilise_head)
     throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
                                          mapper.stable_markers_found(), cal.stable_markers.size()));
-  const auto model = build_solver_model(rig, cal.bindings(), o.settings.params);
+  const auto model = build_solver_model(rig, cal.bindings(), o.settings.params, cal.unfitted_shapes());
   const auto methods = select_solvers(o.solvers);
 
   const Eigen::Index K = mapper.marker_count();

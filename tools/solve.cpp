@@ -115,6 +115,9 @@ void run_solve(const Options& o) {
   fmt::print("{} -> {}: {} frames with {} ({}; {} of 52 ARKit shapes on the rig); head pose held in {}, face held in {}{}\n",
              o.take, o.output, take.frames.size(), method, settings.origin, mapped_shapes, held_head, held_face,
              o.check_labels ? fmt::format(", {} markers relabelled", relabelled) : std::string());
+  if (!cal.unobserved_shapes.empty())
+    fmt::print("{} shapes the calibrated markers cannot observe stayed at 0: {}\n", cal.unobserved_shapes.size(),
+               fmt::join(cal.unfitted_shapes(), ", "));
 }
 
 }  // namespace
