@@ -186,6 +186,11 @@ TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a syntheti
     CHECK(heldout > 0.0);
     CHECK(heldout < 3.0);
     CHECK(s["heldout_mm"]["p95"].get<double>() >= heldout);
+    // The same error in the actor's mm: the take is in mm, the built-in rig in its own units.
+    const double actor_scale = eval["actor_mm_per_rig_mm"].get<double>();
+    const auto used = align::load_calibration_profile(dir / "actor.toml");
+    CHECK(actor_scale == Approx(used.take_mm_per_unit / (used.take_to_rig.scale * used.rig_mm_per_unit)));
+    CHECK(s["heldout_actor_mm"]["median"].get<double>() == Approx(heldout * actor_scale));
     CHECK(s["heldout_mm"]["samples"].get<int>() == 9 * int(eval["heldout_markers"].size()));
     CHECK(s["jitter_mm"]["mean"].get<double>() >= 0.0);
     CHECK(s.contains("intersections"));
