@@ -30,10 +30,7 @@ formats::FaceTake solved_weights_of(const std::filesystem::path& input, Progress
   face.rate_hz = reader.header().rate_hz;
   SolvedFrame solved;
   for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) {
-    reader.read_solved_frame(i, solved);
-    if (solved.weights.size() != Eigen::Index(reader.header().shape_names.size()))
-      throw file_error(input.string(), fmt::format("solved frame {} has {} weights for the header's {} shapes", i,
-                                                   solved.weights.size(), reader.header().shape_names.size()));
+    read_solved_frame_checked(reader, i, solved);
     face.frames.push_back(formats::face_frame_from_solved(solved, arkit));
     bar.update(i + 1, reader.solved_frame_count());
   }

@@ -69,10 +69,7 @@ std::optional<SolvedSummary> summarise_solved(const std::filesystem::path& path)
     for (auto& r : *range) r = {std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
   SolvedFrame solved;
   for (std::size_t f = 0; f < count; ++f) {
-    reader.read_solved_frame(f, solved);
-    if (solved.weights.size() != Eigen::Index(names.size()))
-      throw file_error(path.string(), fmt::format("solved frame {} has {} weights for the header's {} shapes", f,
-                                                  solved.weights.size(), names.size()));
+    read_solved_frame_checked(reader, f, solved);
     for (std::size_t s = 0; s < names.size(); ++s) weights[s][f] = solved.weights[Eigen::Index(s)];
     const auto angles = formats::face_frame_from_solved(solved, arkit).angles;  // the CSV's head angles
     for (int i = 0; i < 3; ++i) {

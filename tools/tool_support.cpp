@@ -152,6 +152,14 @@ double percentile(std::vector<double>& values, double p) {
   return values[index];
 }
 
+void read_solved_frame_checked(const formats::RecordingReader& reader, std::size_t i, SolvedFrame& out) {
+  reader.read_solved_frame(i, out);
+  const std::size_t shapes = reader.header().shape_names.size();
+  if (std::size_t(out.weights.size()) != shapes)
+    throw file_error(reader.name(), fmt::format("solved frame {} has {} weights for the header's {} shapes", i,
+                                                out.weights.size(), shapes));
+}
+
 void write_live_link_csv(const std::filesystem::path& path, const formats::FaceTake& face) {
   if (face.rate_hz > formats::kLiveLinkTimecodeRate + 0.5)
     fmt::print(stderr, "facecap: warning: {}: {:g} Hz is above the Live Link Face timecode's {} fps: consecutive rows share "

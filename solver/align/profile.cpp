@@ -52,7 +52,7 @@ std::string write_calibration_profile(const Calibration& c) {
   std::string body;
   auto out = [&body](std::string_view s) { body += s; };
   out("# facecap calibration profile: written by `facecap calibrate`, read by solve, eval and facecapd.\n");
-  // Version 2 only where it is needed, so that older readers keep reading the rest.
+  // The lowest version that holds what is written, so that older readers keep reading the rest.
   out(fmt::format("version = {}\n", c.observability_known ? 3 : !c.head_markers.empty() ? 2 : 1));
   out("\n[rig]\n");
   out(fmt::format("name = {}\ncontent_hash = \"{:016x}\"\nunits = {}\n", quote(c.rig_name), c.rig_hash, quote(unit_name(c.rig_mm_per_unit))));
