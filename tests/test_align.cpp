@@ -551,7 +551,8 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   CHECK_THROWS_WITH(read_calibration_profile(unknown, "actor.toml"),
                     Catch::Contains(fmt::format("actor.toml:{}:", line_of(unknown, "residual_cm"))) && Catch::Contains("unknown key 'residual_cm'"));
   std::string newer = unsummed;
-  newer.replace(newer.find("version = 3"), 11, "version = 9");
+  REQUIRE(newer.find("\nversion = 3\n") != std::string::npos);
+  newer.replace(newer.find("\nversion = 3\n") + 1, 11, "version = 9");
   CHECK_THROWS_WITH(read_calibration_profile(newer, "actor.toml"), Catch::Contains("version 9"));
   std::string bad_rotation = unsummed;
   bad_rotation.replace(bad_rotation.find("rotation = [["), 13, "rotation = [[2, ");
