@@ -315,6 +315,10 @@ void Daemon::log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::
                calibration_.markers.size(),
                mapper.stabilising() ? fmt::format("on ({} stable markers)", mapper.stable_markers_found()) : "off",
                mapper.source_to_take() != 1.0 ? fmt::format(", source units scaled by {:g}", mapper.source_to_take()) : "");
+  if (!calibration_.unobserved_shapes.empty())
+    spdlog::info("{} shapes move no calibrated marker by {} mm at full weight and stay at 0 (left out of the weight "
+                 "fit): {}", calibration_.unobserved_shapes.size(), calibration_.observable_shape_mm,
+                 fmt::join(calibration_.unfitted_shapes(), ", "));
   if (mapper.markers_found() < calibration_.markers.size())
     spdlog::warn("the source lacks {} of the calibration's markers; they count as missing in every frame",
                  calibration_.markers.size() - mapper.markers_found());

@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <numeric>
+
+#include <Eigen/Geometry>
 
 #include <fmt/format.h>
 
@@ -27,12 +30,6 @@ std::array<std::size_t, kArkitShapeCount> csv_shape_order() {
   swap_columns("JawLeft", "JawRight");
   swap_columns("MouthLeft", "MouthRight");
   return order;
-}
-
-int64_t timecode_ns(const Timecode& tc) {
-  const int64_t seconds = int64_t(tc.hours) * 3600 + int64_t(tc.minutes) * 60 + tc.seconds;
-  const double frames = double(tc.frames) + double(tc.subframe);
-  return seconds * kNsPerSecond + std::llround(frames * 1e9 / kLiveLinkTimecodeRate);
 }
 
 // Where each CSV column goes.
@@ -96,6 +93,39 @@ std::optional<Timecode> parse_livelink_timecode(std::string_view text) noexcept 
 std::string format_livelink_timecode(const Timecode& tc) {
   const int thousandths = std::clamp(int(std::lround(double(tc.subframe) * 1000.0)), 0, 999);
   return fmt::format("{:02}:{:02}:{:02}:{:02}.{:03}", tc.hours, tc.minutes, tc.seconds, tc.frames, thousandths);
+}
+
+int64_t timecode_time_ns(const Timecode& tc) noexcept {
+  const int64_t seconds = int64_t(tc.hours) * 3600 + int64_t(tc.minutes) * 60 + tc.seconds;
+  const double frames = double(tc.frames) + double(tc.subframe);
+  return seconds * kNsPerSecond + (tc.rate_hz == 0 ? 0 : std::llround(frames * 1e9 / tc.rate_hz));
+}
+
+Timecode livelink_timecode_at(int64_t time_of_day_ns) noexcept {
+  const int64_t day_ns = ((time_of_day_ns % kNsPerDay) + kNsPerDay) % kNsPerDay;
+  // Thousandths of a frame: ns * 60 / 1e6, rounded (no overflow: a day is 5.2e12 of them).
+  const int64_t thousandths = (day_ns * kLiveLinkTimecodeRate + 500'000) / 1'000'000;
+  const int64_t whole = thousandths / 1000;
+  const int64_t seconds = whole / kLiveLinkTimecodeRate;
+  Timecode tc;
+  tc.rate_hz = kLiveLinkTimecodeRate;
+  tc.frames = uint8_t(whole % kLiveLinkTimecodeRate);
+  tc.seconds = uint8_t(seconds % 60);
+  tc.minutes = uint8_t((seconds / 60) % 60);
+  tc.hours = uint8_t((seconds / 3600) % 24);
+  tc.subframe = float(double(thousandths % 1000) / 1000.0);
+  return tc;
+}
+
+FaceFrame face_frame_from_solved(const SolvedFrame& solved, const ArkitWeights& arkit) {
+  FaceFrame out;
+  out.source_time_ns = solved.timecode.valid() ? timecode_time_ns(solved.timecode) : solved.source_time_ns;
+  out.timecode = livelink_timecode_at(out.source_time_ns);
+  arkit.map(std::span<const float>(solved.weights.data(), std::size_t(solved.weights.size())), out.weights);
+  out.angles = {};
+  const std::array<float, 3> head = head_yaw_pitch_roll(solved.head_rotation);
+  std::copy(head.begin(), head.end(), out.angles.begin());
+  return out;
 }
 
 FaceTake read_livelinkface(std::string_view text, const std::string& name) {
@@ -178,7 +208,7 @@ FaceTake read_livelinkface(std::string_view text, const std::string& name) {
 
     FaceFrame& frame = take.frames.emplace_back();
     frame.timecode = *timecode;
-    frame.source_time_ns = timecode_ns(*timecode) + day_offset_ns;
+    frame.source_time_ns = timecode_time_ns(*timecode) + day_offset_ns;
     if (take.frames.size() > 1) {
       const int64_t previous_ns = take.frames[take.frames.size() - 2].source_time_ns;
       if (midnight_line == 0 && frame.source_time_ns < previous_ns - kNsPerDay / 2) {

@@ -14,6 +14,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/frame.hpp"
 #include "core/time.hpp"
 #include "formats/arkit.hpp"
 
@@ -47,5 +48,18 @@ std::string write_livelinkface(const FaceTake& take);
 // "HH:MM:SS:FF.fff" <-> Timecode at kLiveLinkTimecodeRate.
 std::optional<Timecode> parse_livelink_timecode(std::string_view text) noexcept;
 std::string format_livelink_timecode(const Timecode& timecode);
+
+// The Live Link timecode of a time of day (ns; wraps at 24 h), rounded to the nearest
+// thousandth of a 60 fps frame as the CSV writes it, so a frame a hair before a frame
+// boundary is that frame (.000), not the one before (.999). Frames of a take up to
+// 60 Hz each get their own HH:MM:SS:FF.
+Timecode livelink_timecode_at(int64_t time_of_day_ns) noexcept;
+// A timecode at any rate as time of day in ns (frames and subframe at tc.rate_hz).
+int64_t timecode_time_ns(const Timecode& timecode) noexcept;
+
+// One CSV row from a solved frame: the ARKit weights as `arkit` maps them, head yaw, pitch
+// and roll (head_yaw_pitch_roll; eyes 0), the frame's timecode re-based to 60 fps, or its
+// source time when it has none. The same values the Live Link output sends.
+FaceFrame face_frame_from_solved(const SolvedFrame& solved, const ArkitWeights& arkit);
 
 }  // namespace facecap::formats

@@ -121,6 +121,7 @@ Calibration read_hand_written(const toml::table& table, const std::string& file,
   const std::size_t heads = c.head_markers.size();
   if (heads == 1 || heads == 2)
     throw Error("head stabilisation needs at least 3 [[head]] markers (or none)", {.file = file, .key = "head"});
+  align::find_unobserved_shapes(c, rig);
   return c;
 }
 
@@ -131,6 +132,7 @@ Calibration read_calibration(std::string_view text, const std::string& name, con
   if (!(table.contains("transform") && table.contains("marker"))) return read_hand_written(table, name, rig);
   Calibration profile = align::read_calibration_profile(text, name);
   align::check_profile_matches_rig(profile, rig, name);
+  if (!profile.observability_known) align::find_unobserved_shapes(profile, rig);  // a profile from before version 3
   const std::size_t stable = profile.stable_markers.size();
   if (stable == 1 || stable == 2)
     throw Error("head stabilisation needs at least 3 stable markers (or none)", {.file = name, .key = "stabilise.markers"});
@@ -163,6 +165,7 @@ Calibration default_calibration(const Rig& rig, int face_markers, int head_marke
     c.head_markers.push_back({h.label, h.position});
     c.stable_markers.push_back(h.label);
   }
+  align::find_unobserved_shapes(c, rig);
   return c;
 }
 

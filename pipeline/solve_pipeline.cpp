@@ -29,7 +29,9 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
                              const SolveSettings& settings)
     : mapper_(calibration, settings.label_markers ? calibration_labels(calibration) : source.labels, source.units,
               settings.mapper),
-      solver_(make_solver(settings.method, build_solver_model(rig, calibration.bindings(), settings.params))),
+      solver_(make_solver(settings.method,
+                          build_solver_model(rig, calibration.bindings(), settings.params,
+                                             calibration.unfitted_shapes()))),
       mapped_(mapper_.make_output()),
       result_(solver_->make_result()),
       bindings_(calibration.bindings()),

@@ -80,9 +80,12 @@ class FaceSolver {
 };
 
 // Precomputes deformation gradients, the factorisation and the collision structure.
-// Throws Error on an unusable rig or binding.
+// unfitted_shapes (names) are left out of Eq. 2: their weights stay 0 (the shapes the
+// calibration's markers cannot observe, align::Calibration::unfitted_shapes). Throws
+// Error on an unusable rig or binding, or an unfitted name the rig lacks.
 std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vector<MarkerBinding> markers,
-                                                      const SolverParams& params = {});
+                                                      const SolverParams& params = {},
+                                                      const std::vector<std::string>& unfitted_shapes = {});
 
 // The solver of `method` (kSolverMethods) over a built model. Not real-time; throws Error
 // without a model.

@@ -59,6 +59,8 @@ void build_marker_rows(SolverModel& model) {
       model.weights.marker_neutral.segment<3>(3 * k) += m.barycentric[i] * rig.neutral.col(m.vertices[i]);
     }
   }
+  for (Eigen::Index s = 0; s < M; ++s)
+    if (!model.weights.fitted[std::size_t(s)]) model.weights.marker_basis.col(s).setZero();
   model.weights.marker_basis_rows = model.weights.marker_basis;
   model.weights.gram_all = model.weights.marker_basis.transpose() * model.weights.marker_basis;
   model.weights.gram_per_marker.resize(M, M * K);
@@ -377,6 +379,7 @@ void build_marker_paths(SolverModel& model) {
     for (int k = 0; k < 3; ++k) incident[std::size_t(rig.triangles(k, t))].push_back(int(t));
   constexpr double kTurning = 0.05;  // radians; below this a straight path is as good
   for (Eigen::Index s = 0; s < M; ++s) {
+    if (!model.weights.fitted[std::size_t(s)]) continue;
     for (Eigen::Index k = 0; k < K; ++k) {
       const auto& b = model.markers[std::size_t(k)];
       Eigen::Vector3d r = Eigen::Vector3d::Zero();
@@ -533,13 +536,20 @@ Eigen::Vector3d nearest_log_branch(const Eigen::Vector3d& r, const Eigen::Vector
 }
 
 std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vector<MarkerBinding> markers,
-                                                      const SolverParams& params) {
+                                                      const SolverParams& params,
+                                                      const std::vector<std::string>& unfitted_shapes) {
   validate(rig, markers, params);
   const auto start = Clock::now();
   auto model = std::make_shared<SolverModel>();
   model->rig = rig;
   model->params = params;
   model->markers = std::move(markers);
+  model->weights.fitted.assign(std::size_t(rig.shape_count()), 1);
+  for (const std::string& name : unfitted_shapes) {
+    const auto s = rig.shape_index(name);
+    if (!s) throw Error(fmt::format("solver: shape '{}' to leave out of the weight fit is not a shape of rig '{}'", name, rig.name));
+    model->weights.fitted[std::size_t(*s)] = 0;
+  }
   build_marker_rows(*model);
   build_vertex_terms(rig, {}, model->blend.vertex_blocks, model->blend.vertex_deltas);
 

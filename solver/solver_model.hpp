@@ -42,6 +42,9 @@ struct WeightsData {
   Eigen::MatrixXd gram_all;         // M x M: B~^T B~ over all markers
   Eigen::MatrixXd gram_per_marker;  // M x (M K): marker k's B_k^T B_k in columns kM..kM+M-1
   std::vector<MarkerPath> marker_paths;  // (marker, shape) pairs that turn: the refinement's arcs
+  // M: 0 for the shapes left out of Eq. 2 (their columns of B~ are zero, they have no
+  // marker paths, so their weights stay 0), else 1.
+  std::vector<uint8_t> fitted;
 };
 
 // Eq. 3-4, and the linear blend x0 + B w (N vertices, T triangles, M shapes).

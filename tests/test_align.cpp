@@ -509,6 +509,31 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
     CHECK(back.markers[k].residual_mm == cal.markers[k].residual_mm);
   }
   CHECK_NOTHROW(check_profile_matches_rig(back, rig, "actor.toml"));
+  // The shapes left out of the weight fit, and the threshold they were decided at.
+  CHECK(text.find("version = 3\n") != std::string::npos);
+  CHECK(back.observability_known);
+  CHECK(back.observable_shape_mm == cal.observable_shape_mm);
+  REQUIRE(back.unobserved_shapes.size() == cal.unobserved_shapes.size());
+  for (std::size_t i = 0; i < cal.unobserved_shapes.size(); ++i) {
+    CHECK(back.unobserved_shapes[i].name == cal.unobserved_shapes[i].name);
+    CHECK(back.unobserved_shapes[i].max_displacement_mm == cal.unobserved_shapes[i].max_displacement_mm);
+  }
+  Calibration decided = cal;
+  decided.unobserved_shapes = {{rig.shape_names[1], 0.25}};
+  const Calibration one = read_calibration_profile(write_calibration_profile(decided), "actor.toml");
+  REQUIRE(one.unobserved_shapes.size() == 1);
+  CHECK(one.unfitted_shapes() == std::vector<std::string>{rig.shape_names[1]});
+  CHECK(one.unobserved_shapes[0].max_displacement_mm == 0.25);
+  // A profile from before version 3 has no [observability]: undecided, and read as before.
+  Calibration undecided = cal;
+  undecided.observability_known = false;
+  const std::string older = write_calibration_profile(undecided);
+  CHECK(older.find("version = 3") == std::string::npos);
+  CHECK_FALSE(read_calibration_profile(older, "actor.toml").observability_known);
+  decided.unobserved_shapes = {{"noSuchShape", 0.25}};
+  CHECK_THROWS_WITH(check_profile_matches_rig(read_calibration_profile(write_calibration_profile(decided), "actor.toml"), rig,
+                                              "actor.toml"),
+                    Catch::Contains("unobserved shape 'noSuchShape'"));
 
   auto line_of = [&](const std::string& s, const std::string& needle) {
     return 1 + std::count(s.begin(), s.begin() + std::ptrdiff_t(s.find(needle)), '\n');
@@ -526,7 +551,8 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   CHECK_THROWS_WITH(read_calibration_profile(unknown, "actor.toml"),
                     Catch::Contains(fmt::format("actor.toml:{}:", line_of(unknown, "residual_cm"))) && Catch::Contains("unknown key 'residual_cm'"));
   std::string newer = unsummed;
-  newer.replace(newer.find("version = 1"), 11, "version = 9");
+  REQUIRE(newer.find("\nversion = 3\n") != std::string::npos);
+  newer.replace(newer.find("\nversion = 3\n") + 1, 11, "version = 9");
   CHECK_THROWS_WITH(read_calibration_profile(newer, "actor.toml"), Catch::Contains("version 9"));
   std::string bad_rotation = unsummed;
   bad_rotation.replace(bad_rotation.find("rotation = [["), 13, "rotation = [[2, ");

@@ -1,5 +1,6 @@
 // facecap calibrate, solve and eval, run as processes the way operators run them.
 #include <cstdio>
+#include <numbers>
 #include <fstream>
 #include <sstream>
 
@@ -92,6 +93,17 @@ TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a syntheti
   for (const auto& f : face.frames) max_yaw = std::max(max_yaw, double(std::abs(f.angles[0])));
   CHECK(max_yaw > 0.02);
   CHECK(max_yaw < 0.2);
+  // One Live Link timecode frame per take frame at 60 Hz, each .000 (the take starts at 0).
+  const auto frame_number = [](const Timecode& tc) {
+    return ((int64_t(tc.hours) * 60 + tc.minutes) * 60 + tc.seconds) * formats::kLiveLinkTimecodeRate + tc.frames;
+  };
+  int64_t bad_steps = 0;
+  for (std::size_t f = 1; f < face.frames.size(); ++f)
+    bad_steps += frame_number(face.frames[f].timecode) != frame_number(face.frames[f - 1].timecode) + 1;
+  CHECK(bad_steps == 0);
+  CHECK(frame_number(face.frames.front().timecode) == 0);
+  CHECK(frame_number(face.frames.back().timecode) == int64_t(face.frames.size()) - 1);
+  for (const auto& f : face.frames) CHECK(f.timecode.subframe == 0.0f);
 
   // ... and to a recording with the calibration in its header.
   r = run_facecap(dir, {"solve", "--rig", "builtin", "--calib", (dir / "actor.toml").string(), "--take", trc.string(), "-o",
@@ -105,6 +117,58 @@ TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a syntheti
   SolvedFrame solved;
   rec.read_solved_frame(100, solved);
   CHECK(solved.weights.size() == BuiltinFace::instance().rig().shape_count());
+
+  // convert writes the recording's solved weights as Live Link Face; our reader reads
+  // back every frame's weights (10 decimals) and a timecode per frame.
+  r = run_facecap(dir, {"convert", (dir / "out.fcrec").string(), (dir / "converted.csv").string()});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto converted = formats::read_livelinkface(dir / "converted.csv");
+  REQUIRE(converted.frames.size() == rec.solved_frame_count());
+  CHECK(converted.rate_hz == 60.0);
+  double weight_error = 0;
+  for (std::size_t f = 0; f < converted.frames.size(); ++f) {
+    rec.read_solved_frame(f, solved);
+    weight_error = std::max(weight_error, std::abs(double(converted.frames[f].weights[jaw_arkit]) - solved.weights[jaw_rig]));
+    CHECK(frame_number(converted.frames[f].timecode) == int64_t(f));
+  }
+  CHECK(weight_error < 1e-6);
+  // solve on the recording, without --calib, uses the calibration and settings it stores:
+  // the same weights again.
+  r = run_facecap(dir, {"solve", "--rig", "builtin", "--take", (dir / "out.fcrec").string(), "-o",
+                        (dir / "again.csv").string(), "-q"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto again = formats::read_livelinkface(dir / "again.csv");
+  REQUIRE(again.frames.size() == converted.frames.size());
+  double again_error = 0;
+  for (std::size_t f = 0; f < again.frames.size(); ++f)
+    for (std::size_t a = 0; a < formats::kArkitShapeCount; ++a)
+      again_error = std::max(again_error, std::abs(double(again.frames[f].weights[a] - converted.frames[f].weights[a])));
+  CHECK(again_error < 1e-6);
+  // inspect summarises the solved weights and the head pose.
+  r = run_facecap(dir, {"inspect", (dir / "out.fcrec").string(), "--json"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto inspected = nlohmann::json::parse(r.out)["solved"];
+  CHECK(inspected["frames"] == synthetic.frames.size());
+  std::vector<double> jaw;
+  for (std::size_t f = 0; f < rec.solved_frame_count(); ++f) {
+    rec.read_solved_frame(f, solved);
+    jaw.push_back(solved.weights[jaw_rig]);
+  }
+  std::sort(jaw.begin(), jaw.end());
+  const auto& jaw_summary = inspected["shapes"][jaw_rig];
+  CHECK(jaw_summary["name"] == "jawOpen");
+  CHECK(jaw_summary["min"].get<double>() == Approx(jaw.front()));
+  CHECK(jaw_summary["max"].get<double>() == Approx(jaw.back()));
+  CHECK(jaw_summary["median"].get<double>() == Approx(jaw[(jaw.size() - 1) / 2]));  // nearest rank
+  CHECK(jaw_summary["frames_above_half"] == std::count_if(jaw.begin(), jaw.end(), [](double w) { return w > 0.5; }));
+  // The head pose comes from the markers alone: the same yaw as the CSV's.
+  const auto yaw = inspected["head"]["yaw_deg"];
+  CHECK(std::max(-yaw[0].get<double>(), yaw[1].get<double>()) == Approx(max_yaw * 180.0 / std::numbers::pi).margin(1e-3));
+  r = run_facecap(dir, {"inspect", (dir / "out.fcrec").string()});
+  CHECK(r.out.find("frames > 0.5") != std::string::npos);
 
   // eval: held-out error and the rest, per solver, as JSON.
   r = run_facecap(dir, {"eval", "--rig", "builtin", "--take", trc.string(), "--calib", (dir / "actor.toml").string(), "--solver",
@@ -122,6 +186,11 @@ TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a syntheti
     CHECK(heldout > 0.0);
     CHECK(heldout < 3.0);
     CHECK(s["heldout_mm"]["p95"].get<double>() >= heldout);
+    // The same error in the actor's mm: the take is in mm, the built-in rig in its own units.
+    const double actor_scale = eval["actor_mm_per_rig_mm"].get<double>();
+    const auto used = align::load_calibration_profile(dir / "actor.toml");
+    CHECK(actor_scale == Approx(used.take_mm_per_unit / (used.take_to_rig.scale * used.rig_mm_per_unit)));
+    CHECK(s["heldout_actor_mm"]["median"].get<double>() == Approx(heldout * actor_scale));
     CHECK(s["heldout_mm"]["samples"].get<int>() == 9 * int(eval["heldout_markers"].size()));
     CHECK(s["jitter_mm"]["mean"].get<double>() >= 0.0);
     CHECK(s.contains("intersections"));

@@ -117,7 +117,8 @@ TEST_CASE("facecap inspect and convert report bad input with file and place", "[
 
   const Run csv = run_facecap(dir, {"convert", (dir / "short.c3d").string(), (dir / "x.csv").string()});
   CHECK(csv.exit_code == 1);
-  CHECK(csv.err.find("output must end in .c3d, .trc or .fcrec") != std::string::npos);
+  CHECK(csv.err.find("short.c3d: a Live Link Face CSV is written from a .fcrec recording's solved frames") !=
+        std::string::npos);
 }
 
 TEST_CASE("facecap inspect exits 1 with the reader's message on a C3D claiming 4e9 points", "[tools][hostile]") {

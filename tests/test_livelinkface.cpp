@@ -117,6 +117,30 @@ TEST_CASE("Live Link timecodes are HH:MM:SS:FF.fff on a 60 fps base", "[livelink
   }
 }
 
+TEST_CASE("Live Link timecodes of solved frames: one HH:MM:SS:FF per frame, rounded to a thousandth", "[livelinkface]") {
+  // A 60 Hz take's frame times in whole ns fall a hair before the frame boundary: they
+  // were written 00, 01, 01.999, 03; now each frame is its own, at .000.
+  for (int64_t f = 0; f < 600; ++f) {
+    const Timecode tc = livelink_timecode_at(f * 1'000'000'000 / 60);
+    INFO(f);
+    CHECK(int64_t(tc.seconds) * 60 + tc.frames == f);
+    CHECK(format_livelink_timecode(tc).ends_with(".000"));
+  }
+  // 30 Hz steps by two frames, as the app's own 30 Hz files do.
+  CHECK(format_livelink_timecode(livelink_timecode_at(3 * 33'333'333)) == "00:00:00:06.000");
+  // The fraction is the phase within the frame, as real files have it (S07-001: .169).
+  const int64_t start = timecode_time_ns(*parse_livelink_timecode("12:27:47:47.169"));
+  CHECK(format_livelink_timecode(livelink_timecode_at(start)) == "12:27:47:47.169");
+  CHECK(format_livelink_timecode(livelink_timecode_at(start + 33'333'333)) == "12:27:47:49.169");
+  CHECK(format_livelink_timecode(livelink_timecode_at(33'323'333)) == "00:00:00:01.999");  // 1.9994 frames
+  // A day wraps; a timecode at another rate is re-based (25 fps frame 5 = 0.2 s = 60 fps frame 12).
+  CHECK(format_livelink_timecode(livelink_timecode_at(24 * 3600 * kNsPerSecond + kNsPerSecond)) == "00:00:01:00.000");
+  Timecode pal;
+  pal.rate_hz = 25;
+  pal.frames = 5;
+  CHECK(format_livelink_timecode(livelink_timecode_at(timecode_time_ns(pal))) == "00:00:00:12.000");
+}
+
 TEST_CASE("Live Link Face writer output reads back; BlendShapeCount in either case", "[livelinkface]") {
   const FaceTake take = small_take();
   const std::string text = write_livelinkface(take);

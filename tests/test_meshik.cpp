@@ -1,17 +1,20 @@
 // The MeshIK baseline: it must reach the articulated jaw at least as well as the
-// nonlinear solver, reproduce every shape from that shape's markers, and handle
-// missing markers like the real-time solvers.
+// nonlinear solver, reproduce every shape from that shape's markers (ICT's neutral,
+// whose mouth corners the tangle hold keeps, included), and handle missing markers
+// like the real-time solvers.
 #include <limits>
 
 #include <catch2/catch.hpp>
 
 #include "solver/builtin_face.hpp"
+#include "solver/rig.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/meshik.hpp"
 #include "solver/solver_model.hpp"
 
 #include "tests/solver_test_support.hpp"
+#include "tests/test_support.hpp"
 
 using namespace facecap;
 
@@ -32,8 +35,10 @@ TEST_CASE("meshik matches the articulated jaw at least as well as the paper's no
   // The paper's pipeline: Eq. 2 weights, then Eq. 4-5 (no refinement of the weights).
   SolverParams paper;
   paper.weight_refinements = 0;
+  SolverParams refined;
+  refined.weight_refinements = 2;  // two steps along the hinge's marker paths
   const auto paper_model = build_solver_model(rig, layout, paper);
-  const auto model = build_solver_model(rig, layout);
+  const auto model = build_solver_model(rig, layout, refined);
   auto run = [&](const std::shared_ptr<const SolverModel>& m) {
     auto solver = make_solver(SolverMethod::kNonlinear, m);
     SolveResult out = solver->make_result();
@@ -122,3 +127,25 @@ TEST_CASE("meshik with a missing marker equals meshik on a layout without it") {
   CHECK(max_error(ra.vertices, rb.vertices) < 1e-6);
 }
 
+
+TEST_CASE("meshik reproduces ICT's neutral from its markers at w = 0, tangled mouth corners included", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  const Rig rig = load_rig(ict.string());
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  REQUIRE(!model->collision.tangle_vertices.empty());  // ICT's mouth corners cross in the neutral
+  const double mm_per_unit = 1.0 / rig_units_per_mm(rig);
+  const Eigen::Matrix3Xd targets = markers_of(rig.neutral, layout);
+  MeshIkSolver meshik(model, MeshIkOptions{});
+  SolveResult out = meshik.make_result();
+  meshik.solve_with_weights(Eigen::VectorXd::Zero(rig.shape_count()), targets, all_present(60), out);
+  const double at_zero_mm = max_error(out.vertices, rig.neutral) * mm_per_unit;
+  CHECK(meshik.last_report().final_energy < 1e-12);  // the neutral is the energy's minimum at w = 0
+  meshik.solve(targets, all_present(60), out);
+  const double solved_mm = max_error(out.vertices, rig.neutral) * mm_per_unit;
+  INFO("max vertex error: " << at_zero_mm << " mm at w = 0, " << solved_mm << " mm solved; largest weight "
+                            << out.weights.maxCoeff());
+  CHECK(at_zero_mm < 1e-3);  // a micrometre
+  CHECK(solved_mm < 1e-3);
+  CHECK(out.weights.maxCoeff() < 1e-6);
+}

@@ -28,6 +28,7 @@ struct Options {
   bool auto_neutral = false;
   int stable_count = 6;
   int average = 0;
+  double observable_mm = align::kObservableShapeMm;
   bool json = false;
   bool force = false;
 };
@@ -132,6 +133,11 @@ void run_calibrate(const Options& o, bool frame_given) {
   }
   const double stable_median = median_of(stable_residuals);
 
+  cal.observable_shape_mm = o.observable_mm;
+  align::find_unobserved_shapes(cal, rig);
+  std::vector<std::string> unobserved;
+  for (const auto& u : cal.unobserved_shapes) unobserved.push_back(fmt::format("{} ({:.2f} mm)", u.name, u.max_displacement_mm));
+
   if (!o.force && std::filesystem::exists(o.output)) throw file_error(o.output, "exists; pass --force to replace it");
   align::save_calibration_profile(o.output, cal);
 
@@ -157,6 +163,10 @@ void run_calibrate(const Options& o, bool frame_given) {
     j["stable_markers"] = cal.stable_markers;
     j["stable_residual_median_mm"] = stable_median;
     j["head_pose_held_frames"] = held;
+    j["observable_shape_mm"] = cal.observable_shape_mm;
+    nlohmann::json shapes = nlohmann::json::object();
+    for (const auto& u : cal.unobserved_shapes) shapes[u.name] = u.max_displacement_mm;
+    j["unobserved_shapes"] = shapes;
     j["notes"] = cal.notes;
     std::puts(j.dump(2).c_str());
     return;
@@ -178,6 +188,9 @@ void run_calibrate(const Options& o, bool frame_given) {
              *std::max_element(residuals.begin(), residuals.end()), residuals.size());
   fmt::print("stable markers: {}; after stabilisation their residual median is {:.3f} mm over {} frames ({} held)\n",
              fmt::join(cal.stable_markers, ", "), stable_median, take.frames.size(), held);
+  if (!unobserved.empty())
+    fmt::print("{} of {} shapes move no marker by {} mm at full weight: the markers cannot observe them, the weight fit "
+               "leaves them at 0: {}\n", unobserved.size(), rig.shape_count(), cal.observable_shape_mm, fmt::join(unobserved, ", "));
   for (const auto& n : cal.notes) fmt::print("note: {}\n", n);
   fmt::print("wrote {}\n", o.output);
 }
@@ -198,6 +211,10 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--markers", opts->markers, "Comma-separated markers to calibrate (default: all)");
   cmd->add_option("--stable", opts->stable, "Comma-separated stable markers for head stabilisation (default: found)");
   cmd->add_option("--stable-count", opts->stable_count, "How many stable markers to find")->capture_default_str()->check(CLI::Range(3, 64));
+  cmd->add_option("--observable-mm", opts->observable_mm,
+                  "Shapes moving no bound marker by this many rig mm at full weight are left out of the weight fit")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--units", opts->units, "Take units mm|cm|m (default: detected from the face's size)");
   cmd->add_option("--rig-units", opts->rig_units, "Rig units mm|cm|m (default: guessed from the face's size)");
   cmd->add_option("-o,--output", opts->output, "Calibration profile to write (.toml)")->required();

@@ -49,6 +49,12 @@ struct SolverRun {
   Eigen::Matrix3Xd previous, previous2;                // the two previous frames' meshes
   int frames_solved = 0;
   Summary heldout_mm, fit_mm, jitter_mm, solve_ms;
+  // The held-out error scaled by `scale`: in the actor's millimetres.
+  nlohmann::json scaled(Summary& s, double scale) {
+    Summary out;
+    for (const double v : s.values) out.add(v * scale);
+    return out.json();
+  }
   int64_t intersections = 0, intersection_frames = 0, flipped = 0, flipped_frames = 0, checked_frames = 0;
   int held = 0;
 };
@@ -69,7 +75,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   if (!mapper.stabilising() && o.settings.mapper.stabilise_head)
     throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
                                          mapper.stable_markers_found(), cal.stable_markers.size()));
-  const auto model = build_solver_model(rig, cal.bindings(), o.settings.params);
+  const auto model = build_solver_model(rig, cal.bindings(), o.settings.params, cal.unfitted_shapes());
   const auto methods = select_solvers(o.solvers);
 
   const Eigen::Index K = mapper.marker_count();
@@ -173,9 +179,13 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   j["stable_residual_mm"] = stable_mm.json();
   j["head_pose_held_frames"] = head_held;
   j["rest_intersections"] = neutral_intersections;
+  // Rig mm to the actor's mm: take length = rig length / scale, in the take's units.
+  const double actor_mm_per_rig_mm = cal.take_mm_per_unit / (cal.take_to_rig.scale * rig_mm);
+  j["actor_mm_per_rig_mm"] = actor_mm_per_rig_mm;
   nlohmann::json per = nlohmann::json::object();
   for (auto& run : runs) {
     per[run.name] = {{"heldout_mm", run.heldout_mm.json()},
+                     {"heldout_actor_mm", run.scaled(run.heldout_mm, actor_mm_per_rig_mm)},
                      {"fit_mm", run.fit_mm.json()},
                      {"jitter_mm", run.offline ? nlohmann::json(nullptr) : run.jitter_mm.json()},
                      {"intersections", {{"new_pairs_per_checked_frame", run.checked_frames ? double(run.intersections) / double(run.checked_frames) : 0.0},
@@ -202,6 +212,11 @@ void print_take_evaluation(const nlohmann::json& j) {
              "new isect/frm", "flip/frm", "solve ms");
   fmt::print("{:<10} {:>16} {:>16} {:>10} {:>14} {:>10} {:>10}\n", "", "median / p95", "median / p95", "mean",
              fmt::format("(rest has {})", j["rest_intersections"].get<int64_t>()), "", "mean");
+  for (const auto& [name, s] : j["solvers"].items()) {
+    fmt::print("{:<10} held-out in the actor's mm (x{:.3f}): median {:.2f}, p95 {:.2f}\n", name,
+               j["actor_mm_per_rig_mm"].get<double>(), s["heldout_actor_mm"]["median"].get<double>(),
+               s["heldout_actor_mm"]["p95"].get<double>());
+  }
   for (const auto& [name, s] : j["solvers"].items()) {
     const std::string jitter = s["jitter_mm"].is_null() ? "-" : fmt::format("{:.4f}", s["jitter_mm"]["mean"].get<double>());
     fmt::print("{:<10} {:>7.2f} / {:>6.2f} {:>7.2f} / {:>6.2f} {:>10} {:>14.1f} {:>10.2f} {:>10.3f}\n", name,

@@ -1,19 +1,26 @@
-// facecap inspect: what a marker take, recording, Live Link Face CSV or NatNet capture holds.
+// facecap inspect: what a marker take, recording (and its solved frames), Live Link Face
+// CSV or NatNet capture holds.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <limits>
+#include <numbers>
 #include <optional>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
+#include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
 #include "formats/natnet_capture.hpp"
+#include "formats/recording.hpp"
 #include "formats/take.hpp"
 #include "tools/commands.hpp"
 #include "tools/inspect_capture.hpp"
+#include "tools/tool_support.hpp"
 
 namespace facecap::tools {
 namespace {
@@ -22,12 +29,74 @@ using formats::FaceTake;
 using formats::MarkerTake;
 using formats::TakeFormat;
 
-// A file read as whichever kind it is: markers, blendshape weights, or NatNet traffic.
+// What a recording's solved frames did: per rig shape its weight's spread, and the
+// head pose's range.
+struct SolvedSummary {
+  struct Shape {
+    std::string name;
+    double min = 0, median = 0, max = 0;
+    std::size_t frames_above_half = 0;
+  };
+  std::size_t frames = 0;
+  std::string rig_name, rig_units;
+  std::vector<Shape> shapes;
+  std::array<std::array<double, 2>, 3> head_angles_deg{};  // yaw, pitch, roll: min, max
+  std::array<std::array<double, 2>, 3> head_translation{};  // x, y, z: min, max (rig units)
+};
+
+// A file read as whichever kind it is: markers (with a recording's solved frames),
+// blendshape weights, or NatNet traffic.
 struct LoadedFile {
   std::optional<MarkerTake> markers;
+  std::optional<SolvedSummary> solved;
   std::optional<FaceTake> face;
   std::optional<formats::natnet::NatNetCapture> capture;
 };
+
+// nullopt for a recording without solved frames. Throws Error on a damaged frame.
+std::optional<SolvedSummary> summarise_solved(const std::filesystem::path& path) {
+  const formats::RecordingReader reader(path);
+  const std::size_t count = reader.solved_frame_count();
+  if (count == 0) return std::nullopt;
+  const auto& names = reader.header().shape_names;
+  SolvedSummary summary;
+  summary.frames = count;
+  summary.rig_name = reader.header().rig_name;
+  summary.rig_units = reader.header().rig_units;
+  std::vector<std::vector<double>> weights(names.size(), std::vector<double>(count));
+  const formats::ArkitWeights arkit(names);
+  for (auto* range : {&summary.head_angles_deg, &summary.head_translation})
+    for (auto& r : *range) r = {std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+  SolvedFrame solved;
+  for (std::size_t f = 0; f < count; ++f) {
+    read_solved_frame_checked(reader, f, solved);
+    for (std::size_t s = 0; s < names.size(); ++s) weights[s][f] = solved.weights[Eigen::Index(s)];
+    const auto angles = formats::face_frame_from_solved(solved, arkit).angles;  // the CSV's head angles
+    for (int i = 0; i < 3; ++i) {
+      auto& a = summary.head_angles_deg[std::size_t(i)];
+      const double degrees = angles[std::size_t(i)] * 180.0 / std::numbers::pi;
+      a = {std::min(a[0], degrees), std::max(a[1], degrees)};
+      auto& t = summary.head_translation[std::size_t(i)];
+      t = {std::min(t[0], solved.head_translation[i]), std::max(t[1], solved.head_translation[i])};
+    }
+  }
+  for (std::size_t s = 0; s < names.size(); ++s) {
+    auto& w = weights[s];
+    SolvedSummary::Shape shape{names[s]};
+    shape.frames_above_half = std::size_t(std::count_if(w.begin(), w.end(), [](double x) { return x > 0.5; }));
+    shape.min = *std::min_element(w.begin(), w.end());
+    shape.max = *std::max_element(w.begin(), w.end());
+    shape.median = percentile(w, 50.0);
+    summary.shapes.push_back(shape);
+  }
+  return summary;
+}
+
+bool is_capture(const std::filesystem::path& path) {
+  char head[4] = {};
+  std::ifstream(path, std::ios::binary).read(head, sizeof head);
+  return formats::looks_like_capture(head);
+}
 
 LoadedFile load(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options) {
   LoadedFile loaded;
@@ -38,6 +107,7 @@ LoadedFile load(const std::filesystem::path& path, const formats::natnet::Captur
     loaded.face = formats::read_livelinkface(path);
   } else {
     loaded.markers = formats::read_take(path);
+    if (loaded.markers->format == TakeFormat::kRecording) loaded.solved = summarise_solved(path);
   }
   return loaded;
 }
@@ -89,6 +159,39 @@ nlohmann::json markers_json(const std::filesystem::path& path, const MarkerTake&
   j["metadata"] = metadata;
   j["warnings"] = take.warnings;
   return j;
+}
+
+nlohmann::json solved_json(const SolvedSummary& s) {
+  nlohmann::json j;
+  j["frames"] = s.frames;
+  j["rig"] = s.rig_name;
+  j["rig_units"] = s.rig_units;
+  nlohmann::json shapes = nlohmann::json::array();
+  for (const auto& shape : s.shapes)
+    shapes.push_back({{"name", shape.name}, {"min", shape.min}, {"median", shape.median}, {"max", shape.max},
+                      {"frames_above_half", shape.frames_above_half}});
+  j["shapes"] = shapes;
+  const char* angle_names[] = {"yaw_deg", "pitch_deg", "roll_deg"};
+  const char* axes[] = {"x", "y", "z"};
+  for (int i = 0; i < 3; ++i) {
+    j["head"][angle_names[i]] = s.head_angles_deg[std::size_t(i)];
+    j["head"]["translation"][axes[i]] = s.head_translation[std::size_t(i)];
+  }
+  return j;
+}
+
+void print_solved(const SolvedSummary& s) {
+  fmt::print("\nsolved frames {} (rig {}, {})\n", s.frames, s.rig_name, s.rig_units.empty() ? "units unknown" : s.rig_units);
+  const char* angle_names[] = {"yaw", "pitch", "roll"};
+  const char* axes[] = {"x", "y", "z"};
+  for (int i = 0; i < 3; ++i)
+    fmt::print("  head {:<5} {:8.2f} .. {:8.2f} deg    {} {:10.3f} .. {:10.3f}\n", angle_names[i],
+               s.head_angles_deg[std::size_t(i)][0], s.head_angles_deg[std::size_t(i)][1], axes[i],
+               s.head_translation[std::size_t(i)][0], s.head_translation[std::size_t(i)][1]);
+  fmt::print("  {:<24} {:>7} {:>7} {:>7} {:>12}\n", "shape", "min", "median", "max", "frames > 0.5");
+  for (const auto& shape : s.shapes)
+    fmt::print("  {:<24} {:7.3f} {:7.3f} {:7.3f} {:12}\n", shape.name, shape.min, shape.median, shape.max,
+               shape.frames_above_half);
 }
 
 nlohmann::json face_json(const std::filesystem::path& path, const FaceTake& take) {
@@ -182,7 +285,7 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
   cmd->add_option("file", opts->file, "The file to inspect")->required()->check(CLI::ExistingFile);
   cmd->add_flag("--json", opts->json,
                 "Print JSON: format, frames, rate_hz, markers, labels, units, gaps, first_frame (captures: frames, "
-                "natnet_version, rate_hz)");
+                "natnet_version, rate_hz; recordings with solved frames: solved)");
   cmd->add_flag("--time", opts->time, "Also measure how long reading the file takes");
   cmd->add_option("--repeat", opts->repeat, "Reads timed by --time")
       ->check(CLI::Range(1, 10000))
@@ -211,6 +314,7 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
       nlohmann::json j = loaded.capture   ? capture_json(*loaded.capture, opts->frames)
                          : loaded.markers ? markers_json(path, *loaded.markers)
                                           : face_json(path, *loaded.face);
+      if (loaded.solved) j["solved"] = solved_json(*loaded.solved);
       if (times) j["read_ms"] = {{"min", times->min_ms}, {"median", times->median_ms}, {"reads", times->reads}};
       // NaN has no JSON form; missing positions are already null.
       std::puts(j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
@@ -221,6 +325,7 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
         print_markers(path, *loaded.markers);
       else
         print_face(path, *loaded.face);
+      if (loaded.solved) print_solved(*loaded.solved);
       if (times) {
         fmt::print("\nread time min {:.3f} ms, median {:.3f} ms over {} reads ({} bytes)\n", times->min_ms,
                    times->median_ms, times->reads, std::filesystem::file_size(path));

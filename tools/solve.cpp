@@ -1,16 +1,12 @@
 // facecap solve: offline batch solve of a calibrated take to a Live Link Face style CSV
 // (ARKit weights where the rig has the shapes, head angles) or to a .fcrec recording
 // (marker frames and solved frames, the calibration in the header).
-#include <cmath>
 #include <filesystem>
-#include <numbers>
 #include <optional>
 
-#include <Eigen/Geometry>
 #include <fmt/format.h>
 
 #include "core/error.hpp"
-#include "core/io.hpp"
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
 #include "formats/recording.hpp"
@@ -23,6 +19,7 @@
 #include "tools/commands.hpp"
 #include "tools/progress.hpp"
 #include "tools/solve_config.hpp"
+#include "tools/tool_support.hpp"
 
 namespace facecap::tools {
 namespace {
@@ -32,20 +29,6 @@ struct Options {
   bool force = false, quiet = false, vertices = false, check_labels = false;
   SolveConfigOptions settings;
 };
-
-Timecode timecode_at(int64_t time_ns) {
-  const double frames = double(time_ns) * 1e-9 * formats::kLiveLinkTimecodeRate;
-  const auto whole = int64_t(std::floor(frames));
-  Timecode tc;
-  tc.rate_hz = formats::kLiveLinkTimecodeRate;
-  tc.frames = uint8_t(whole % formats::kLiveLinkTimecodeRate);
-  const int64_t seconds = whole / formats::kLiveLinkTimecodeRate;
-  tc.seconds = uint8_t(seconds % 60);
-  tc.minutes = uint8_t((seconds / 60) % 60);
-  tc.hours = uint8_t((seconds / 3600) % 24);
-  tc.subframe = float(frames - double(whole));
-  return tc;
-}
 
 // The settings and calibration a recording was solved with, when the take is one.
 struct Stored {
@@ -114,14 +97,7 @@ void run_solve(const Options& o) {
     held_head += (solved.flags & kSolvedHeadPoseHeld) != 0;
     held_face += (solved.flags & kSolvedTooFewMarkers) != 0;
     if (csv) {
-      formats::FaceFrame out;
-      out.source_time_ns = frame.source_time_ns;
-      out.timecode = frame.timecode.valid() ? frame.timecode : timecode_at(frame.source_time_ns);
-      arkit.map(std::span<const float>(solved.weights.data(), std::size_t(solved.weights.size())), out.weights);
-      out.angles = {};
-      const std::array<float, 3> head = formats::head_yaw_pitch_roll(solved.head_rotation);
-      std::copy(head.begin(), head.end(), out.angles.begin());
-      face.frames.push_back(out);
+      face.frames.push_back(formats::face_frame_from_solved(solved, arkit));
     } else {
       recording->append_marker_frame(frame);
       recording->append_solved_frame(solved);
@@ -130,8 +106,7 @@ void run_solve(const Options& o) {
   }
   bar.finish();
   if (csv) {
-    const std::string text = formats::write_livelinkface(face);
-    write_file_atomically(output, std::span<const char>(text.data(), text.size()));
+    write_live_link_csv(output, face);
   } else {
     recording->close();
   }
@@ -139,6 +114,9 @@ void run_solve(const Options& o) {
   fmt::print("{} -> {}: {} frames with {} ({}; {} of 52 ARKit shapes on the rig); head pose held in {}, face held in {}{}\n",
              o.take, o.output, take.frames.size(), method, settings.origin, mapped_shapes, held_head, held_face,
              o.check_labels ? fmt::format(", {} markers relabelled", relabelled) : std::string());
+  if (!cal.unobserved_shapes.empty())
+    fmt::print("{} shapes the calibrated markers cannot observe stayed at 0: {}\n", cal.unobserved_shapes.size(),
+               fmt::join(cal.unfitted_shapes(), ", "));
 }
 
 }  // namespace

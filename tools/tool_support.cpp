@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "core/io.hpp"
 #include "core/units.hpp"
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
@@ -149,6 +150,22 @@ double percentile(std::vector<double>& values, double p) {
   const std::size_t index = std::size_t(std::max(rank, 1.0)) - 1;
   std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(index), values.end());
   return values[index];
+}
+
+void read_solved_frame_checked(const formats::RecordingReader& reader, std::size_t i, SolvedFrame& out) {
+  reader.read_solved_frame(i, out);
+  const std::size_t shapes = reader.header().shape_names.size();
+  if (std::size_t(out.weights.size()) != shapes)
+    throw file_error(reader.name(), fmt::format("solved frame {} has {} weights for the header's {} shapes", i,
+                                                out.weights.size(), shapes));
+}
+
+void write_live_link_csv(const std::filesystem::path& path, const formats::FaceTake& face) {
+  if (face.rate_hz > formats::kLiveLinkTimecodeRate + 0.5)
+    fmt::print(stderr, "facecap: warning: {}: {:g} Hz is above the Live Link Face timecode's {} fps: consecutive rows share "
+               "a timecode frame and differ in its fraction\n", path.string(), face.rate_hz, formats::kLiveLinkTimecodeRate);
+  const std::string text = formats::write_livelinkface(face);
+  write_file_atomically(path, std::span<const char>(text.data(), text.size()));
 }
 
 }  // namespace facecap::tools

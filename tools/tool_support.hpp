@@ -11,6 +11,8 @@
 
 #include <Eigen/Core>
 
+#include "formats/livelinkface.hpp"
+#include "formats/recording.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/rig.hpp"
 
@@ -55,6 +57,14 @@ Eigen::Matrix3Xd marker_positions(const Eigen::Matrix3Xd& pose, const std::vecto
 // "all" (every kSolverMethods row) or a comma-separated list of their names, in the
 // order given, each once. Throws Error naming an unknown solver and the allowed names.
 std::vector<SolverMethod> select_solvers(const std::string& option);
+
+// The i-th solved frame of a recording, refused (Error naming the file and frame) when
+// its weights do not match the header's shapes.
+void read_solved_frame_checked(const formats::RecordingReader& reader, std::size_t i, SolvedFrame& out);
+
+// Writes solved weights as a Live Link Face CSV (atomically). Above 60 Hz rows share the
+// CSV's 60 fps timecode frames: says so on stderr.
+void write_live_link_csv(const std::filesystem::path& path, const formats::FaceTake& face);
 
 // Nearest-rank percentile p (0..100) of values; reorders them. 0 for no values.
 double percentile(std::vector<double>& values, double p);

@@ -80,6 +80,7 @@ TakeCalibration calibrate_take(const Rig& rig, const std::vector<std::string>& l
   if (t.calibration.stable_markers.size() < 3)
     throw Error(fmt::format("calibrate: only {} stable markers are present in the calibration frame; 3 are needed",
                             t.calibration.stable_markers.size()));
+  find_unobserved_shapes(t.calibration, rig);
   return t;
 }
 

@@ -6,7 +6,8 @@
 //   4. calibrate() on that mean;
 //   5. final stable markers: the same search restricted to the markers the rig's shapes
 //      move least at their bound points (a jaw moves rigidly too, but it is not the
-//      skull), then steps 3-4 again with them when they changed.
+//      skull), then steps 3-4 again with them when they changed;
+//   6. the shapes the bound markers cannot observe (find_unobserved_shapes).
 // Not real-time.
 #include <cstdint>
 #include <optional>

@@ -15,6 +15,7 @@
 
 #include "solver/align/geometry.hpp"
 #include "solver/face_solver.hpp"
+#include "solver/rig.hpp"
 
 namespace facecap::align {
 
@@ -34,6 +35,22 @@ struct HeadMarkerCalibration {
   Eigen::Vector3d neutral = Eigen::Vector3d::Zero();  // take units, at the calibration frame
 };
 
+// A rig shape the calibrated markers cannot observe: at full weight it moves no bound
+// point by kObservableShapeMm or more, so Eq. 2 would set its weight from marker noise and
+// calibration error alone (ICT's eyeLook*, eyeWide and cheekSquint move the eyeballs and
+// lids, which no marker sits on). The solve leaves such shapes out of Eq. 2: their
+// weights stay 0.
+struct UnobservedShape {
+  std::string name;
+  double max_displacement_mm = 0.0;  // rig mm: the most it moves a bound point at weight 1
+};
+
+// The threshold, rig mm at weight 1 (docs/solver.md, "Shapes no marker observes"): about
+// twice the calibration's median per-marker residual on real takes (AnimFace on ICT:
+// 1.5-1.7 mm), the mismatch between actor and rig that a weight fit will otherwise
+// explain with whichever small shape fits it.
+inline constexpr double kObservableShapeMm = 3.5;
+
 struct Calibration {
   std::string rig_name;
   uint64_t rig_hash = 0;
@@ -51,6 +68,11 @@ struct Calibration {
   double trimmed_rms_mm = 0.0;  // rig mm, surface ICP residual over the kept markers
   int start_index = -1;         // which start won (diagnostics)
   std::vector<std::string> notes;  // what the operator should know (excluded markers, ...)
+  // Shapes left out of Eq. 2 (find_unobserved_shapes). observability_known is false for
+  // profiles written before it was stored: readers decide it then from the bindings.
+  bool observability_known = false;
+  double observable_shape_mm = kObservableShapeMm;  // the threshold it was decided with
+  std::vector<UnobservedShape> unobserved_shapes;
 
   // Index of a label in markers, or -1.
   int find(const std::string& label) const;
@@ -60,6 +82,12 @@ struct Calibration {
   const Eigen::Vector3d* neutral_of(const std::string& label) const;
   // Bindings in solver order (the markers' order).
   std::vector<MarkerBinding> bindings() const;
+  // The names of unobserved_shapes: the shapes the solve leaves out of Eq. 2.
+  std::vector<std::string> unfitted_shapes() const;
 };
+
+// Decides unobserved_shapes from the markers' bindings on the rig at
+// observable_shape_mm; sets observability_known. Not real-time.
+void find_unobserved_shapes(Calibration& calibration, const Rig& rig);
 
 }  // namespace facecap::align

@@ -52,8 +52,8 @@ std::string write_calibration_profile(const Calibration& c) {
   std::string body;
   auto out = [&body](std::string_view s) { body += s; };
   out("# facecap calibration profile: written by `facecap calibrate`, read by solve, eval and facecapd.\n");
-  // Version 2 only where it is needed, so that older readers keep reading the rest.
-  out(fmt::format("version = {}\n", c.head_markers.empty() ? 1 : kCalibrationProfileVersion));
+  // The lowest version that holds what is written, so that older readers keep reading the rest.
+  out(fmt::format("version = {}\n", c.observability_known ? 3 : !c.head_markers.empty() ? 2 : 1));
   out("\n[rig]\n");
   out(fmt::format("name = {}\ncontent_hash = \"{:016x}\"\nunits = {}\n", quote(c.rig_name), c.rig_hash, quote(unit_name(c.rig_mm_per_unit))));
   out("\n[source]\n");
@@ -87,6 +87,14 @@ std::string write_calibration_profile(const Calibration& c) {
   for (const auto& h : c.head_markers) {
     out("\n[[head_marker]]  # head pose only: not bound, not pinned\n");
     out(fmt::format("label = {}\nneutral = {}\n", quote(h.label), vec3(h.neutral)));
+  }
+  if (c.observability_known) {
+    out(fmt::format("\n[observability]  # shapes moving no bound point by threshold_mm at full weight are left out of the "
+                    "weight fit\nthreshold_mm = {}\n", c.observable_shape_mm));
+    for (const auto& u : c.unobserved_shapes) {
+      out("\n[[unobserved_shape]]  # the markers cannot observe it: its weight stays 0\n");
+      out(fmt::format("name = {}\nmax_displacement_mm = {}\n", quote(u.name), u.max_displacement_mm));
+    }
   }
   // The checksum line goes second; it is left out of its own sum.
   const std::size_t first_break = body.find('\n') + 1;
@@ -195,7 +203,8 @@ bool is_hex16(const std::string& s) {
 Calibration read_calibration_profile(std::string_view text, const std::string& name) {
   const toml::table root = parse_toml(text, name);
   Reader r(name);
-  r.only_keys(root, {"version", "checksum", "rig", "source", "transform", "fit", "stabilise", "notes", "marker", "head_marker"}, "");
+  r.only_keys(root, {"version", "checksum", "rig", "source", "transform", "fit", "stabilise", "notes", "marker", "head_marker",
+                     "observability", "unobserved_shape"}, "");
   const int64_t version = r.integer(root, "version", "");
   if (version < 1 || version > kCalibrationProfileVersion)
     r.fail(root.get("version"), fmt::format("profile version {} is not readable by this facecap (reads 1..{})", version,
@@ -312,6 +321,30 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
       c.head_markers.push_back(std::move(h));
     }
   }
+  if (const toml::node* node = root.get("observability")) {
+    if (!node->is_table()) r.fail(node, "'observability' must be a table", "observability");
+    r.only_keys(*node->as_table(), {"threshold_mm"}, "observability.");
+    c.observable_shape_mm = r.number(*node->as_table(), "threshold_mm", "observability.");
+    if (!(c.observable_shape_mm >= 0.0))
+      r.fail(node->as_table()->get("threshold_mm"), "threshold_mm must be >= 0", "observability.threshold_mm");
+    c.observability_known = true;
+  }
+  if (const toml::node* shapes = root.get("unobserved_shape")) {
+    if (!c.observability_known) r.fail(shapes, "[[unobserved_shape]] needs an [observability] table", "unobserved_shape");
+    if (!shapes->is_array_of_tables())
+      r.fail(shapes, "'unobserved_shape' must be [[unobserved_shape]] tables", "unobserved_shape");
+    std::set<std::string> names;
+    for (const auto& node : *shapes->as_array()) {
+      const auto& t = *node.as_table();
+      r.only_keys(t, {"name", "max_displacement_mm"}, "unobserved_shape.");
+      UnobservedShape u;
+      u.name = r.string(t, "name", "unobserved_shape.");
+      if (!names.insert(u.name).second)
+        r.fail(t.get("name"), fmt::format("shape '{}' appears twice", u.name), "unobserved_shape.name");
+      u.max_displacement_mm = r.number(t, "max_displacement_mm", "unobserved_shape.");
+      c.unobserved_shapes.push_back(std::move(u));
+    }
+  }
   for (const auto& s : c.stable_markers)
     if (!c.neutral_of(s))
       r.fail(stab.get("markers"), fmt::format("stable marker '{}' has no [[marker]] or [[head_marker]] entry", s),
@@ -334,6 +367,10 @@ void check_profile_matches_rig(const Calibration& c, const Rig& rig, const std::
       if (v >= rig.vertex_count())
         throw Error(fmt::format("marker '{}' binds vertex {}, the rig has {}", m.label, v, rig.vertex_count()),
                     ErrorLocation{.file = profile_name, .key = "marker.vertices"});
+  for (const auto& u : c.unobserved_shapes)
+    if (!rig.shape_index(u.name))
+      throw Error(fmt::format("unobserved shape '{}' is not a shape of rig '{}'", u.name, rig.name),
+                  ErrorLocation{.file = profile_name, .key = "unobserved_shape.name"});
 }
 
 }  // namespace facecap::align

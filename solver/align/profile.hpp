@@ -13,6 +13,9 @@
 //   [[marker]]   label, vertices, barycentric, neutral (take units), bound_point (rig),
 //                offset (rig: transform(neutral) - bound_point, the identity mismatch), residual_mm
 //   [[head_marker]] label, neutral (take units): a head-rig marker, for the head pose only (version 2)
+//   [observability] threshold_mm; [[unobserved_shape]] name, max_displacement_mm: the shapes
+//                left out of the weight fit and why (version 3; older profiles have none,
+//                and the reader leaves observability_known false)
 //   notes = [...]
 //
 // Reading is strict: unknown keys, wrong types, a bad checksum or a newer version are
@@ -27,7 +30,8 @@
 namespace facecap::align {
 
 // 2: [[head_marker]] entries (written only by profiles that have them).
-inline constexpr int kCalibrationProfileVersion = 2;
+// 3: [observability] and [[unobserved_shape]] (written by profiles that decided them).
+inline constexpr int kCalibrationProfileVersion = 3;
 
 std::string write_calibration_profile(const Calibration& calibration);
 void save_calibration_profile(const std::filesystem::path& path, const Calibration& calibration);
