@@ -143,16 +143,22 @@ TEST_CASE("a calibration with head-rig markers round-trips through the profile a
   const Rig& rig = BuiltinFace::instance().rig();
   const pipeline::Calibration calibration = pipeline::default_calibration(rig, 8, 4);
   const std::string text = align::write_calibration_profile(calibration);
-  CHECK(text.find("version = 2") != std::string::npos);  // head markers need version 2
+  // Head markers need version 2; which shapes the markers observe, version 3.
+  CHECK(text.find(calibration.observability_known ? "version = 3" : "version = 2") != std::string::npos);
   const pipeline::Calibration back = pipeline::read_calibration(text, "embedded", rig);
   REQUIRE(back.head_markers.size() == 4);
   CHECK(back.head_markers[3].label == calibration.head_markers[3].label);
   CHECK(back.head_markers[3].neutral == calibration.head_markers[3].neutral);
   CHECK(back.stable_markers == calibration.stable_markers);
   CHECK(align::write_calibration_profile(back) == text);
-  // Without head markers a profile stays version 1, which older readers read.
-  const std::string plain = align::write_calibration_profile(pipeline::default_calibration(rig, 8, 0));
-  CHECK(plain.find("version = 1") != std::string::npos);
+  // A profile is written at the lowest version that holds it, which older readers read:
+  // without the shapes' observability 2 with head markers, 1 without.
+  pipeline::Calibration older = calibration;
+  older.observability_known = false;
+  older.unobserved_shapes.clear();
+  CHECK(align::write_calibration_profile(older).find("version = 2") != std::string::npos);
+  older.head_markers.clear();
+  CHECK(align::write_calibration_profile(older).find("version = 1") != std::string::npos);
 }
 
 // `facecap calibrate` then facecapd: the profile the tool writes is the calibration the
