@@ -283,7 +283,6 @@ std::string Daemon::status_line(const Figures& w) const {
   if (const std::string flagged = flagged_text(w); !flagged.empty()) line += ", " + flagged;
   if (const drivers::SourceHealth source = source_->health(); !source.state.empty())
     line += fmt::format(", source: {}", source.state.view());
-  if (const std::string source = source_->status(); !source.empty()) line += ", " + source;
   return line;
 }
 
@@ -424,7 +423,7 @@ void Daemon::supervise_once(int64_t now_ns) {
     if (const std::string flagged = flagged_text(f); !flagged.empty()) spdlog::warn("frames flagged: {}", flagged);
     if (f.outputs_dropped > 0) spdlog::warn("{} frames dropped by the outputs", f.outputs_dropped);
     if (f.source_errors > 0) spdlog::warn("{} source errors (malformed input, device errors)", f.source_errors);
-    if (const std::string source = source_->status(); !source.empty()) spdlog::warn("source: {}", source);
+    if (!sample.source.state.empty()) spdlog::warn("source: {}", sample.source.state.view());
     *stats_sample_ = sample;
     next_stats_ns_ = now_ns + int64_t(c.logging.stats_interval_s * kNsPerSecond);
   }
@@ -618,7 +617,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["latency_ms"] = {{"p50", ms(f.latency_p50_ns)}, {"p99", ms(f.latency_p99_ns)}, {"max", ms(f.latency_max_ns)}};
   j["cpu_percent"] = f.cpu_percent;
   j["source"] = {{"description", source_->description()}, {"overwritten", f.source_overwritten},
-                 {"late", f.source_late}, {"errors", f.source_errors}, {"status", source_->status()}};
+                 {"late", f.source_late}, {"errors", f.source_errors}, {"status", std::string(source_->health().state.view())}};
   nlohmann::json chain = nlohmann::json::object();
   for (std::size_t i = 0; i < kLatencyStageCount; ++i) {
     const LatencyFigures& stage = f.latency_chain[i];

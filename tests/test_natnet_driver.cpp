@@ -263,6 +263,6 @@ TEST_CASE("the natnet driver takes frames from natnet-serve and counts and drops
   CHECK(counts.malformed == 2);
   CHECK(source.health().errors == 5);
   CHECK(counts.stale == 0);
-  CHECK(source.status().empty());
+  CHECK(source.health().state.empty());
   source.stop();
 }

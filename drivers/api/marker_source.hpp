@@ -64,9 +64,6 @@ class MarkerSource {
 
   // For logs and STATUS ("sim builtin 48+4 markers at 120 Hz"). Not RT-safe.
   virtual std::string description() const = 0;
-  // What the operator should know now ("no frames from 10.0.0.5 for 3.2 s"), for STATUS
-  // and the log; empty when all is well. Any thread. Not RT-safe.
-  virtual std::string status() const { return {}; }
   // Safe from any thread. RT-safe.
   virtual SourceHealth health() const noexcept = 0;
   // No frame will come any more (a replay that ended). RT-safe.

@@ -330,12 +330,17 @@ void NatNetSource::on_models(const nn::ModelDefinitions& models) {
   std::string note = converter_->follow(models);
   if (!note.empty()) spdlog::warn("natnet: new model definitions from {}: {}", server_name_, note);
   else spdlog::info("natnet: new model definitions from {} followed", server_name_);
-  set_note(std::move(note));
+  note_ = std::move(note);
+  publish_state(monotonic_now_ns());
 }
 
-void NatNetSource::set_note(std::string note) {
-  const std::lock_guard lock(note_mutex_);
-  note_ = std::move(note);
+void NatNetSource::publish_state(int64_t now_ns) {
+  std::string text;
+  if (silent_)
+    text = fmt::format("no frames from {} for {:.1f} s", server_name_,
+                       seconds(now_ns - last_frame_ns_.load(std::memory_order_relaxed)));
+  if (!note_.empty()) text += (text.empty() ? "" : "; ") + note_;
+  state_.set(text);
 }
 
 void NatNetSource::on_frame(const nn::FrameOfData& frame, int64_t received_ns) {
@@ -344,6 +349,8 @@ void NatNetSource::on_frame(const nn::FrameOfData& frame, int64_t received_ns) {
     silent_ = false;
     spdlog::info("natnet: frames from {} again after {:.1f} s", server_name_,
                  seconds(received_ns - last_frame_ns_.load(std::memory_order_relaxed)));
+    last_frame_ns_.store(received_ns, std::memory_order_relaxed);
+    publish_state(received_ns);
   }
   last_frame_ns_.store(received_ns, std::memory_order_relaxed);
   if (have_frame_ && frame.frame_number <= last_frame_number_) {
@@ -389,6 +396,7 @@ void NatNetSource::periodic(int64_t now_ns) {
       spdlog::warn("natnet: no frames from {} for {:.1f} s: connecting again every second", server_name_,
                    seconds(silent_for));
     }
+    publish_state(now_ns);  // the silence's length, every poll slice
     if (now_ns >= next_reconnect_ns_) {
       send_connect();
       send(message(nn::MessageId::kRequestModelDef));
@@ -420,18 +428,6 @@ NatNetCounts NatNetSource::counts() const noexcept {
   c.model_updates = model_updates_.load(std::memory_order_relaxed);
   c.unlabelled_dropped = unlabelled_dropped_.load(std::memory_order_relaxed);
   return c;
-}
-
-std::string NatNetSource::status() const {
-  std::string text;
-  if (running_.load(std::memory_order_acquire)) {
-    const int64_t silent_for = monotonic_now_ns() - last_frame_ns_.load(std::memory_order_relaxed);
-    if (silent_for > int64_t(options_.silence_timeout_s * kNsPerSecond))
-      text = fmt::format("no frames from {} for {:.1f} s", server_name_, seconds(silent_for));
-  }
-  const std::lock_guard lock(note_mutex_);
-  if (!note_.empty()) text += (text.empty() ? "" : "; ") + note_;
-  return text;
 }
 
 std::string NatNetSource::description() const {

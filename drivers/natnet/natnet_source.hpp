@@ -14,12 +14,11 @@
 // (formats/natnet_markers.hpp) into the latest-value mailbox, asks again for the model
 // definitions when they change, sends keep-alives (unicast) and echoes (the server's clock
 // on ours, for latency), follows a restarted server, and when the server falls silent says
-// so in status() and reconnects every second until frames come again. Malformed,
+// so in its state line (SourceHealth::state) and reconnects every second until frames come again. Malformed,
 // truncated and oversize datagrams are counted (NatNetCounts, SourceHealth::errors) and
 // dropped.
 #include <atomic>
 #include <cstdint>
-#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -62,7 +61,6 @@ class NatNetSource final : public MailboxSource {
   void start(const SourceStart& start) override;
   void stop() noexcept override;
   std::string description() const override;
-  std::string status() const override;
 
   NatNetCounts counts() const noexcept;
   // The bitstream frames are read as. Valid after open().
@@ -84,7 +82,8 @@ class NatNetSource final : public MailboxSource {
   void on_frame(const formats::natnet::FrameOfData& frame, int64_t received_ns);
   void on_models(const formats::natnet::ModelDefinitions& models);
   void periodic(int64_t now_ns);
-  void set_note(std::string note);
+  // Writes the state line from the silence and note_. Receive thread only.
+  void publish_state(int64_t now_ns);
   void count_bad(std::atomic<uint64_t>& counter, const std::string& what, int64_t now_ns);
 
   NatNetOptions options_;
@@ -120,8 +119,7 @@ class NatNetSource final : public MailboxSource {
   std::thread thread_;
   std::atomic<uint64_t> frames_{0}, malformed_{0}, truncated_{0}, oversize_{0}, stale_{0}, restarts_{0}, silences_{0},
       model_updates_{0}, unlabelled_dropped_{0};
-  mutable std::mutex note_mutex_;
-  std::string note_;  // what the last model definitions changed, for status()
+  std::string note_;  // what the last model definitions changed; receive thread only
 };
 
 }  // namespace facecap::drivers
