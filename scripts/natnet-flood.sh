@@ -16,6 +16,7 @@
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+. "$here/scripts/bench-lib.sh"
 build_dir=${FACECAP_BUILD_DIR:-$here/build}
 seconds=10
 rate=10000

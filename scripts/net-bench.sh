@@ -22,6 +22,7 @@
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+. "$here/scripts/bench-lib.sh"
 build_dir=${FACECAP_BUILD_DIR:-$here/build}
 seconds=60
 strict=0
@@ -54,9 +55,7 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# The soak's replay: the ICT rig at 240 Hz, 48 markers, 0.1 mm noise, 0.5% dropouts, looped.
-"$facecap" synth --rig "$rig" --rate 240 --frames 4800 --markers 48 --noise 0.1 --dropout 0.005 \
-  -o "$work/ict-240.fcrec" >/dev/null
+make_ict_240hz_replay "$facecap" "$rig" "$work/ict-240.fcrec"
 
 base=$(( 41000 + $$ % 10000 ))
 udp_port=$base vmc_port=$(( base + 1 )) livelink_port=$(( base + 2 ))

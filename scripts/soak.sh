@@ -12,6 +12,7 @@
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+. "$here/scripts/bench-lib.sh"
 build_dir=${FACECAP_BUILD_DIR:-$here/build}
 seconds=600
 strict=0
@@ -37,16 +38,10 @@ facecapd="$build_dir/daemon/facecapd"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
-# The replay: a synthetic take of the ICT rig at 240 Hz (the built-in motion, 48 markers
-# spread over the face as facecapd's default marker set places them, 0.1 mm noise, 0.5%
-# dropouts), 20 s long and looped. It has no head markers: head stabilisation is off.
-"$facecap" synth --rig "$rig" --rate 240 --frames 4800 --markers 48 --noise 0.1 --dropout 0.005 \
-  -o "$work/ict-240.fcrec" >/dev/null
+make_ict_240hz_replay "$facecap" "$rig" "$work/ict-240.fcrec"
 
 echo "soak: ICT rig at 240 Hz from a replay for $seconds s"
-allow_root=()
-[ "$(id -u)" -ne 0 ] || allow_root=(--allow-root)  # facecapd refuses root otherwise
-"$facecapd" "${allow_root[@]}" \
+"$facecapd" \
   --set "rig.path=$rig" \
   --set source.driver=replay --set "source.replay.file=$work/ict-240.fcrec" --set source.replay.loop=true \
   --set calibration.head_markers=0 \
