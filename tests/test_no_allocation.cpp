@@ -207,6 +207,36 @@ TEST_CASE("the plausibility gate allocates nothing, accepting or refusing marker
   CHECK(allocations == 0);
 }
 
+TEST_CASE("labelling an unlabelled point cloud in the pipeline allocates nothing") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const pipeline::Calibration calibration = pipeline::default_calibration(rig, 24, 4);
+  const MarkerSet rest = pipeline::rest_marker_set(calibration);
+  std::vector<Eigen::Vector3d> points;
+  for (const auto& m : rest.face) points.push_back(binding_point(m, rig.neutral));
+  for (const auto& m : rest.head) points.push_back(m.position);
+  std::vector<std::string> slots;  // a cloud source: unlabelled slots, as the natnet and v4l2 drivers hand over
+  for (std::size_t k = 0; k < points.size() + 4; ++k) slots.push_back(fmt::format("unlabelled_{}", k + 1));
+  pipeline::SolveSettings settings;
+  settings.label_markers = true;
+  pipeline::SolvePipeline pipeline(rig, calibration, {slots, ""}, settings);
+  SolvedFrame solved = pipeline.make_solved_frame(false);
+  MarkerFrame frame = make_marker_frame(slots);
+  std::size_t allocations = 0;
+  for (int i = 0; i < 4; ++i) {
+    for (std::size_t k = 0; k < slots.size(); ++k) {  // the points in another order each frame
+      const std::size_t from = (k + std::size_t(i) * 7) % slots.size();
+      frame.markers[k].flags = from < points.size() ? kMarkerUnlabelled : kMarkerUnlabelled | kMarkerMissing;
+      if (from < points.size()) frame.markers[k].position = points[from];
+    }
+    frame.source_time_ns = i * (kNsPerSecond / 120);
+    const test::CountAllocations counter;
+    pipeline.process(frame, solved);
+    if (i > 0) allocations += std::size_t(counter.count());  // the first frame may size caches
+  }
+  CHECK(pipeline.label_stats().assigned == int(points.size()));
+  CHECK(allocations == 0);
+}
+
 TEST_CASE("runtime takes, the control stream and the operator telemetry allocate nothing on the solve thread") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
