@@ -9,17 +9,34 @@
 
 namespace facecap::pipeline {
 
-CaptureCalibration calibrate_capture(const Rig& rig, const formats::MarkerTake& take, const std::string& name) {
-  if (take.frames.empty()) throw file_error(name, "the capture has no frames");
+void check_calibration_take(const formats::MarkerTake& take, const std::string& name) {
+  if (take.frames.empty()) throw file_error(name, "the take has no frames");
   if (take.marker_count() < 6) throw file_error(name, fmt::format("{} markers; calibration needs at least 6", take.marker_count()));
-  // Units for the neutral search's mm thresholds: stated, or the decade the face's size suggests.
-  double take_mm = millimetres_per_unit(take.units).value_or(0.0);
-  if (take_mm <= 0.0) {
-    Eigen::Matrix3Xd present(3, 0);
-    for (const Marker& m : take.frames.front().markers)
-      if (m.present()) present.conservativeResize(3, present.cols() + 1), present.col(present.cols() - 1) = m.position;
-    take_mm = millimetres_per_unit(guess_face_units(bounding_box(present))).value_or(10.0);
-  }
+}
+
+double neutral_search_mm_per_unit(const formats::MarkerTake& take, std::optional<double> given) {
+  if (given) return *given;
+  if (const auto stated = millimetres_per_unit(take.units)) return *stated;
+  Eigen::Matrix3Xd present(3, 0);
+  for (const Marker& m : take.frames.front().markers)
+    if (m.present()) present.conservativeResize(3, present.cols() + 1), present.col(present.cols() - 1) = m.position;
+  return millimetres_per_unit(guess_face_units(bounding_box(present))).value_or(10.0);
+}
+
+void describe_calibration_source(align::Calibration& calibration, const align::TakeCalibration& result,
+                                 const formats::MarkerTake& take, const std::string& name) {
+  calibration.source_take = name;
+  calibration.source_frame = take.frames[result.frame].frame_no;
+  if (result.count > 1)
+    calibration.notes.push_back(fmt::format("neutral positions are the mean of frames {} to {} stabilised onto frame {}",
+                                            take.frames[result.first].frame_no,
+                                            take.frames[result.first + result.count - 1].frame_no,
+                                            calibration.source_frame));
+}
+
+CaptureCalibration calibrate_capture(const Rig& rig, const formats::MarkerTake& take, const std::string& name) {
+  check_calibration_take(take, name);
+  const double take_mm = neutral_search_mm_per_unit(take, std::nullopt);
   align::TakeCalibrationOptions options;
   options.calibration.rig_mm_per_unit = 1.0 / rig_units_per_mm(rig);
   if (millimetres_per_unit(take.units)) options.calibration.take_mm_per_unit = take_mm;
@@ -28,12 +45,7 @@ CaptureCalibration calibrate_capture(const Rig& rig, const formats::MarkerTake& 
   CaptureCalibration out;
   out.result = align::calibrate_take(rig, take.labels, take.frames, options);
   align::Calibration& c = out.result.calibration;
-  c.source_take = name;
-  c.source_frame = take.frames[out.result.frame].frame_no;
-  if (out.result.count > 1)
-    c.notes.push_back(fmt::format("neutral positions are the mean of frames {} to {} stabilised onto frame {}",
-                                  take.frames[out.result.first].frame_no,
-                                  take.frames[out.result.first + out.result.count - 1].frame_no, c.source_frame));
+  describe_calibration_source(c, out.result, take, name);
   std::vector<double> residuals;
   for (const auto& m : c.markers) residuals.push_back(m.residual_mm);
   if (!residuals.empty()) {

@@ -12,6 +12,7 @@
 #include "core/units.hpp"
 #include "formats/take.hpp"
 #include "solver/align/neutral.hpp"
+#include "pipeline/capture_calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
 #include "solver/align/calibrate_take.hpp"
 #include "solver/align/profile.hpp"
@@ -67,8 +68,7 @@ void run_calibrate(const Options& o, bool frame_given) {
   const double rig_mm = rig_mm_per_unit(rig, o.rig_units);
   formats::MarkerTake take = select_markers(formats::read_take(o.take), split_list(o.markers), o.take);
   for (const auto& w : take.warnings) fmt::print(stderr, "facecap: warning: {}: {}\n", o.take, w);
-  if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
-  if (take.marker_count() < 6) throw file_error(o.take, fmt::format("{} markers; calibration needs at least 6", take.marker_count()));
+  pipeline::check_calibration_take(take, o.take);
 
   std::optional<double> given_units;
   if (!o.units.empty()) {
@@ -76,20 +76,12 @@ void run_calibrate(const Options& o, bool frame_given) {
     if (!given_units) throw Error(fmt::format("--units '{}': use mm, cm or m", o.units));
   }
   const auto file_units = millimetres_per_unit(take.units);
-  // Provisional units for the neutral search's mm thresholds: given, stated, or the
-  // decade a face's size suggests.
-  double search_units = given_units ? *given_units : file_units ? *file_units : 10.0;
-  if (!given_units && !file_units) {
-    std::vector<uint8_t> present;
-    const auto P = frame_positions(take.frames.front(), present);
-    if (const auto g = millimetres_per_unit(guess_face_units(bounding_box(P)))) search_units = *g;
-  }
 
   align::TakeCalibrationOptions topts;
   topts.calibration.take_mm_per_unit = given_units;
   topts.calibration.rig_mm_per_unit = rig_mm;
   topts.neutral.rate_hz = take.rate_hz > 0 ? take.rate_hz : 60.0;
-  topts.neutral.take_mm_per_unit = search_units;
+  topts.neutral.take_mm_per_unit = pipeline::neutral_search_mm_per_unit(take, given_units);
   topts.average = o.average;
   topts.stable_count = o.stable_count;
   // Stable markers: named, or found (mutual distances vary least over this take, among
@@ -107,12 +99,7 @@ void run_calibrate(const Options& o, bool frame_given) {
   align::Calibration cal = result.calibration;
   const bool auto_neutral = result.neutral.has_value();
   const align::NeutralFrame neutral = result.neutral.value_or(align::NeutralFrame{});
-  cal.source_take = std::filesystem::path(o.take).filename().string();
-  cal.source_frame = take.frames[result.frame].frame_no;
-  if (result.count > 1)
-    cal.notes.push_back(fmt::format("neutral positions are the mean of frames {} to {} stabilised onto frame {}",
-                                    take.frames[result.first].frame_no, take.frames[result.first + result.count - 1].frame_no,
-                                    cal.source_frame));
+  pipeline::describe_calibration_source(cal, result, take, std::filesystem::path(o.take).filename().string());
   if (cal.units_detected && file_units && *file_units != cal.take_mm_per_unit)
     cal.notes.push_back(fmt::format("the take states '{}' but its size says '{}'; used '{}' (override with --units)", take.units,
                                     unit_name(cal.take_mm_per_unit), unit_name(cal.take_mm_per_unit)));
