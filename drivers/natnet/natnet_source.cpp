@@ -225,43 +225,44 @@ void NatNetSource::drain(natnet::UdpSocket& socket) {
   }
 }
 
-void NatNetSource::count_bad(std::atomic<uint64_t>& counter, const std::string& what, int64_t now_ns) {
+template <typename Describe>
+void NatNetSource::count_bad(std::atomic<uint64_t>& counter, Describe&& describe) {
   counter.fetch_add(1, std::memory_order_relaxed);
   errors_.fetch_add(1, std::memory_order_relaxed);
   if (errors_logged_ < kErrorsLoggedEach) {
     ++errors_logged_;
-    spdlog::warn("natnet: dropped {}{}", what,
+    spdlog::warn("natnet: dropped {}{}", describe(),
                  errors_logged_ == kErrorsLoggedEach ? " (further ones are counted, and summed up every 10 s)" : "");
   }
 }
 
 void NatNetSource::handle(std::span<const char> datagram, bool truncated, const natnet::Endpoint& from,
                           int64_t received_ns) {
-  const std::string sender = from.to_string();
   if (truncated || datagram.size() > nn::kHeaderBytes + nn::kMaxPayloadBytes) {
-    count_bad(oversize_, fmt::format("a datagram from {} larger than any NatNet packet", sender), received_ns);
+    count_bad(oversize_, [&] { return fmt::format("a datagram from {} larger than any NatNet packet", from.to_string()); });
     return;
   }
   if (datagram.size() < nn::kHeaderBytes) {
-    count_bad(truncated_, fmt::format("a {}-byte datagram from {}: shorter than a NatNet header", datagram.size(), sender),
-              received_ns);
+    count_bad(truncated_, [&] {
+      return fmt::format("a {}-byte datagram from {}: shorter than a NatNet header", datagram.size(), from.to_string());
+    });
     return;
   }
   uint16_t declared = 0;
   std::memcpy(&declared, datagram.data() + 2, 2);
   if (nn::kHeaderBytes + declared != datagram.size()) {
     const bool cut = nn::kHeaderBytes + declared > datagram.size();
-    count_bad(cut ? truncated_ : oversize_,
-              fmt::format("a datagram from {} of {} bytes whose header says {}", sender, datagram.size(),
-                          nn::kHeaderBytes + declared),
-              received_ns);
+    count_bad(cut ? truncated_ : oversize_, [&] {
+      return fmt::format("a datagram from {} of {} bytes whose header says {}", from.to_string(), datagram.size(),
+                         nn::kHeaderBytes + declared);
+    });
     return;
   }
   nn::Message m;
   try {
-    m = nn::parse_message(datagram, bitstream_, sender);
+    m = nn::parse_message(datagram, bitstream_, from.to_string());
   } catch (const Error& e) {
-    count_bad(malformed_, fmt::format("a malformed datagram: {}", e.what()), received_ns);
+    count_bad(malformed_, [&] { return fmt::format("a malformed datagram: {}", e.what()); });
     return;
   }
   switch (m.id) {

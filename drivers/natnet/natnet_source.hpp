@@ -84,7 +84,10 @@ class NatNetSource final : public MailboxSource {
   void periodic(int64_t now_ns);
   // Writes the state line from the silence and note_. Receive thread only.
   void publish_state(int64_t now_ns);
-  void count_bad(std::atomic<uint64_t>& counter, const std::string& what, int64_t now_ns);
+  // Counts a dropped datagram; `describe()` makes its text only for the few that are
+  // logged one by one, so a flood costs no formatting.
+  template <typename Describe>
+  void count_bad(std::atomic<uint64_t>& counter, Describe&& describe);
 
   NatNetOptions options_;
   SourceInfo info_;
