@@ -11,7 +11,7 @@
 // floats little-endian; no padding besides the fields named reserved.
 //
 // This header depends only on the C++ standard library: the client library and the
-// daemon's encoder (formats/udp_stream.hpp) both include it.
+// daemon's encoder (outputs/udp/udp_stream_encoding.hpp) both include it.
 #include <cstddef>
 #include <cstdint>
 

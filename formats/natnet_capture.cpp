@@ -6,7 +6,6 @@
 #include "formats/natnet_request.hpp"
 
 namespace facecap::formats::natnet {
-namespace {
 
 bool on_natnet_port(const UdpDatagram& d) noexcept {
   for (const uint16_t port : {d.source_port, d.destination_port}) {
@@ -14,6 +13,8 @@ bool on_natnet_port(const UdpDatagram& d) noexcept {
   }
   return false;
 }
+
+namespace {
 
 std::string record_label(const std::string& name, const UdpDatagram& d) {
   return fmt::format("{} record {}", name, d.record + 1);
@@ -59,29 +60,14 @@ std::optional<Version> requested_bitstream(const Message& message) {
   return request->bitstream;
 }
 
-NatNetCapture decode(UdpCapture& udp, const std::string& name, const CaptureOptions& options) {
-  NatNetCapture capture;
-  capture.file_format = udp.file_format();
-  capture.link_type = udp.link_type_name();
-  std::vector<UdpDatagram> datagrams;
-  try {
-    UdpDatagram d;
-    while (udp.next(d)) {
-      if (options.any_port || on_natnet_port(d)) {
-        datagrams.push_back(std::move(d));
-      } else {
-        ++capture.other_ports;
-      }
-    }
-  } catch (const Error& e) {
-    capture.damage = e.what();
-  }
-  capture.records = udp.counts();
-  choose_bitstream(datagrams, name, options, capture);
+}  // namespace
 
+void decode_datagrams(const std::vector<UdpDatagram>& datagrams, const std::string& name, const CaptureOptions& options,
+                      NatNetCapture& capture) {
+  choose_bitstream(datagrams, name, options, capture);
   Version bitstream = capture.bitstream;
   capture.messages.reserve(datagrams.size());
-  for (UdpDatagram& d : datagrams) {
+  for (const UdpDatagram& d : datagrams) {
     try {
       Message message = parse_message(d.payload, bitstream, record_label(name, d));
       if (const auto version = requested_bitstream(message)) bitstream = *version;
@@ -92,19 +78,6 @@ NatNetCapture decode(UdpCapture& udp, const std::string& name, const CaptureOpti
       if (capture.errors.size() < NatNetCapture::kMaxErrors) capture.errors.emplace_back(e.what());
     }
   }
-  return capture;
-}
-
-}  // namespace
-
-NatNetCapture read_natnet_capture(const std::filesystem::path& path, const CaptureOptions& options) {
-  UdpCapture udp(path);
-  return decode(udp, path.filename().string(), options);
-}
-
-NatNetCapture read_natnet_capture(std::span<const char> bytes, const std::string& name, const CaptureOptions& options) {
-  UdpCapture udp(bytes, name);
-  return decode(udp, name, options);
 }
 
 double frame_rate_hz(const NatNetCapture& capture) {

@@ -1,11 +1,10 @@
 #pragma once
-// NatNet messages out of a packet capture: the UDP datagrams of pcap.hpp, each parsed by
+// NatNet messages out of a packet capture's UDP datagrams (pcap.hpp), each parsed by
 // natnet.hpp. Which layout the frames have comes from the session in the capture: a
 // client's CONNECT asking for a bitstream, else the server's SERVERINFO, else the option
 // (3.0, what Motive 2.x streams); a "Bitstream,M.m" NAT_REQUEST switches it from there on.
-// For tools and replays: it reads the whole capture into memory; not real-time safe.
+// The file is read by drivers/capture (libpcap); for tools and replays, not real-time safe.
 #include <cstdint>
-#include <filesystem>
 #include <optional>
 #include <span>
 #include <string>
@@ -58,11 +57,14 @@ struct NatNetCapture {
   std::optional<std::string> damage;
 };
 
-// Throws Error when the file is not a capture libpcap reads or has an unsupported link
-// type; everything after that is counted, not thrown.
-NatNetCapture read_natnet_capture(const std::filesystem::path& path, const CaptureOptions& options = {});
-NatNetCapture read_natnet_capture(std::span<const char> bytes, const std::string& name,
-                                  const CaptureOptions& options = {});
+// True for datagrams to or from NatNet's command or data port (1510, 1511).
+bool on_natnet_port(const UdpDatagram& datagram) noexcept;
+
+// Parses `datagrams` (a capture's, in capture order) into capture.messages, choosing the
+// session's bitstream; what does not parse is counted in capture.undecodable. `name`
+// (the capture's) goes into the errors. The caller fills the facts of the file.
+void decode_datagrams(const std::vector<UdpDatagram>& datagrams, const std::string& name, const CaptureOptions& options,
+                      NatNetCapture& capture);
 
 // Frames per second from the first and last frames' numbers and timestamps (dropped
 // frames do not lower it); 0 with fewer than two frames or no time between them.

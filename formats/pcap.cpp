@@ -1,16 +1,11 @@
 #include "formats/pcap.hpp"
 
 #include <algorithm>
-#include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <optional>
 
 #include <arpa/inet.h>
-#include <fmt/format.h>
-#include <pcap/pcap.h>
-
-#include "core/error.hpp"
+#include <pcap/dlt.h>  // the DLT_* numbers only: libpcap itself is not linked
 
 namespace facecap::formats {
 
@@ -42,16 +37,14 @@ std::optional<uint32_t> magic(std::span<const char> head) noexcept {
   return value;
 }
 
-std::string_view format_of(std::span<const char> head) noexcept {
-  return magic(head) == kPcapngBlockType ? "pcapng" : "pcap";
-}
-
 uint16_t be16(std::span<const uint8_t> b, std::size_t at) noexcept { return uint16_t(b[at] << 8 | b[at + 1]); }
 uint32_t be32(std::span<const uint8_t> b, std::size_t at) noexcept {
   return uint32_t(b[at]) << 24 | uint32_t(b[at + 1]) << 16 | uint32_t(b[at + 2]) << 8 | b[at + 3];
 }
 
-bool is_supported_link(int link_type) noexcept {
+}  // namespace
+
+bool supported_link_type(int link_type) noexcept {
   switch (link_type) {
     case DLT_EN10MB:
     case DLT_LINUX_SLL:
@@ -64,6 +57,8 @@ bool is_supported_link(int link_type) noexcept {
     default: return false;
   }
 }
+
+namespace {
 
 enum class Outcome { kDatagram, kFragmentHeld, kNotIp, kNotUdp, kTruncated, kMalformed };
 
@@ -168,29 +163,10 @@ bool looks_like_capture(std::span<const char> head) noexcept {
          swapped == kPcapMagicNano;
 }
 
-struct UdpCapture::State {
-  std::string name;
-  pcap_t* pcap = nullptr;
+struct UdpFramer::State {
   int link_type = 0;
-  std::string_view format;
   CaptureCounts counts;
   Reassembler reassembler;
-  bool finished = false;
-
-  // Takes `pcap`; throws Error (closing it) unless its link type is supported.
-  State(pcap_t* opened, std::string capture_name, std::string_view file_format)
-      : name(std::move(capture_name)), pcap(opened), link_type(pcap_datalink(opened)), format(file_format) {
-    if (!is_supported_link(link_type)) {
-      const char* link_name = pcap_datalink_val_to_name(link_type);
-      pcap_close(pcap);
-      throw file_error(name, fmt::format("link type {} ({}) is not supported: Ethernet, Linux cooked (SLL, SLL2), "
-                                         "raw IP and loopback are",
-                                         link_type, link_name ? link_name : "unknown"));
-    }
-  }
-  ~State() { pcap_close(pcap); }
-  State(const State&) = delete;
-  State& operator=(const State&) = delete;
 
   // One record: the link layer, then IP. `cut`: the snap length shortened it.
   Outcome decode(std::span<const uint8_t> b, bool cut, UdpDatagram& out) {
@@ -329,80 +305,41 @@ struct UdpCapture::State {
   std::vector<char> reassembled_;
 };
 
-UdpCapture::UdpCapture(const std::filesystem::path& path) {
-  char head[4] = {};
-  std::ifstream(path, std::ios::binary).read(head, sizeof head);
-  char error[PCAP_ERRBUF_SIZE] = {};
-  pcap_t* pcap = pcap_open_offline_with_tstamp_precision(path.c_str(), PCAP_TSTAMP_PRECISION_NANO, error);
-  if (!pcap) throw file_error(path.string(), fmt::format("not a readable pcap or pcapng capture: {}", error));
-  state_ = std::make_unique<State>(pcap, path.string(), format_of(head));
-}
+UdpFramer::UdpFramer(int link_type) : state_(std::make_unique<State>()) { state_->link_type = link_type; }
+UdpFramer::~UdpFramer() = default;
+UdpFramer::UdpFramer(UdpFramer&&) noexcept = default;
+UdpFramer& UdpFramer::operator=(UdpFramer&&) noexcept = default;
 
-UdpCapture::UdpCapture(std::span<const char> bytes, const std::string& name) {
-  if (bytes.empty()) throw file_error(name, "empty: not a pcap or pcapng capture");
-  FILE* file = fmemopen(const_cast<char*>(bytes.data()), bytes.size(), "rb");
-  if (!file) throw file_error(name, "cannot open the bytes as a stream");
-  char error[PCAP_ERRBUF_SIZE] = {};
-  pcap_t* pcap = pcap_fopen_offline_with_tstamp_precision(file, PCAP_TSTAMP_PRECISION_NANO, error);
-  if (!pcap) {
-    std::fclose(file);  // pcap_close closes it once libpcap has taken it
-    throw file_error(name, fmt::format("not a readable pcap or pcapng capture: {}", error));
-  }
-  state_ = std::make_unique<State>(pcap, name, format_of(bytes));
-}
-
-UdpCapture::~UdpCapture() = default;
-UdpCapture::UdpCapture(UdpCapture&&) noexcept = default;
-UdpCapture& UdpCapture::operator=(UdpCapture&&) noexcept = default;
-
-bool UdpCapture::next(UdpDatagram& out) {
+bool UdpFramer::add_record(std::span<const uint8_t> captured, std::size_t wire_bytes, int64_t seconds,
+                           int64_t nanoseconds, UdpDatagram& out) {
   State& s = *state_;
-  while (!s.finished) {
-    pcap_pkthdr* header = nullptr;
-    const u_char* data = nullptr;
-    const int status = pcap_next_ex(s.pcap, &header, &data);
-    if (status == PCAP_ERROR_BREAK) {
-      s.finished = true;
-      s.counts.unfinished_fragments += s.reassembler.drop_all();
-      return false;
-    }
-    if (status != 1) {
-      throw file_error(s.name,
-                       fmt::format("capture record {} is damaged: {}", s.counts.records + 1, pcap_geterr(s.pcap)));
-    }
-    const std::size_t record = s.counts.records++;
-    // pcapng stamps reach far beyond int64 nanoseconds (year 2262).
-    int64_t time_ns = 0;
-    if (__builtin_mul_overflow(int64_t(header->ts.tv_sec), int64_t(1'000'000'000), &time_ns) ||
-        __builtin_add_overflow(time_ns, int64_t(header->ts.tv_usec), &time_ns)) {
-      ++s.counts.malformed;
-      continue;
-    }
-    out = UdpDatagram{};
-    switch (s.decode(std::span(data, header->caplen), header->caplen < header->len, out)) {
-      case Outcome::kDatagram:
-        ++s.counts.udp_records;
-        ++s.counts.datagrams;
-        out.record = record;
-        out.capture_time_ns = time_ns;
-        return true;
-      case Outcome::kFragmentHeld: break;
-      case Outcome::kNotIp: ++s.counts.not_ip; break;
-      case Outcome::kNotUdp: ++s.counts.not_udp; break;
-      case Outcome::kTruncated: ++s.counts.truncated; break;
-      case Outcome::kMalformed: ++s.counts.malformed; break;
-    }
+  const std::size_t record = s.counts.records++;
+  // pcapng stamps reach far beyond int64 nanoseconds (year 2262).
+  int64_t time_ns = 0;
+  if (__builtin_mul_overflow(seconds, int64_t(1'000'000'000), &time_ns) ||
+      __builtin_add_overflow(time_ns, nanoseconds, &time_ns)) {
+    ++s.counts.malformed;
+    return false;
+  }
+  out = UdpDatagram{};
+  switch (s.decode(captured, captured.size() < wire_bytes, out)) {
+    case Outcome::kDatagram:
+      ++s.counts.udp_records;
+      ++s.counts.datagrams;
+      out.record = record;
+      out.capture_time_ns = time_ns;
+      return true;
+    case Outcome::kFragmentHeld: break;
+    case Outcome::kNotIp: ++s.counts.not_ip; break;
+    case Outcome::kNotUdp: ++s.counts.not_udp; break;
+    case Outcome::kTruncated: ++s.counts.truncated; break;
+    case Outcome::kMalformed: ++s.counts.malformed; break;
   }
   return false;
 }
 
-const CaptureCounts& UdpCapture::counts() const noexcept { return state_->counts; }
+void UdpFramer::finish() noexcept { state_->counts.unfinished_fragments += state_->reassembler.drop_all(); }
 
-std::string_view UdpCapture::link_type_name() const noexcept {
-  const char* name = pcap_datalink_val_to_name(state_->link_type);
-  return name ? name : "unknown";
-}
-
-std::string_view UdpCapture::file_format() const noexcept { return state_->format; }
+const CaptureCounts& UdpFramer::counts() const noexcept { return state_->counts; }
 
 }  // namespace facecap::formats

@@ -1,20 +1,19 @@
 #pragma once
-// UDP datagrams out of packet captures (.pcap and .pcapng, read by libpcap). Pure framing:
-// capture records -> link layer -> IPv4/IPv6 (fragments reassembled) -> UDP; it knows
-// nothing of what the datagrams carry.
+// UDP datagrams out of the records of packet captures (.pcap and .pcapng). Pure framing:
+// a record's bytes -> link layer -> IPv4/IPv6 (fragments reassembled) -> UDP; it knows
+// neither how the records are read from the file (drivers/capture reads them with
+// libpcap) nor what the datagrams carry.
 //
-// Link types: Ethernet (with 802.1Q/802.1ad VLAN tags), Linux cooked (SLL and SLL2), raw
-// IP (DLT_RAW, DLT_IPV4, DLT_IPV6) and BSD loopback (DLT_NULL, DLT_LOOP); another link
-// type is an Error when the capture is opened. Every other record (ARP, TCP, ICMP, a snap
-// length that cut the datagram, headers that contradict the captured bytes, fragments
-// whose datagram never completes) is skipped and counted in CaptureCounts.
+// Link types, as libpcap's DLT_* numbers: Ethernet (with 802.1Q/802.1ad VLAN tags), Linux
+// cooked (SLL and SLL2), raw IP (DLT_RAW, DLT_IPV4, DLT_IPV6) and BSD loopback (DLT_NULL,
+// DLT_LOOP). Every other record (ARP, TCP, ICMP, a snap length that cut the datagram,
+// headers that contradict the captured bytes, fragments whose datagram never completes)
+// is skipped and counted in CaptureCounts.
 #include <array>
 #include <cstdint>
-#include <filesystem>
 #include <memory>
 #include <span>
 #include <string>
-#include <string_view>
 #include <vector>
 
 namespace facecap::formats {
@@ -55,28 +54,28 @@ struct CaptureCounts {
 // pcapng files.
 bool looks_like_capture(std::span<const char> head) noexcept;
 
-// Reads a capture record by record. Not thread-safe; not real-time safe (libpcap reads
-// the file, datagrams are allocated).
-class UdpCapture {
- public:
-  // Opens a file; throws Error naming it when libpcap cannot read it or its link type is
-  // not one of those above.
-  explicit UdpCapture(const std::filesystem::path& path);
-  // Reads a capture held in memory (tests, fuzzing); `bytes` must outlive this object.
-  UdpCapture(std::span<const char> bytes, const std::string& name);
-  ~UdpCapture();
-  UdpCapture(UdpCapture&&) noexcept;
-  UdpCapture& operator=(UdpCapture&&) noexcept;
+// True for the link types above.
+bool supported_link_type(int link_type) noexcept;
 
-  // The next UDP datagram into `out`; false once the capture is exhausted. Throws Error
-  // naming the record when the file is damaged (a record cut short, a bad block).
-  bool next(UdpDatagram& out);
+// Turns a capture's records, in order, into UDP datagrams. Not thread-safe; not real-time
+// safe (datagrams and fragments are allocated).
+class UdpFramer {
+ public:
+  // `link_type` must be supported_link_type.
+  explicit UdpFramer(int link_type);
+  ~UdpFramer();
+  UdpFramer(UdpFramer&&) noexcept;
+  UdpFramer& operator=(UdpFramer&&) noexcept;
+
+  // One record: `captured` its bytes, `wire_bytes` its length on the wire (more than
+  // captured when the snap length cut it), stamped `seconds` + `nanoseconds`. True when
+  // it completed a datagram, put in `out`; otherwise it is counted or held as a fragment.
+  bool add_record(std::span<const uint8_t> captured, std::size_t wire_bytes, int64_t seconds, int64_t nanoseconds,
+                  UdpDatagram& out);
+  // The capture ended: fragments of datagrams that never completed are counted.
+  void finish() noexcept;
 
   const CaptureCounts& counts() const noexcept;
-  // libpcap's name of the link type: "EN10MB", "LINUX_SLL", ...
-  std::string_view link_type_name() const noexcept;
-  // "pcap" or "pcapng".
-  std::string_view file_format() const noexcept;
 
  private:
   struct State;

@@ -21,7 +21,7 @@
 #include "formats/natnet_request.hpp"
 #include "formats/recording.hpp"
 #include "formats/trc.hpp"
-#include "formats/udp_stream.hpp"
+#include "outputs/udp/udp_stream_encoding.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/gltf_rig.hpp"
 #include "solver/obj_mesh.hpp"
@@ -30,6 +30,7 @@
 namespace fs = std::filesystem;
 using namespace facecap;
 using namespace facecap::formats;
+namespace udp_stream = facecap::outputs::udp_stream;
 
 namespace {
 

@@ -6,11 +6,11 @@
 #include <span>
 
 #include "core/error.hpp"
-#include "formats/pcap.hpp"
+#include "drivers/capture/capture_file.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {
-    facecap::formats::UdpCapture capture(std::span<const char>(reinterpret_cast<const char*>(data), size), "fuzz.pcap");
+    facecap::capture::UdpCapture capture(std::span<const char>(reinterpret_cast<const char*>(data), size), "fuzz.pcap");
     facecap::formats::UdpDatagram datagram;
     while (capture.next(datagram)) {
     }

@@ -62,7 +62,7 @@ std::unique_ptr<OutputSink> make_udp(const config::DaemonConfig& c, const SinkCo
   const uint64_t frame_bytes = udp::frame_message_bytes(spec.shape_count, spec.vertex_count);
   spec.destination.send_buffer_bytes = int(std::min<uint64_t>(4 * frame_bytes + (256 << 10), 8 << 20));
   spec.periodic_interval_ns = kNsPerSecond;  // the schema
-  formats::udp_stream::StreamSchema schema;
+  udp_stream::StreamSchema schema;
   schema.rig_hash = context.header.rig_hash;
   schema.rig_name = context.header.rig_name;
   schema.shape_names = context.header.shape_names;

@@ -4,14 +4,15 @@
 #include <benchmark/benchmark.h>
 
 #include "core/io.hpp"
+#include "drivers/capture/capture_file.hpp"
 #include "formats/c3d.hpp"
 #include "formats/livelinkface.hpp"
-#include "formats/natnet_capture.hpp"
 #include "formats/recording.hpp"
 #include "formats/trc.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
+using namespace facecap::capture;
 using namespace facecap::formats;
 
 namespace {
@@ -117,7 +118,7 @@ void BM_ReadNatNetCapture(benchmark::State& state) {
     state.SkipWithError(test::missing_shared_data_message("natnet/traffic.pcapng").c_str());
     return;
   }
-  for (auto _ : state) benchmark::DoNotOptimize(natnet::read_natnet_capture(path));
+  for (auto _ : state) benchmark::DoNotOptimize(capture::read_natnet_capture(path));
   state.SetBytesProcessed(int64_t(state.iterations() * std::filesystem::file_size(path)));
 }
 BENCHMARK(BM_ReadNatNetCapture)->Unit(benchmark::kMillisecond);

@@ -5,11 +5,12 @@
 #include <fmt/format.h>
 #include <catch2/catch.hpp>
 
-#include "formats/natnet_capture.hpp"
+#include "drivers/capture/capture_file.hpp"
 #include "tests/capture_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
+using namespace facecap::capture;
 using namespace facecap::formats;
 using namespace facecap::formats::natnet;
 using namespace facecap::test;

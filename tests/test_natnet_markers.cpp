@@ -8,11 +8,13 @@
 
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "drivers/capture/capture_file.hpp"
 #include "formats/natnet_markers.hpp"
 #include "formats/natnet_request.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
+using namespace facecap::capture;
 using namespace facecap::formats::natnet;
 using Catch::Contains;
 

@@ -14,10 +14,11 @@
 #include "formats/arkit.hpp"
 #include "formats/livelink_packet.hpp"
 #include "formats/osc.hpp"
-#include "formats/udp_stream.hpp"
+#include "outputs/udp/udp_stream_encoding.hpp"
 
 using namespace facecap;
 using namespace facecap::formats;
+namespace udp_stream = facecap::outputs::udp_stream;
 
 namespace {
 

@@ -27,7 +27,7 @@
 #include "core/time.hpp"
 #include "daemon/io_thread.hpp"
 #include "formats/arkit.hpp"
-#include "formats/udp_stream.hpp"
+#include "outputs/udp/udp_stream_encoding.hpp"
 #include "outputs/livelink/livelink_protocol.hpp"
 #include "outputs/net/net_sink.hpp"
 #include "outputs/udp/udp_stream_protocol.hpp"
@@ -87,8 +87,8 @@ SolvedFrame numbered_frame(int64_t n, Eigen::Index shapes, Eigen::Index vertices
   return f;
 }
 
-formats::udp_stream::StreamSchema test_schema(std::vector<std::string> names, uint32_t vertices) {
-  formats::udp_stream::StreamSchema s;
+udp_stream::StreamSchema test_schema(std::vector<std::string> names, uint32_t vertices) {
+  udp_stream::StreamSchema s;
   s.rig_hash = 0xfeedface12345678ull;
   s.rig_name = "testrig";
   s.shape_names = std::move(names);
@@ -291,11 +291,11 @@ TEST_CASE("the UDP client drops a frame that lost a datagram, counts it, and rep
       if (i != skip) sendto(fd, grams[i].data(), grams[i].size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof to);
   };
   std::vector<char> message;
-  const uint32_t schema_id = formats::udp_stream::encode_schema(test_schema({"a", "b", "c"}, 400), 0, message);
-  send_all(formats::udp_stream::datagrams(udp::kSchemaMessage, 11, 1, message));
+  const uint32_t schema_id = udp_stream::encode_schema(test_schema({"a", "b", "c"}, 400), 0, message);
+  send_all(udp_stream::datagrams(udp::kSchemaMessage, 11, 1, message));
   for (int64_t n = 1; n <= 3; ++n) {
-    formats::udp_stream::encode_frame(numbered_frame(n, 3, 400), {schema_id, 1, 0}, true, message);
-    const auto grams = formats::udp_stream::datagrams(udp::kFrameMessage, 11, uint64_t(n), message);
+    udp_stream::encode_frame(numbered_frame(n, 3, 400), {schema_id, 1, 0}, true, message);
+    const auto grams = udp_stream::datagrams(udp::kFrameMessage, 11, uint64_t(n), message);
     REQUIRE(grams.size() == 4);
     send_all(grams, n == 2 ? std::optional<std::size_t>(1) : std::nullopt);  // frame 2 loses a datagram
   }

@@ -109,7 +109,7 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, e
     spec.periodic_interval_ns = kNsPerSecond;
     return spec;
   };
-  formats::udp_stream::StreamSchema schema;
+  outputs::udp_stream::StreamSchema schema;
   schema.shape_names = rig->shape_names;
   schema.vertex_count = uint32_t(rig->vertex_count());
   outputs::NetSink udp(io.context(), net_spec(kDiscardPort, true), std::make_unique<outputs::UdpStreamProtocol>(schema, true));

@@ -7,11 +7,12 @@
 
 #include "core/error.hpp"
 #include "core/io.hpp"
-#include "formats/pcap.hpp"
+#include "drivers/capture/capture_file.hpp"
 #include "tests/capture_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
+using namespace facecap::capture;
 using namespace facecap::formats;
 using namespace facecap::test;
 

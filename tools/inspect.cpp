@@ -15,6 +15,7 @@
 #include "core/error.hpp"
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
+#include "drivers/capture/capture_file.hpp"
 #include "formats/natnet_capture.hpp"
 #include "formats/recording.hpp"
 #include "formats/take.hpp"
@@ -102,7 +103,7 @@ LoadedFile load(const std::filesystem::path& path, const formats::natnet::Captur
   LoadedFile loaded;
   const TakeFormat format = formats::detect_file_format(path);
   if (format == TakeFormat::kNatNetCapture) {
-    loaded.capture = formats::natnet::read_natnet_capture(path, capture_options);
+    loaded.capture = capture::read_natnet_capture(path, capture_options);
   } else if (format == TakeFormat::kLiveLinkFace) {
     loaded.face = formats::read_livelinkface(path);
   } else {

@@ -8,6 +8,7 @@
 
 #include "core/error.hpp"
 #include "core/time.hpp"
+#include "drivers/capture/capture_file.hpp"
 #include "formats/natnet_markers.hpp"
 
 namespace facecap::drivers {
@@ -20,7 +21,7 @@ void ReplaySource::open() {
   if (formats::detect_file_format(options_.file) == formats::TakeFormat::kNatNetCapture) {
     const formats::natnet::MarkerSelection selection{natnet_.marker_set, std::size_t(natnet_.unlabelled_markers),
                                                      uint16_t(natnet_.timecode_rate_hz)};
-    take_ = formats::natnet::capture_take(formats::natnet::read_natnet_capture(options_.file), selection, options_.file);
+    take_ = formats::natnet::capture_take(capture::read_natnet_capture(options_.file), selection, options_.file);
   } else {
     take_ = formats::read_take(options_.file);
   }

@@ -1,11 +1,11 @@
 #pragma once
 // facecap's own UDP stream (docs/udp-stream.md) as a network output's protocol: every
 // frame as one message of one or more chunks, and the schema at start, every second and
-// with a stopping flag at the end. The bytes come from formats/udp_stream.hpp.
+// with a stopping flag at the end. The bytes come from outputs/udp/udp_stream_encoding.hpp.
 #include <cstdint>
 #include <vector>
 
-#include "formats/udp_stream.hpp"
+#include "outputs/udp/udp_stream_encoding.hpp"
 #include "outputs/net/net_sink.hpp"
 
 namespace facecap::outputs {
@@ -14,7 +14,7 @@ class UdpStreamProtocol final : public NetProtocol {
  public:
   // A random stream id, so that receivers tell a restarted facecapd from the one before.
   // Not RT-safe; throws Error for a rig the stream cannot carry.
-  UdpStreamProtocol(formats::udp_stream::StreamSchema schema, bool vertices);
+  UdpStreamProtocol(udp_stream::StreamSchema schema, bool vertices);
 
   std::string_view name() const noexcept override { return "udp"; }
   std::string description() const override;
@@ -27,7 +27,7 @@ class UdpStreamProtocol final : public NetProtocol {
  private:
   bool send_message(udp::MessageKind kind, uint64_t sequence, const std::vector<char>& message, UdpSender& out);
 
-  formats::udp_stream::StreamSchema schema_;
+  udp_stream::StreamSchema schema_;
   bool vertices_;
   uint32_t stream_id_;
   uint32_t schema_id_ = 0;

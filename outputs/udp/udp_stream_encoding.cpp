@@ -1,4 +1,4 @@
-#include "formats/udp_stream.hpp"
+#include "outputs/udp/udp_stream_encoding.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -8,7 +8,7 @@
 
 #include "core/error.hpp"
 
-namespace facecap::formats::udp_stream {
+namespace facecap::outputs::udp_stream {
 namespace {
 
 static_assert(std::endian::native == std::endian::little, "the stream's layout is the host's: little-endian");
@@ -134,4 +134,4 @@ std::vector<std::vector<char>> datagrams(udp::MessageKind kind, uint32_t stream_
   return out;
 }
 
-}  // namespace facecap::formats::udp_stream
+}  // namespace facecap::outputs::udp_stream

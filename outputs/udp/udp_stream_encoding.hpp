@@ -10,7 +10,7 @@
 #include "client/facecap_udp_layout.hpp"
 #include "core/frame.hpp"
 
-namespace facecap::formats::udp_stream {
+namespace facecap::outputs::udp_stream {
 
 // What a receiver needs to name the weights of every frame.
 struct StreamSchema {
@@ -50,4 +50,4 @@ std::span<const char> chunk_payload(std::span<const char> message, uint16_t inde
 std::vector<std::vector<char>> datagrams(udp::MessageKind kind, uint32_t stream_id, uint64_t sequence,
                                          std::span<const char> message);
 
-}  // namespace facecap::formats::udp_stream
+}  // namespace facecap::outputs::udp_stream
