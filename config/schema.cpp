@@ -245,8 +245,9 @@ const std::vector<KeySpec>& schema_rows() {
                       "tables (the blend's terms) into the cache, so that a solve after a sleep does not start from "
                       "main memory (ICT FaceKit at 240 Hz: the blend stage 10% faster for 6% more CPU); 0 turns it off."},
       {FACECAP_KEY(loop.realtime), .default_value = true,
-       .description = "Try SCHED_FIFO for the solve thread (needs CAP_SYS_NICE or RLIMIT_RTPRIO); a failure is "
-                      "reported, never fatal."},
+       .description = "Try SCHED_FIFO for the solve thread, and two priorities below it for the I/O "
+                      "thread that sends the network outputs and serves the control API (needs CAP_SYS_NICE or "
+                      "RLIMIT_RTPRIO); a failure is reported, never fatal."},
       {FACECAP_KEY(loop.priority), .default_value = int64_t{0}, .min = 0, .max = 99,
        .description = "SCHED_FIFO priority; 0 picks the middle of the range. Clamped to RLIMIT_RTPRIO."},
       {FACECAP_KEY(loop.lock_memory), .default_value = false,

@@ -18,7 +18,7 @@ RealtimeReport apply_realtime(const RealtimeRequest& request) noexcept {
   RealtimeReport report;
   if (request.fifo) {
     const int lowest = sched_get_priority_min(SCHED_FIFO), highest = sched_get_priority_max(SCHED_FIFO);
-    int priority = request.priority > 0 ? request.priority : kDefaultRealtimePriority;
+    int priority = realtime_priority(request.priority);
     priority = std::clamp(priority, lowest, highest);
     // Without CAP_SYS_NICE only up to RLIMIT_RTPRIO is allowed; root's limit is often 0
     // yet it may set any priority, so the limit is applied only when it is not zero.

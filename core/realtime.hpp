@@ -12,6 +12,10 @@ namespace facecap {
 
 // Middle of the SCHED_FIFO range, below the kernel's threaded interrupts (50).
 inline constexpr int kDefaultRealtimePriority = 40;
+// A configured priority, 0 meaning the default.
+inline constexpr int realtime_priority(int configured) noexcept {
+  return configured > 0 ? configured : kDefaultRealtimePriority;
+}
 
 struct RealtimeRequest {
   bool fifo = true;                 // SCHED_FIFO for the calling thread

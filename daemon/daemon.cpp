@@ -2,6 +2,7 @@
 
 #include <bit>
 #include <cerrno>
+#include <cstring>
 #include <csignal>
 #include <fstream>
 #include <utility>
@@ -136,7 +137,7 @@ void Daemon::start() {
     stream_ = stream.get();
     sinks_.push_back(std::move(stream));
   }
-  io_->start();
+  start_io_thread(c);
   std::vector<outputs::OutputSink*> sinks;
   for (const auto& sink : sinks_) {
     spdlog::info("output {}", sink->description());
@@ -170,6 +171,20 @@ void Daemon::start() {
 }
 
 // The control API on the I/O thread; its token read once, here.
+// The I/O thread sends what the solve thread offered: with loop.realtime it runs at
+// SCHED_FIFO below the solve thread and the drivers' threads, so that a frame's way out
+// does not wait behind the machine's other work.
+void Daemon::start_io_thread(const config::DaemonConfig& c) {
+  const int priority = c.loop.realtime ? std::max(1, realtime_priority(int(c.loop.priority)) - 2) : 0;
+  const RealtimeReport report = io_->start(priority);
+  if (priority == 0) return;
+  if (report.fifo_applied)
+    spdlog::info("I/O thread (network outputs, control API) runs SCHED_FIFO priority {}", report.priority);
+  else
+    spdlog::warn("could not make the I/O thread SCHED_FIFO priority {}: {}; network outputs may lag under load",
+                 report.priority, std::strerror(report.fifo_errno));
+}
+
 void Daemon::start_control() {
   const config::HttpSection& http = config_.values.control.http;
   std::string token;

@@ -124,6 +124,7 @@ class Daemon {
   void apply_live_settings();
   void shutdown(const std::string& reason);
   void write_stats_file(const Figures& run) const;
+  void start_io_thread(const config::DaemonConfig& c);
   void log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::Calibration& calibration,
                     double build_seconds) const;
   static std::string flagged_text(const Figures& window);

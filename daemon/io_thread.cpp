@@ -1,5 +1,7 @@
 #include "daemon/io_thread.hpp"
 
+#include <future>
+
 #include "core/log.hpp"
 
 namespace facecap::daemon {
@@ -8,9 +10,13 @@ IoThread::IoThread() : work_(boost::asio::make_work_guard(context_)) {}
 
 IoThread::~IoThread() { stop(); }
 
-void IoThread::start() {
-  if (thread_.joinable()) return;
-  thread_ = std::thread([this] {
+RealtimeReport IoThread::start(int fifo_priority) {
+  if (thread_.joinable()) return {};
+  std::promise<RealtimeReport> applied;
+  std::future<RealtimeReport> report = applied.get_future();
+  thread_ = std::thread([this, fifo_priority, &applied] {
+    applied.set_value(fifo_priority > 0 ? apply_realtime({.fifo = true, .priority = fifo_priority})
+                                        : RealtimeReport{});
     try {
       context_.run();
     } catch (const std::exception& e) {
@@ -18,6 +24,7 @@ void IoThread::start() {
       spdlog::error("I/O thread stopped: {}", e.what());
     }
   });
+  return report.get();
 }
 
 void IoThread::stop() noexcept {

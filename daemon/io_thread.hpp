@@ -8,6 +8,8 @@
 #include <boost/asio/executor_work_guard.hpp>
 #include <boost/asio/io_context.hpp>
 
+#include "core/realtime.hpp"
+
 namespace facecap::daemon {
 
 class IoThread {
@@ -20,8 +22,10 @@ class IoThread {
 
   // What sinks and servers schedule their work on; valid before start().
   boost::asio::io_context& context() noexcept { return context_; }
-  // Runs the context on its own thread until stop(). Not RT-safe.
-  void start();
+  // Runs the context on its own thread until stop(), at SCHED_FIFO `fifo_priority` when
+  // it is above 0 (below the solve thread's, so that a frame received is sent without
+  // waiting behind the machine's other work); returns how that went. Not RT-safe.
+  RealtimeReport start(int fifo_priority = 0);
   // Stops the context (pending handlers are dropped) and joins the thread. Idempotent;
   // not RT-safe.
   void stop() noexcept;

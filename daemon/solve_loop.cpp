@@ -88,7 +88,7 @@ SolveLoop::~SolveLoop() {
 void SolveLoop::start() {
   epoch_ns_ = monotonic_now_ns() + kStartDelayNs;
   // Simulated devices run just below the solve thread, as real ones are outside the host.
-  const int loop_priority = options_.realtime.priority > 0 ? options_.realtime.priority : kDefaultRealtimePriority;
+  const int loop_priority = realtime_priority(options_.realtime.priority);
   source_.start({.epoch_ns = epoch_ns_, .lockstep = options_.lockstep,
                  .thread_priority = options_.realtime.fifo ? std::max(1, loop_priority - 1) : 0});
   thread_ = std::thread([this] { run(); });
