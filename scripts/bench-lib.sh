@@ -12,3 +12,10 @@
 make_ict_240hz_replay() {
   "$1" synth --rig "$2" --rate 240 --frames 4800 --markers 48 --noise 0.1 --dropout 0.005 -o "$3" >/dev/null
 }
+
+# A command prefix that runs a peer standing in for another machine (a Motive server, a
+# device) at SCHED_FIFO 30, below facecapd's threads, so that a loaded host does not make
+# its stream bursty; empty where real-time scheduling is not allowed.
+# Usage: "${remote_peer_prefix[@]}" facecap natnet-serve ...
+remote_peer_prefix=()
+if command -v chrt >/dev/null && chrt -f 30 true 2>/dev/null; then remote_peer_prefix=(chrt -f 30); fi

@@ -51,7 +51,7 @@ trap cleanup EXIT
 port=$(( 40000 + $$ % 10000 * 2 % 10000 ))
 
 "$facecap" calibrate --rig builtin --take "$take" -o "$work/actor.toml" >/dev/null
-"$facecap" natnet-serve "$take" --loop --rate 240 --mode "$mode" --address 127.0.0.1 --interface 127.0.0.1 \
+"${remote_peer_prefix[@]}" "$facecap" natnet-serve "$take" --loop --rate 240 --mode "$mode" --address 127.0.0.1 --interface 127.0.0.1 \
   --command-port "$port" --data-port $((port + 1)) --marker-set Face --seconds $((seconds + 10)) \
   --garbage-rate "$rate" >"$work/serve.log" 2>&1 &
 serve_pid=$!

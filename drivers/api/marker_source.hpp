@@ -39,8 +39,10 @@ struct SourceHealth {
 struct SourceStart {
   int64_t epoch_ns = 0;   // CLOCK_MONOTONIC time of the loop's first tick: frame times count from here
   bool lockstep = false;  // hand every frame in order, as fast as the loop asks (replay)
-  // > 0: SCHED_FIFO priority (tried) for threads that stand in for a device's own timing,
-  // so that simulated frames stay punctual on a loaded host.
+  // > 0: SCHED_FIFO priority (tried) for the driver's thread: a receive thread takes each
+  // frame off the network or device as it arrives, and a simulated device keeps its own
+  // timing, however loaded the host. A failure leaves ordinary scheduling (the solve
+  // thread reports the same failure).
   int thread_priority = 0;
 };
 

@@ -7,6 +7,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/realtime.hpp"
 #include "core/time.hpp"
 #include "formats/natnet_request.hpp"
 
@@ -187,13 +188,16 @@ void NatNetSource::open() {
   configure_mailbox(info_.labels);
 }
 
-void NatNetSource::start(const SourceStart&) {
+void NatNetSource::start(const SourceStart& start) {
   const int64_t now = monotonic_now_ns();
   last_frame_ns_.store(now, std::memory_order_relaxed);
   next_keepalive_ns_ = next_echo_ns_ = next_reconnect_ns_ = now;
   next_error_log_ns_ = now + kErrorLogNs;
   running_.store(true, std::memory_order_release);
-  thread_ = std::thread([this] { run(); });
+  thread_ = std::thread([this, priority = start.thread_priority] {
+    if (priority > 0) apply_realtime({.fifo = true, .priority = priority});
+    run();
+  });
 }
 
 void NatNetSource::stop() noexcept {

@@ -205,8 +205,6 @@ void SimSource::start(const SourceStart& start) {
   stop();
   running_.store(true);
   thread_ = std::thread([this, start] {
-    // Like a device's own clock, frame delivery should not depend on the host's load;
-    // failure leaves ordinary scheduling (the solve thread reports the same failure).
     if (start.thread_priority > 0) apply_realtime({.fifo = true, .priority = start.thread_priority});
     run(start.epoch_ns);
   });

@@ -10,6 +10,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
+#include "core/realtime.hpp"
 #include "core/time.hpp"
 
 namespace facecap::drivers {
@@ -291,7 +292,10 @@ void UsbSource::start(const SourceStart& start) {
   if (start.lockstep) throw Error("the usb source runs on the device's clock and cannot run in lockstep");
   stop();
   running_.store(true);
-  thread_ = std::thread([this] { run(); });
+  thread_ = std::thread([this, priority = start.thread_priority] {
+    if (priority > 0) apply_realtime({.fifo = true, .priority = priority});
+    run();
+  });
 }
 
 void UsbSource::stop() noexcept {
