@@ -1,6 +1,7 @@
 #include "drivers/v4l2/v4l2_source.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <limits>
 
 #include <fmt/format.h>
@@ -18,6 +19,7 @@ namespace {
 constexpr int kWaitMs = 50;                          // the thread checks its state this often
 constexpr int64_t kSilentCameraNs = kNsPerSecond;    // a camera quiet this long is reported
 constexpr int64_t kStateRefreshNs = 250 * kNsPerMs;
+constexpr int64_t kReopenEveryNs = kNsPerSecond;      // a lost camera is looked for this often
 
 std::vector<std::string> split_devices(const std::string& list) {
   std::vector<std::string> out;
@@ -112,8 +114,9 @@ void V4l2Source::stop() noexcept {
   if (thread_.joinable()) thread_.join();
 }
 
-// The driver's thread: images in, blobs at once, sets by timestamp, points out. Not RT-safe
-// (OpenCV may allocate; a camera that fails is logged).
+// The driver's thread: images in, blobs at once, sets by timestamp, points out; a camera
+// that fails takes the cameras down until they all stream again (recover()). Not RT-safe
+// (OpenCV may allocate; it logs).
 void V4l2Source::run() {
   v4l2::CameraImage image;
   std::vector<int64_t> last_image_ns(pipeline_->cameras(), monotonic_now_ns());
@@ -131,10 +134,10 @@ void V4l2Source::run() {
         unmatched_.store(matcher_->unmatched(), std::memory_order_relaxed);
       }
     } catch (const Error& e) {
-      spdlog::error("v4l2: {}; no more frames from the cameras", e.what());
-      state_.set(fmt::format("stopped: {}", e.what()));
-      errors_.fetch_add(1, std::memory_order_relaxed);
-      return;
+      if (!recover(e.what())) return;
+      std::fill(last_image_ns.begin(), last_image_ns.end(), monotonic_now_ns());
+      silent = false;
+      continue;
     }
     // A camera that sends nothing holds every set back: say which.
     const int64_t now_ns = monotonic_now_ns();
@@ -151,6 +154,39 @@ void V4l2Source::run() {
       silent = false;
     }
   }
+}
+
+// A camera unplugged (or its driver gone) fails the feed: every camera is closed and the
+// whole feed reopened every kReopenEveryNs until it streams again, the daemon solving on
+// (held frames) meanwhile. False when the source was stopped first.
+bool V4l2Source::recover(std::string why) {
+  errors_.fetch_add(1, std::memory_order_relaxed);
+  spdlog::error("v4l2: {}; reopening the cameras every {:g} s", why, double(kReopenEveryNs) / kNsPerSecond);
+  feed_->stop();
+  const int64_t lost_ns = monotonic_now_ns();
+  int64_t next_try_ns = lost_ns + kReopenEveryNs;
+  while (running_.load(std::memory_order_relaxed)) {
+    const int64_t now_ns = monotonic_now_ns();
+    if (now_ns < next_try_ns) {
+      state_.set(fmt::format("cameras lost {:.1f} s ago, reopening: {}", double(now_ns - lost_ns) / kNsPerSecond, why));
+      std::this_thread::sleep_for(std::chrono::milliseconds(kWaitMs));
+      continue;
+    }
+    next_try_ns = now_ns + kReopenEveryNs;
+    try {
+      feed_->open();
+      feed_->start();
+    } catch (const Error& e) {
+      feed_->stop();
+      why = e.what();
+      continue;
+    }
+    reconnects_.fetch_add(1, std::memory_order_relaxed);
+    spdlog::info("v4l2: the cameras stream again after {:.1f} s", double(monotonic_now_ns() - lost_ns) / kNsPerSecond);
+    state_.set(fmt::format("cameras back after a gap of {:.1f} s", double(monotonic_now_ns() - lost_ns) / kNsPerSecond));
+    return true;
+  }
+  return false;
 }
 
 void V4l2Source::publish(int64_t set_time_ns) {

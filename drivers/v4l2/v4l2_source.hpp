@@ -44,6 +44,7 @@ class V4l2Source final : public MailboxSource {
 
  private:
   void run();
+  bool recover(std::string why);
   void publish(int64_t set_time_ns);
 
   V4l2Options options_;
