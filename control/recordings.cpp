@@ -30,11 +30,14 @@ double recorded_seconds(const formats::RecordingReader& reader) {
 
 Reply list_recordings(const std::string& directory) {
   std::error_code ec;
+  // The directory is made with the first take: none yet is an empty list.
+  if (!fs::exists(directory, ec)) return {200, {{"directory", directory}, {"recordings", json::array()}}};
   std::vector<fs::directory_entry> files;
-  for (const auto& entry : fs::directory_iterator(directory, ec))
-    if (entry.path().extension() == kRecordingExtension && entry.is_regular_file(ec)) files.push_back(entry);
-  if (ec && !fs::exists(directory))
-    return {200, {{"directory", directory}, {"recordings", json::array()}}};
+  for (const auto& entry : fs::directory_iterator(directory, ec)) {
+    std::error_code ignored;
+    if (entry.path().extension() == kRecordingExtension && entry.is_regular_file(ignored)) files.push_back(entry);
+  }
+  if (ec) return error_reply(500, fmt::format("cannot list the recordings in {}: {}", directory, ec.message()));
   std::sort(files.begin(), files.end(), [](const auto& a, const auto& b) {
     std::error_code ignored;
     return a.last_write_time(ignored) > b.last_write_time(ignored);

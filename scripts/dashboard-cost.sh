@@ -57,13 +57,8 @@ run() {
     --set "logging.stats_file=$stats" \
     > "$work/facecapd.log" 2>&1 &
   pid=$!
-  local port=""
-  for _ in $(seq 1 300); do
-    port=$(sed -n 's|.*control API on http://127\.0\.0\.1:\([0-9]*\).*|\1|p' "$work/facecapd.log" | head -1)
-    if [ -n "$port" ] && grep -q "ready: first frame solved" "$work/facecapd.log"; then break; fi
-    kill -0 "$pid" 2>/dev/null || { cat "$work/facecapd.log"; echo "FAILED: facecapd stopped"; exit 1; }
-    sleep 0.1
-  done
+  local port
+  port=$(control_port_when_ready "$work/facecapd.log" "$pid")
   if [ "$phase" = browsers ]; then
     node "$here/dashboard/tests/attach.mjs" "http://127.0.0.1:$port/" "$seconds" "$browsers" | sed "s/^/  $phase $n: /"
   fi

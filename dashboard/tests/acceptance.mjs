@@ -10,22 +10,14 @@
 // Exits 77 (skipped, with the reason) when chromium or playwright-core is absent.
 import { execFileSync, spawn } from 'node:child_process';
 import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
-import { createRequire } from 'node:module';
 import { tmpdir } from 'node:os';
 import { basename, join, resolve } from 'node:path';
+import { launchChromium, missingBrowser } from './chromium.mjs';
 
 const kSkipped = 77;
 const build = resolve(process.argv[2] ?? 'build');
-const chromiumPath = process.env.FACECAP_CHROMIUM ?? '/usr/bin/chromium';
-if (!existsSync(chromiumPath)) {
-  console.log(`SKIPPED: no chromium at ${chromiumPath} (Debian package chromium; scripts/quickstart.sh test installs it)`);
-  process.exit(kSkipped);
-}
-let chromium;
-try {
-  ({ chromium } = createRequire(import.meta.url)('playwright-core'));
-} catch {
-  console.log('SKIPPED: playwright-core is not installed in dashboard/node_modules (the build runs npm ci there)');
+if (missingBrowser()) {
+  console.log(`SKIPPED: ${missingBrowser()}`);
   process.exit(kSkipped);
 }
 if (!existsSync(join(build, 'dashboard', 'index.html'))) {
@@ -134,14 +126,7 @@ let daemon = null, browser = null;
 try {
   daemon = await startDaemon();
   const base = `http://127.0.0.1:${daemon.port}`;
-  browser = await chromium.launch({
-    executablePath: chromiumPath,
-    headless: true,
-    // As root in a container: no sandbox. No background traffic on a closed network.
-    // WebGL through SwiftShader, as there is no GPU.
-    args: ['--no-sandbox', '--disable-background-networking', '--disable-component-update', '--disable-sync',
-           '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-  });
+  browser = await launchChromium();
   const page = await browser.newPage({ viewport: { width: 1400, height: 860 } });
   const pageErrors = [];
   page.on('pageerror', (e) => pageErrors.push(e.message));

@@ -2,16 +2,10 @@
 // (scripts/dashboard-cost.sh): each a separate browser, as two operators' screens would be.
 // Prints how many stream frames each page drew, so a run that drew nothing is seen.
 // Usage: node dashboard/tests/attach.mjs URL SECONDS BROWSERS
-import { createRequire } from 'node:module';
+import { launchChromium } from './chromium.mjs';
 
 const [url, seconds, count] = [process.argv[2], Number(process.argv[3]), Number(process.argv[4] ?? 2)];
-const { chromium } = createRequire(import.meta.url)('playwright-core');
-const browsers = await Promise.all(Array.from({ length: count }, () => chromium.launch({
-  executablePath: process.env.FACECAP_CHROMIUM ?? '/usr/bin/chromium',
-  headless: true,
-  args: ['--no-sandbox', '--disable-background-networking', '--disable-component-update', '--disable-sync',
-         '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-})));
+const browsers = await Promise.all(Array.from({ length: count }, () => launchChromium()));
 const pages = await Promise.all(browsers.map(async (b) => {
   const page = await b.newPage({ viewport: { width: 1280, height: 800 } });
   await page.goto(url);
