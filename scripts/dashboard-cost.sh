@@ -31,7 +31,7 @@ while [ $# -gt 0 ]; do
   shift
 done
 chromium=${FACECAP_CHROMIUM:-/usr/bin/chromium}
-if [ ! -x "$chromium" ] || [ ! -d "$here/dashboard/node_modules/playwright-core" ] || [ ! -f "$build_dir/dashboard/index.html" ]; then
+if [ ! -x "$chromium" ] || [ ! -d "$here/dashboard/node_modules/playwright-core" ] || [ ! -f "$build_dir/dashboard/www/index.html" ]; then
   echo "SKIPPED: needs $chromium (Debian package chromium), dashboard/node_modules (npm ci) and the built dashboard"
   exit 77
 fi
