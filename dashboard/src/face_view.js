@@ -6,12 +6,12 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 // Residuals at or above this many millimetres are drawn fully red.
-export const kResidualRedMm = 2.0;
+const kResidualRedMm = 2.0;
 const kMissingColour = new THREE.Color(0x7a8290);
 const kGatedColour = new THREE.Color(0xd040e0);
 
 // Green (0 mm) through yellow to red (kResidualRedMm and above).
-export function residualColour(mm, out = new THREE.Color()) {
+function residualColour(mm, out = new THREE.Color()) {
   const t = Math.min(1, Math.max(0, mm / kResidualRedMm));
   return out.setHSL((1 - t) * 0.33, 0.9, 0.5);
 }
@@ -34,7 +34,6 @@ export class FaceView {
     this.markers = null;
     this.headAxes = new THREE.AxesHelper(1);
     this.scene.add(this.headAxes);
-    this.vertexCount = 0;
     this.markerCount = 0;
     this.lastTargets = [];  // per marker slot: last known [x, y, z], for drawing missing ones
     this.framed = false;
@@ -68,7 +67,6 @@ export class FaceView {
       this.scene.remove(this.markers);
       this.markers = null;
     }
-    this.vertexCount = 0;
     this.framed = false;
     if (schema.vertex_count > 0 && schema.triangles) {
       const geometry = new THREE.BufferGeometry();
@@ -106,7 +104,6 @@ export class FaceView {
       drawn = position.count;
       if (!this.framed) this.frame(this.mesh.geometry.boundingSphere);
     }
-    this.vertexCount = drawn || this.vertexCount;
     this.updateMarkers(frame.markers);
     this.updateHead(frame.head);
     return drawn;

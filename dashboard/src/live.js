@@ -10,7 +10,6 @@ const kDisplayRateHz = 30;
 const $ = (id) => document.getElementById(id);
 const view = new FaceView($('face'));
 const graph = new SolveGraph($('graph'), $('graph-legend'));
-let lastStatus = null;
 let framesSeen = 0;
 
 function connect() {
@@ -50,7 +49,6 @@ function onFrame(frame) {
 }
 
 function onStatus(s) {
-  lastStatus = s;
   const w = s.window;
   const quality = $('quality');
   quality.className = `quality ${w.quality || 'unknown'}`;
