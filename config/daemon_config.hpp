@@ -117,6 +117,7 @@ struct HttpSection {
   std::string address;
   int64_t port = 0;
   std::string token_file;
+  std::string dashboard_dir;  // "": the built or installed dashboard (daemon/dashboard_location)
 };
 
 struct ControlSection {

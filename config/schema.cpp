@@ -352,6 +352,10 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(control.http.token_file), .default_value = std::string(), .names_input_file = true,
        .description = "File holding the bearer token every request must carry (`Authorization: Bearer <token>`); "
                       "required when the address is not loopback. Empty: no token on loopback."},
+      {FACECAP_KEY(control.http.dashboard_dir), .default_value = std::string(),
+       .description = "Directory of the operator dashboard's built files, served at / (docs/dashboard.md). Empty: "
+                      "the dashboard built with this facecapd (in its build tree) or installed with it "
+                      "(share/facecap/dashboard)."},
 
       {FACECAP_KEY(quality.markers_used_degraded), .default_value = 0.9, .min = 0, .max = 1, .reload = Reload::kLive,
        .description = "The capture is degraded when the solve uses fewer than this fraction of the calibration's "

@@ -9,6 +9,9 @@
 #include <boost/beast/http/verb.hpp>
 #include <fmt/format.h>
 
+#include "control/recordings.hpp"
+#include "control/static_files.hpp"
+
 namespace facecap::control {
 namespace http = boost::beast::http;
 using nlohmann::json;
@@ -151,7 +154,54 @@ constexpr Route kRoutes[] = {
     {"/status", http::verb::get},         {"/metrics", http::verb::get},    {"/config", http::verb::get},
     {"/actors", http::verb::get},         {"/actor", http::verb::post},     {"/calibrate", http::verb::post},
     {"/record/start", http::verb::post},  {"/record/stop", http::verb::post}, {"/stream", http::verb::get},
+    {"/recordings", http::verb::get},     {"/recordings/frames", http::verb::get},
 };
+
+// The query's parameters as (key, value) pairs, in order.
+std::vector<std::pair<std::string_view, std::string_view>> query_items(std::string_view target) {
+  const std::size_t question = target.find('?');
+  std::string_view query = question == std::string_view::npos ? std::string_view() : target.substr(question + 1);
+  std::vector<std::pair<std::string_view, std::string_view>> items;
+  while (!query.empty()) {
+    const std::string_view item = query.substr(0, query.find('&'));
+    query.remove_prefix(std::min(query.size(), item.size() + 1));
+    const std::size_t eq = item.find('=');
+    if (!item.empty()) items.emplace_back(item.substr(0, eq), eq == std::string_view::npos ? "" : item.substr(eq + 1));
+  }
+  return items;
+}
+
+// A whole unsigned number from min to max, or nullopt.
+std::optional<uint64_t> bounded_count(std::string_view text, uint64_t min, uint64_t max) {
+  uint64_t value = 0;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc() || end != text.data() + text.size() || value < min || value > max) return std::nullopt;
+  return value;
+}
+
+// GET /recordings/frames?name=N&first=F&count=C&step=S, or the 400 refusing it.
+std::variant<Request, Reply> parse_recording_query(std::string_view target) {
+  ReadRecording read;
+  for (const auto& [key, value] : query_items(target)) {
+    if (key == "name") {
+      read.name = std::string(value);
+      continue;
+    }
+    std::optional<uint64_t> number;
+    if (key == "first") number = bounded_count(value, 0, uint64_t(1) << 40);
+    else if (key == "count") number = bounded_count(value, 1, kMaxRecordingFramesPerRequest);
+    else if (key == "step") number = bounded_count(value, 1, 1000000);
+    else return error_reply(400, fmt::format("unknown query parameter \"{}\" (allowed: name, first, count, step)", key));
+    if (!number)
+      return error_reply(400, key == "count" ? fmt::format("count must be a whole number from 1 to {}", kMaxRecordingFramesPerRequest)
+                                             : fmt::format("{} must be a whole number{}", key, key == "step" ? " from 1" : ""));
+    (key == "first" ? read.first : key == "count" ? read.count : read.step) = *number;
+  }
+  if (read.name.empty() || read.name.size() > kMaxNameBytes || read.name.find('/') != std::string::npos ||
+      read.name.front() == '.' || !read.name.ends_with(".fcrec"))
+    return error_reply(400, "name must be a recording's file name (*.fcrec, no '/', not starting with '.')");
+  return Request{read};
+}
 
 }  // namespace
 
@@ -178,8 +228,10 @@ std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContex
   const std::string_view target(request.target().data(), request.target().size());
   const std::string_view path = target_path(target);
   const Route* route = std::find_if(std::begin(kRoutes), std::end(kRoutes), [&](const Route& r) { return r.path == path; });
-  if (route == std::end(kRoutes))
+  if (route == std::end(kRoutes)) {
+    if (request.method() == http::verb::get) return serve_static_file(request, path, context.dashboard_dir, context.version);
     return make_response(request, error_reply(404, fmt::format("no route {}", path)), context.version);
+  }
   if (request.method() != route->method) {
     HttpResponse response = make_response(
         request,
@@ -191,7 +243,8 @@ std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContex
   }
   auto answer = [&](const Reply& reply) { return make_response(request, reply, context.version); };
   if (path == "/stream") return answer(error_reply(400, "/stream is a WebSocket: send an Upgrade request"));
-  if (route->method == http::verb::get && path != "/actors") {
+  const bool queued_read = path == "/actors" || path == "/recordings" || path == "/recordings/frames";
+  if (route->method == http::verb::get && !queued_read) {
     const std::shared_ptr<const Published> published = context.board.latest();
     if (path == "/metrics") return answer({200, published->metrics_text});
     const std::string& text = path == "/status" ? published->status_json : published->config_json;
@@ -201,7 +254,13 @@ std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContex
     return response;
   }
   Request command = ListActors{};
-  if (path != "/actors") {
+  if (path == "/recordings") {
+    command = ListRecordings{};
+  } else if (path == "/recordings/frames") {
+    auto parsed = parse_recording_query(target);
+    if (auto* refused = std::get_if<Reply>(&parsed)) return answer(*refused);
+    command = std::get<Request>(std::move(parsed));
+  } else if (path != "/actors") {
     auto parsed = parse_command(path, request.body());
     if (auto* refused = std::get_if<Reply>(&parsed)) return answer(*refused);
     command = std::get<Request>(std::move(parsed));
@@ -223,13 +282,7 @@ std::variant<StreamRequest, HttpResponse> accept_stream(const HttpRequest& reque
   if (auto refused = check_token(request, context)) return *refused;
   StreamRequest stream;
   const std::string_view target(request.target().data(), request.target().size());
-  const std::size_t question = target.find('?');
-  std::string_view query = question == std::string_view::npos ? std::string_view() : target.substr(question + 1);
-  while (!query.empty()) {
-    const std::string_view item = query.substr(0, query.find('&'));
-    query.remove_prefix(std::min(query.size(), item.size() + 1));
-    const std::size_t eq = item.find('=');
-    const std::string_view key = item.substr(0, eq), value = eq == std::string_view::npos ? "" : item.substr(eq + 1);
+  for (const auto& [key, value] : query_items(target)) {
     auto bad = [&](std::string what) { return make_response(request, error_reply(400, std::move(what)), context.version); };
     if (key == "rate") {
       double hz = 0;

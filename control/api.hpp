@@ -35,6 +35,7 @@ struct ApiContext {
   CommandQueue& commands;
   std::string token;    // required as "Authorization: Bearer <token>"; empty: none required
   std::string version;  // for the Server header
+  std::string dashboard_dir;  // the dashboard's files, served at "/" (docs/dashboard.md); "": none
 };
 
 // A JSON (or, for /metrics, text) response to `request` with its keep-alive.

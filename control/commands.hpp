@@ -5,6 +5,7 @@
 // once, from whichever thread finished. A full queue refuses the command (503) rather
 // than growing. Nothing here is real-time code; the solve thread never sees it.
 #include <cstddef>
+#include <cstdint>
 #include <deque>
 #include <functional>
 #include <mutex>
@@ -43,8 +44,18 @@ struct StartRecording {
   bool markers_only = false;  // raw markers only: a new actor with no profile yet
 };
 struct StopRecording {};
+// The recordings in outputs.recording.directory.
+struct ListRecordings {};
+// Solved frames first, first + step, ... (at most count) of the recording `name` there.
+struct ReadRecording {
+  std::string name;
+  uint64_t first = 0;
+  uint64_t count = 1;
+  uint64_t step = 1;
+};
 
-using Request = std::variant<ListActors, SelectActor, Calibrate, StartRecording, StopRecording>;
+using Request =
+    std::variant<ListActors, SelectActor, Calibrate, StartRecording, StopRecording, ListRecordings, ReadRecording>;
 
 struct Command {
   Request request;

@@ -41,7 +41,7 @@ class StreamSession;
 
 struct ControlServer::Impl : std::enable_shared_from_this<ControlServer::Impl> {
   Impl(net::io_context& io, ServerOptions o, const StatusBoard& board, CommandQueue& commands, StreamSink* sink)
-      : acceptor(io), pump_timer(io), options(std::move(o)), context{board, commands, options.token, options.version},
+      : acceptor(io), pump_timer(io), options(std::move(o)), context{board, commands, options.token, options.version, options.dashboard_dir},
         stream(sink) {}
 
   void accept();

@@ -21,6 +21,7 @@ struct ServerOptions {
   uint16_t port = 0;    // 0: any free port
   std::string token;    // empty: none required
   std::string version;  // "facecapd 0.1.0 (git ...)", for the Server header
+  std::string dashboard_dir;  // the dashboard's files, served at "/"; "": none (a 404 page says so)
 };
 
 class ControlServer {

@@ -101,6 +101,9 @@ json frame_message(const StreamSink::Entry& entry, const StreamSchema& schema, b
     p95 = *at;
     max = *std::max_element(measured.begin(), measured.end());
   }
+  json stage_us = json::object();
+  for (std::size_t stage = 0; stage < kSolveStageCount; ++stage)
+    stage_us[std::string(solve_stage_name(SolveStage(stage)))] = double(f.stage_ns[stage]) * 1e-3;
   const Timecode& tc = f.timecode;
   json message = {
       {"type", "frame"},
@@ -122,6 +125,8 @@ json frame_message(const StreamSink::Entry& entry, const StreamSchema& schema, b
         {"face_held", (f.flags & kSolvedTooFewMarkers) != 0},
         {"residual_p95_mm", p95},
         {"residual_max_mm", max}}},
+      {"solve_us", double(f.solve_end_ns - f.solve_start_ns) * 1e-3},
+      {"stage_us", std::move(stage_us)},
   };
   if (vertices && f.vertices.cols() == Eigen::Index(schema.vertex_count))
     message["vertices"] = std::vector<float>(f.vertices.data(), f.vertices.data() + f.vertices.size());

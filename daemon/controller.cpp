@@ -72,7 +72,9 @@ void Controller::execute(control::Command command) {
         else if constexpr (std::is_same_v<T, control::SelectActor>) select_actor(request, std::move(command.reply));
         else if constexpr (std::is_same_v<T, control::Calibrate>) calibrate(request, std::move(command.reply));
         else if constexpr (std::is_same_v<T, control::StartRecording>) start_recording(request, std::move(command.reply));
-        else stop_recording(std::move(command.reply));
+        else if constexpr (std::is_same_v<T, control::StopRecording>) stop_recording(std::move(command.reply));
+        else if constexpr (std::is_same_v<T, control::ListRecordings>) list_recordings(std::move(command.reply));
+        else read_recording(request, std::move(command.reply));
       },
       command.request);
 }
@@ -412,6 +414,31 @@ void Controller::report(control::StatusReport& r) const {
   const outputs::RecorderCounters counters = parts_.takes->take_counters();
   t.frames_written = std::max(counters.marker_frames, counters.solved_frames);
   t.frames_dropped = counters.dropped;
+}
+
+// ---------------------------------------------------------------- recordings
+
+void Controller::list_recordings(ReplyFn reply) {
+  jobs_.push_back({std::async(std::launch::async, control::list_recordings, parts_.config->outputs.recording.directory),
+                   std::move(reply)});
+}
+
+void Controller::read_recording(const control::ReadRecording& request, ReplyFn reply) {
+  if (!replay_rig_) {
+    auto rig = std::make_shared<control::ReplayRig>();
+    rig->hash = parts_.rig->content_hash();
+    rig->vertex_count = uint32_t(parts_.rig->vertex_count());
+    rig->triangles.assign(parts_.rig->triangles.data(), parts_.rig->triangles.data() + parts_.rig->triangles.size());
+    rig->blend = [face = parts_.rig](const Eigen::VectorXf& weights, Eigen::Matrix3Xf& vertices) {
+      vertices = face->linear_blend(weights.cast<double>()).cast<float>();
+    };
+    replay_rig_ = std::move(rig);
+  }
+  jobs_.push_back({std::async(std::launch::async,
+                              [directory = parts_.config->outputs.recording.directory, request, rig = replay_rig_] {
+                                return control::recording_frames(directory, request, *rig);
+                              }),
+                   std::move(reply)});
 }
 
 }  // namespace facecap::daemon

@@ -16,6 +16,7 @@
 
 #include "config/daemon_config.hpp"
 #include "control/commands.hpp"
+#include "control/recordings.hpp"
 #include "control/status.hpp"
 #include "daemon/solve_loop.hpp"
 #include "drivers/api/marker_source.hpp"
@@ -74,6 +75,9 @@ class Controller {
   void calibrate(const control::Calibrate& request, control::ReplyFn reply);
   void start_recording(const control::StartRecording& request, control::ReplyFn reply);
   void stop_recording(control::ReplyFn reply);
+  // The replay page's reads of outputs.recording.directory, on worker threads.
+  void list_recordings(control::ReplyFn reply);
+  void read_recording(const control::ReadRecording& request, control::ReplyFn reply);
   // Builds a solve pipeline aside (one at a time) from what `make` returns.
   void build(std::string what, std::function<Built()> make, control::ReplyFn reply);
   void adopt_built();
@@ -94,6 +98,7 @@ class Controller {
   bool rebuild_with_config_calibration_ = false;
 
   std::vector<Job> jobs_;
+  std::shared_ptr<const control::ReplayRig> replay_rig_;  // made at the first read_recording
 
   CalibrationStep calibration_step_ = CalibrationStep::kIdle;
   control::Calibrate calibration_request_;

@@ -64,6 +64,16 @@ std::shared_ptr<const Rig> load_configured_rig(const config::RigSection& section
   return rig;
 }
 
+// The dashboard built with this facecapd when it runs from its build tree (the tests, a
+// developer), else the one installed with it.
+std::string default_dashboard_dir() {
+  std::error_code ec;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  const std::string exe_path = ec ? std::string() : exe.string();
+  if (exe_path.starts_with(FACECAP_BUILD_TREE "/")) return FACECAP_BUILT_DASHBOARD_DIR;
+  return FACECAP_INSTALLED_DASHBOARD_DIR;
+}
+
 }  // namespace
 
 std::string check_rig_and_calibration(const config::DaemonConfig& config) {
@@ -196,10 +206,12 @@ void Daemon::start_control() {
     if (token.empty()) throw file_error(http.token_file, "the control API's token file is empty");
   }
   publish_status(monotonic_now_ns());
+  const std::string dashboard = http.dashboard_dir.empty() ? default_dashboard_dir() : http.dashboard_dir;
   server_ = std::make_unique<control::ControlServer>(
       io_->context(),
       control::ServerOptions{.address = http.address, .port = uint16_t(http.port), .token = std::move(token),
-                             .version = options_.version.empty() ? std::string("facecapd") : options_.version},
+                             .version = options_.version.empty() ? std::string("facecapd") : options_.version,
+                             .dashboard_dir = dashboard},
       board_, commands_, stream_);
   spdlog::info("control API on http://{}:{}{}", http.address.find(':') == std::string::npos ? http.address : "[" + http.address + "]",
                server_->port(), http.token_file.empty() ? "" : " (bearer token required)");

@@ -648,6 +648,10 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
       {"solved_frames", fmt::format("{}", reader.solved_frame_count())},
       {"index", reader.index_rebuilt() ? "rebuilt by scanning" : "present"},
   };
+  // The slate (format version 3), as docs/daemon.md promises `facecap inspect` shows it.
+  for (const auto& [key, value] : {std::pair<const char*, const std::string&>{"take", h.take}, {"actor", h.actor},
+                                   {"scene", h.scene}, {"shot", h.shot}, {"notes", h.notes}})
+    if (!value.empty()) take.metadata.emplace_back(key, value);
   if (reader.truncated())
     take.warnings.push_back(fmt::format("{}: recording cut off: {}", reader.name(), reader.stop_reason()));
   if (duplicates > 0)

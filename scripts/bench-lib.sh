@@ -19,3 +19,22 @@ make_ict_240hz_replay() {
 # Usage: "${remote_peer_prefix[@]}" facecap natnet-serve ...
 remote_peer_prefix=()
 if command -v chrt >/dev/null && chrt -f 30 true 2>/dev/null; then remote_peer_prefix=(chrt -f 30); fi
+
+# The control API's port from facecapd's log (started with control.http.port=0), once it
+# has solved its first frame; fails, with the log on stderr, when facecapd stops first or
+# 30 s pass. Usage: port=$(control_port_when_ready LOG PID)
+control_port_when_ready() {
+  local log=$1 pid=$2 port=""
+  for _ in $(seq 1 300); do
+    port=$(sed -n 's|.*control API on http://127\.0\.0\.1:\([0-9]*\).*|\1|p' "$log" | head -1)
+    if [ -n "$port" ] && grep -q "ready: first frame solved" "$log"; then
+      echo "$port"
+      return 0
+    fi
+    kill -0 "$pid" 2>/dev/null || { cat "$log" >&2; echo "FAILED: facecapd stopped" >&2; return 1; }
+    sleep 0.1
+  done
+  cat "$log" >&2
+  echo "FAILED: facecapd did not start its control API within 30 s" >&2
+  return 1
+}

@@ -63,15 +63,7 @@ run_seconds=$(( 2 * seconds * rounds + 30 ))
   > "$work/facecapd.log" 2>&1 &
 pid=$!
 
-# The port it picked, once it is solving.
-port=""
-for _ in $(seq 1 300); do
-  port=$(sed -n 's|.*control API on http://127\.0\.0\.1:\([0-9]*\).*|\1|p' "$work/facecapd.log" | head -1)
-  if [ -n "$port" ] && grep -q "ready: first frame solved" "$work/facecapd.log"; then break; fi
-  kill -0 "$pid" 2>/dev/null || { cat "$work/facecapd.log"; echo "FAILED: facecapd stopped"; exit 1; }
-  sleep 0.1
-done
-[ -n "$port" ] || { cat "$work/facecapd.log"; echo "FAILED: facecapd did not start its control API"; exit 1; }
+port=$(control_port_when_ready "$work/facecapd.log" "$pid")
 sleep 1  # past the start-up ticks
 
 missed_total() {

@@ -38,6 +38,12 @@ install_packages() {
   "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
 }
 
+# Node.js and npm: the build makes the operator dashboard with them (dashboard/, npm ci
+# from its lock file) and the tests' npm peers need them; a Node.js installed otherwise is
+# used as it is.
+command -v node >/dev/null || packages+=(nodejs)
+command -v npm >/dev/null || packages+=(npm)
+
 build() {
   cmake -S "$here" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
   cmake --build "$build_dir" --parallel "$(nproc)"
@@ -52,10 +58,9 @@ case "$mode" in
     exec "$build_dir/tools/facecap" daemon-demo "$@"
     ;;
   test)
-    # Node.js and npm for the tests' npm peers (tests/peers: the osc package that decodes
-    # the VMC output); a Node.js installed otherwise is used as it is.
-    command -v node >/dev/null || packages+=(nodejs)
-    command -v npm >/dev/null || packages+=(npm)
+    # The tests' npm peers (tests/peers: the osc package that decodes the VMC output), and
+    # Debian's chromium, which the dashboard's browser test drives headless.
+    packages+=(chromium)
     install_packages
     (cd "$here/tests/peers" && npm ci --no-audit --no-fund --loglevel=error)
     build

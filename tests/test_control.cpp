@@ -17,11 +17,13 @@
 #include "config/config_file.hpp"
 #include "control/api.hpp"
 #include "control/http_client.hpp"
+#include "control/static_files.hpp"
 #include "core/error.hpp"
 #include "core/time.hpp"
 #include "daemon/daemon.hpp"
 #include "formats/recording.hpp"
 #include "pipeline/recording_header.hpp"
+#include "solver/builtin_face.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -126,7 +128,7 @@ bool have_promtool() { return std::system("command -v promtool > /dev/null 2>&1"
 
 TEST_CASE("the API answers malformed requests with the right 4xx and a JSON error") {
   Api api;
-  CHECK(api.refusal(request(http::verb::get, "/nope")) == std::pair{404, std::string("no route /nope")});
+  CHECK(api.refusal(request(http::verb::post, "/nope")) == std::pair{404, std::string("no route /nope")});
   {
     const auto response = api.handle(request(http::verb::delete_, "/status"));
     REQUIRE(response);
@@ -178,6 +180,60 @@ TEST_CASE("the API answers malformed requests with the right 4xx and a JSON erro
   CHECK((*metrics)[http::field::content_type].starts_with("text/plain; version=0.0.4"));
 }
 
+TEST_CASE("the dashboard's files are served from its directory and never from outside it") {
+  const fs::path dir = test::scratch_dir("dashboard-files");
+  const fs::path root = dir / "dashboard";
+  test::write_text(root / "index.html", "<!doctype html><title>live</title>");
+  test::write_text(root / "assets" / "live-1a2b.js", "console.log(1);");
+  test::write_text(dir / "secret.txt", "SECRET");
+  fs::create_directories(dir / "outside");
+  test::write_text(dir / "outside" / "secret.txt", "SECRET");
+  fs::create_symlink(dir / "secret.txt", root / "escape.txt");
+  fs::create_directory_symlink(dir / "outside", root / "linked");
+  Api api;
+  api.context.dashboard_dir = root.string();
+  auto get = [&](const std::string& target) {
+    const auto response = api.handle(request(http::verb::get, target));
+    REQUIRE(response);
+    return *response;
+  };
+
+  const control::HttpResponse index = get("/");
+  CHECK(index.result_int() == 200);
+  CHECK(index.body() == "<!doctype html><title>live</title>");
+  CHECK(index[http::field::content_type] == "text/html; charset=utf-8");
+  CHECK(get("/index.html?x=1").body() == index.body());
+  const control::HttpResponse script = get("/assets/live-1a2b.js");
+  CHECK(script.result_int() == 200);
+  CHECK(script.body() == "console.log(1);");
+  CHECK(script[http::field::content_type] == "text/javascript; charset=utf-8");
+  CHECK(script[http::field::cache_control] == "max-age=31536000, immutable");
+  // The API's routes stay the API's.
+  CHECK(get("/status").result_int() == 200);
+  CHECK(get("/status")[http::field::content_type] == "application/json");
+
+  for (const std::string target : {"/../secret.txt", "/assets/../../secret.txt", "/%2e%2e/secret.txt", "/%2E%2E%2Fsecret.txt",
+                                   "/assets/%2e%2e/%2e%2e/secret.txt", "/..%2fsecret.txt", "/./index.html", "/assets//live-1a2b.js",
+                                   "/..\\secret.txt", "/%5c..%5csecret.txt", "/escape.txt", "/linked/secret.txt",
+                                   "/index.html%00.js", "/%zz", "/%2", "/missing.js"}) {
+    INFO(target);
+    const control::HttpResponse refused = get(target);
+    CHECK(refused.result_int() == 404);
+    CHECK_THAT(refused.body(), !Contains("SECRET") && Contains("<h1>Not found</h1>"));
+    CHECK(refused[http::field::content_type] == "text/html; charset=utf-8");
+  }
+  CHECK(control::resolve_static_path("/assets/live-1a2b.js", root.string()) ==
+        fs::canonical(root / "assets" / "live-1a2b.js").string());
+  CHECK(control::resolve_static_path("/escape.txt", root.string()).empty());
+
+  // No dashboard: a page that says so and what to do.
+  api.context.dashboard_dir = (dir / "not-built").string();
+  const control::HttpResponse absent = get("/");
+  CHECK(absent.result_int() == 404);
+  CHECK_THAT(absent.body(), Contains("The dashboard is not installed") && Contains((dir / "not-built").string()) &&
+                                Contains("control.http.dashboard_dir"));
+}
+
 TEST_CASE("a bearer token is required when one is set: missing and wrong give 401, right passes") {
   Api api;
   api.context.token = "s3cret";
@@ -189,7 +245,7 @@ TEST_CASE("a bearer token is required when one is set: missing and wrong give 40
   REQUIRE(wrong);
   CHECK(wrong->result_int() == 401);
   CHECK((*wrong)[http::field::www_authenticate] == "Bearer realm=\"facecap\", error=\"invalid_token\"");
-  CHECK(api.refusal(request(http::verb::get, "/nope", "", "s3cret")).first == 404);  // past the token: routed
+  CHECK(api.refusal(request(http::verb::post, "/nope", "", "s3cret")).first == 404);  // past the token: routed
   auto right = api.handle(request(http::verb::get, "/status", "", "s3cret"));
   REQUIRE(right);
   CHECK(right->result_int() == 200);
@@ -402,6 +458,95 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
     CHECK(rate == Approx(20).epsilon(0.25));
     CHECK(statuses >= 1);
   }
+  CHECK(d.stop() == 0);
+}
+
+TEST_CASE("the replay page's routes: takes listed, and a take's solved frames read back as the stream's frames") {
+  const fs::path dir = test::scratch_dir("control-replay");
+  test::write_text(dir / "dashboard" / "index.html", "<title>live</title>");
+  test::write_text(dir / "secret.txt", "SECRET");
+  RunningDaemon d({"outputs.shm.name=" + unique_shm("replay"), "control.http.enabled=true", "control.http.port=0",
+                   "source.sim.rate_hz=60", "outputs.recording.directory=" + (dir / "takes").string(),
+                   "control.http.dashboard_dir=" + (dir / "dashboard").string()});
+  const uint16_t port = d->control_port();
+  REQUIRE(port != 0);
+  control::HttpClient client("127.0.0.1", port);
+
+  // The dashboard through the real server; a ".." target as a client sends it, unnormalised.
+  const control::HttpResult page = client.request("GET", "/");
+  CHECK(page.status == 200);
+  CHECK(page.body == "<title>live</title>");
+  const std::string escaped = raw_exchange(port, "GET /../secret.txt HTTP/1.1\r\nConnection: close\r\n\r\n");
+  CHECK_THAT(escaped, Contains("HTTP/1.1 404") && !Contains("SECRET"));
+
+  CHECK(get_json(client, "/recordings")["recordings"].empty());
+  post(client, "/record/start", {{"take", "r1"}, {"actor", "ann"}});
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const json stopped = post(client, "/record/stop", json::object());
+  test::write_text(dir / "takes" / "junk.fcrec", "not a recording");
+  const std::string name = fs::path(stopped["file"].get<std::string>()).filename().string();
+  const formats::RecordingReader take(stopped["file"].get<std::string>());
+  REQUIRE(take.solved_frame_count() >= 12);
+
+  const json listed = get_json(client, "/recordings");
+  CHECK(listed["directory"] == (dir / "takes").string());
+  REQUIRE(listed["recordings"].size() == 2);
+  const json* r1 = nullptr;
+  for (const json& r : listed["recordings"]) {
+    if (r["name"] == "junk.fcrec") CHECK_THAT(r["error"].get<std::string>(), Contains("junk.fcrec"));
+    if (r["name"] == name) r1 = &r;
+  }
+  REQUIRE(r1);
+  CHECK((*r1)["take"] == "r1");
+  CHECK((*r1)["actor"] == "ann");
+  CHECK((*r1)["rig"] == "builtin");
+  CHECK((*r1)["rate_hz"] == 60.0);
+  CHECK((*r1)["solved_frames"] == take.solved_frame_count());
+  CHECK((*r1)["vertices"] == false);  // outputs.recording.vertices is off by default
+  CHECK((*r1)["seconds"].get<double>() == Approx(double(take.solved_frame_count() - 1) / 60).margin(0.02));
+
+  // Frames 1, 4, 7: the recorded weights, and the rig's blend of them as the mesh.
+  const json read = get_json(client, fmt::format("/recordings/frames?name={}&first=1&count=3&step=3", name));
+  CHECK(read["solved_frames"] == take.solved_frame_count());
+  CHECK(read["vertices_from"] == "blend");
+  CHECK(read["schema"]["vertex_count"] == 6174);
+  CHECK(read["schema"]["triangles"].size() == 3 * std::size_t(BuiltinFace::instance().rig().triangle_count()));
+  REQUIRE(read["frames"].size() == 3);
+  const Rig& rig = BuiltinFace::instance().rig();
+  for (std::size_t k = 0; k < 3; ++k) {
+    SolvedFrame recorded;
+    take.read_solved_frame(1 + 3 * k, recorded);
+    const json& frame = read["frames"][k];
+    CHECK(frame["type"] == "frame");
+    CHECK(frame["frame_no"] == recorded.frame_no);
+    REQUIRE(frame["weights"].size() == std::size_t(recorded.weights.size()));
+    for (Eigen::Index i = 0; i < recorded.weights.size(); ++i) CHECK(frame["weights"][std::size_t(i)] == recorded.weights[i]);
+    const Eigen::Matrix3Xd blended = rig.linear_blend(recorded.weights.cast<double>());
+    REQUIRE(frame["vertices"].size() == 3 * 6174);
+    for (const Eigen::Index v : {Eigen::Index(0), Eigen::Index(3000), Eigen::Index(6173)})
+      for (int c = 0; c < 3; ++c)
+        CHECK(frame["vertices"][std::size_t(3 * v + c)].get<double>() == Approx(blended(c, v)).margin(1e-4));
+  }
+
+  // Refusals: what is wrong, and whose fault.
+  auto refused = [&](const std::string& target) {
+    const control::HttpResult r = client.request("GET", target);
+    INFO(target << ": " << r.body);
+    return std::pair{r.status, json::parse(r.body).value("error", "")};
+  };
+  CHECK(refused("/recordings/frames?first=0").first == 400);
+  CHECK(refused("/recordings/frames?name=../takes/" + name).first == 400);
+  CHECK(refused("/recordings/frames?name=.hidden.fcrec").first == 400);
+  CHECK(refused("/recordings/frames?name=" + name + "&count=61") ==
+        std::pair{400, std::string("count must be a whole number from 1 to 60")});
+  CHECK(refused("/recordings/frames?name=" + name + "&step=0").first == 400);
+  CHECK(refused("/recordings/frames?name=" + name + "&speed=2").second ==
+        "unknown query parameter \"speed\" (allowed: name, first, count, step)");
+  CHECK(refused("/recordings/frames?name=nope.fcrec").first == 404);
+  CHECK(refused(fmt::format("/recordings/frames?name={}&first={}", name, take.solved_frame_count())).first == 416);
+  const auto junk = refused("/recordings/frames?name=junk.fcrec");
+  CHECK(junk.first == 422);
+  CHECK_THAT(junk.second, Contains("junk.fcrec"));
   CHECK(d.stop() == 0);
 }
 

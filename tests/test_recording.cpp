@@ -276,8 +276,12 @@ TEST_CASE("Recording <-> take: labels become slots, absent markers missing", "[r
   CHECK(back.first_frame == 1);
   facecap::test::require_same_points(take, back, 0.0);
 
-  // A live source whose marker set changes: a marker appears late, one has no label.
+  // A live source whose marker set changes: a marker appears late, one has no label. Its
+  // slate shows in the take's metadata (what `facecap inspect` prints), empty fields not.
   RecordingHeader header;
+  header.take = "t7";
+  header.actor = "ann";
+  header.shot = "3";
   {
     RecordingWriter writer(dir / "live.fcrec", header);
     MarkerFrame f0;
@@ -299,6 +303,11 @@ TEST_CASE("Recording <-> take: labels become slots, absent markers missing", "[r
   }  // the destructor closes the file
   const MarkerTake live = take_from_recording(RecordingReader(dir / "live.fcrec"));
   CHECK(live.labels == std::vector<std::string>{"a", "id_42"});
+  CHECK(live.metadata_value("take") == "t7");
+  CHECK(live.metadata_value("actor") == "ann");
+  CHECK(live.metadata_value("shot") == "3");
+  CHECK(std::none_of(live.metadata.begin(), live.metadata.end(), [](const auto& kv) { return kv.first == "scene"; }));
+  CHECK(std::none_of(back.metadata.begin(), back.metadata.end(), [](const auto& kv) { return kv.first == "take"; }));
   REQUIRE(live.frames.size() == 2);
   CHECK(live.frames[0].markers[0].position == Eigen::Vector3d(1, 2, 3));
   CHECK_FALSE(live.frames[0].markers[1].present());
