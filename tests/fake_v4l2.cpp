@@ -305,34 +305,33 @@ void clear() {
 // The interposed libc entry points: the fake's paths and descriptors, else libc's own.
 using namespace facecap::test::fake_v4l2;
 
-extern "C" int open(const char* path, int flags, ...) {
-  mode_t mode = 0;
-  if (flags & (O_CREAT | O_TMPFILE)) {
-    va_list args;
-    va_start(args, flags);
-    mode = mode_t(va_arg(args, int));
-    va_end(args);
-  }
+namespace {
+
+// open and open64 alike: the fake's paths, else libc's `name`.
+int interposed_open(const char* name, const char* path, int flags, va_list args) {
+  const mode_t mode = (flags & (O_CREAT | O_TMPFILE)) ? mode_t(va_arg(args, int)) : 0;
   bool handled = false;
   const int fd = open_fake(path, handled);
   if (handled) return fd;
-  static const auto libc_open = real<int (*)(const char*, int, ...)>("open");
-  return libc_open(path, flags, mode);
+  return real<int (*)(const char*, int, ...)>(name)(path, flags, mode);
+}
+
+}  // namespace
+
+extern "C" int open(const char* path, int flags, ...) {
+  va_list args;
+  va_start(args, flags);
+  const int fd = interposed_open("open", path, flags, args);
+  va_end(args);
+  return fd;
 }
 
 extern "C" int open64(const char* path, int flags, ...) {
-  mode_t mode = 0;
-  if (flags & (O_CREAT | O_TMPFILE)) {
-    va_list args;
-    va_start(args, flags);
-    mode = mode_t(va_arg(args, int));
-    va_end(args);
-  }
-  bool handled = false;
-  const int fd = open_fake(path, handled);
-  if (handled) return fd;
-  static const auto libc_open64 = real<int (*)(const char*, int, ...)>("open64");
-  return libc_open64(path, flags, mode);
+  va_list args;
+  va_start(args, flags);
+  const int fd = interposed_open("open64", path, flags, args);
+  va_end(args);
+  return fd;
 }
 
 extern "C" int close(int fd) {
