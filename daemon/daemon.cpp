@@ -651,7 +651,7 @@ void Daemon::write_stats_file(const Figures& f) const {
     chain[std::string(latency_stage_name(LatencyStage(i)))] = {
         {"frames", stage.frames}, {"p50", ms(stage.p50_ns)}, {"p99", ms(stage.p99_ns)}, {"max", ms(stage.max_ns)}};
   }
-  j["latency_stages_ms"] = chain;  // sorts after "latency_ms", which scripts/soak.sh reads first
+  j["latency_stages_ms"] = chain;
   j["outputs_dropped"] = f.outputs_dropped;
   nlohmann::json flagged = nlohmann::json::object();
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) flagged[std::string(solved_flag_name(bit))] = f.flagged_frames[bit];
