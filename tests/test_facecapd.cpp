@@ -4,6 +4,7 @@
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -318,4 +319,43 @@ TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file miss
   CHECK(last.frame_no <= last_solved);
   CHECK(lost_ms <= 100.0);
   ::shm_unlink(("/" + shm).c_str());
+}
+
+TEST_CASE("facecapd recording onto a full tmpfs says FAILED, counts the frames not on disk and leaves a readable file") {
+  // A real full disk: a 256 KiB tmpfs in a mount namespace (root, or an unprivileged user
+  // namespace), filled in under a second by the sim's 52 markers and 45 weights at 120 Hz.
+  const fs::path dir = test::scratch_dir("facecapd-full");
+  fs::create_directories(dir / "mnt");
+  const std::string command = fmt::format(
+      "unshare {} sh -c 'mount -t tmpfs -o size=256k tmpfs {mnt} || exit 0; FACECAPD_ALLOW_ROOT=1 timeout -s TERM 4 {} "
+      "--set outputs.shm.name={} --set outputs.recording.enabled=true --set outputs.recording.directory={mnt} "
+      "--set logging.stats_file={stats} >{log} 2>&1; echo exit=$?; cp {mnt}/*.fcrec {copy}' 2>&1",
+      ::geteuid() == 0 ? "-m" : "-rm", kFacecapd, unique_shm("full"), fmt::arg("mnt", (dir / "mnt").string()),
+      fmt::arg("stats", (dir / "stats.json").string()), fmt::arg("log", (dir / "facecapd.log").string()),
+      fmt::arg("copy", (dir / "copy.fcrec").string()));
+  int status = 0;
+  const std::string out = test::run_and_capture(command, &status);
+  if (out.find("exit=") == std::string::npos) {
+    WARN("SKIPPED: no mount namespace for a small tmpfs here (needs root or unprivileged user namespaces): " << out);
+    return;
+  }
+  const std::string log = test::slurp(dir / "facecapd.log");
+  INFO(out << log);
+  CHECK_THAT(out, Contains("exit=124"));  // ran until timeout's SIGTERM: the full disk did not stop it
+  CHECK_THAT(log, Contains("write failed: No space left on device; the file keeps its first") &&
+                      Contains("every later frame is dropped (solving and the other outputs go on)"));
+  CHECK_THAT(log, Contains("[error]") && Contains("FAILED: "));
+  const auto stats = nlohmann::json::parse(test::slurp(dir / "stats.json"));
+  const auto& recording = stats["outputs"]["recording"];
+  CHECK(recording["failed"] == true);
+  CHECK(recording["errors"] == 1);
+  // Solving went on: every frame solved was offered, and is in the file or dropped.
+  CHECK(recording["offered"] == stats["frames_solved"]);
+  CHECK(recording["offered"].get<uint64_t>() == recording["delivered"].get<uint64_t>() + recording["dropped"].get<uint64_t>());
+  CHECK(recording["dropped"].get<uint64_t>() > 0);
+  const formats::RecordingReader file(dir / "copy.fcrec");
+  CHECK(file.skipped().empty());
+  CHECK_FALSE(file.truncated());
+  CHECK(file.solved_frame_count() == recording["delivered"].get<uint64_t>());
+  CHECK(file.solved_frame_count() > 20);
 }
