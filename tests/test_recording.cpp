@@ -4,6 +4,7 @@
 #include <cerrno>
 #include <csignal>
 #include <cstring>
+#include <functional>
 
 #include <sched.h>
 #include <sys/mount.h>
@@ -513,44 +514,65 @@ TEST_CASE("Recording: a full disk ends the file at its last whole chunk, never r
   }
 }
 
-TEST_CASE("Recording: a file-size limit (EFBIG) ends the file at its last whole chunk", "[recording][disk]") {
-  // RLIMIT_FSIZE with SIGXFSZ ignored: the kernel's own EFBIG, in a child process so the
-  // limit stays there. The child reports what the writer counted through a pipe.
-  const auto path = facecap::test::scratch_dir("recording-efbig") / "take.fcrec";
+namespace {
+
+// What a child process's writer did: 0 when it failed with the expected error (1: the
+// child could not set up, 2: another outcome), and the frames the writer counted.
+struct ChildReport {
+  uint64_t status = 2, markers = 0, solved = 0;
+};
+
+// Runs body in a forked child (whose limits and mounts stay there) and returns its report.
+ChildReport in_child(const std::function<ChildReport()>& body) {
   int fds[2];
   REQUIRE(::pipe(fds) == 0);
   const pid_t child = ::fork();
   REQUIRE(child >= 0);
   if (child == 0) {
     ::close(fds[0]);
-    ::signal(SIGXFSZ, SIG_IGN);
-    const rlimit limit{100'000, 100'000};
-    ::setrlimit(RLIMIT_FSIZE, &limit);
-    uint64_t counts[2] = {0, 0};
+    ChildReport report;
     try {
-      RecordingWriter writer(path, test_header(), {.buffer_bytes = 16 << 10});
-      const auto result = append_until_failure(writer, 2000);
-      counts[0] = writer.marker_frames();
-      counts[1] = writer.solved_frames();
-      if (result.second.find("File too large") == std::string::npos) counts[0] = ~uint64_t(0);
-      writer.close();
+      report = body();
     } catch (...) {
-      counts[0] = ~uint64_t(0);
+      report.status = 2;
     }
-    [[maybe_unused]] const ssize_t n = ::write(fds[1], counts, sizeof counts);
+    [[maybe_unused]] const ssize_t n = ::write(fds[1], &report, sizeof report);
     ::_exit(0);
   }
   ::close(fds[1]);
-  uint64_t counts[2] = {0, 0};
-  CHECK(::read(fds[0], counts, sizeof counts) == ssize_t(sizeof counts));
+  ChildReport report;
+  CHECK(::read(fds[0], &report, sizeof report) == ssize_t(sizeof report));
   ::close(fds[0]);
-  int status = 0;
-  ::waitpid(child, &status, 0);
-  REQUIRE(counts[0] != ~uint64_t(0));  // the child saw "File too large" and closed without throwing
+  ::waitpid(child, nullptr, 0);
+  return report;
+}
+
+// Writes frames to path until the writer fails; the report says whether it failed with
+// `expected` in its message, and what it counted.
+ChildReport write_until_full(const std::filesystem::path& path, const std::string& expected) {
+  RecordingWriter writer(path, test_header(), {.buffer_bytes = 16 << 10});
+  const auto result = append_until_failure(writer, 5000);
+  ChildReport report{result.second.find(expected) == std::string::npos ? 2u : 0u, writer.marker_frames(),
+                     writer.solved_frames()};
+  writer.close();
+  return report;
+}
+
+}  // namespace
+
+TEST_CASE("Recording: a file-size limit (EFBIG) ends the file at its last whole chunk", "[recording][disk]") {
+  // RLIMIT_FSIZE with SIGXFSZ ignored: the kernel's own EFBIG.
+  const auto path = facecap::test::scratch_dir("recording-efbig") / "take.fcrec";
+  const ChildReport report = in_child([&] {
+    ::signal(SIGXFSZ, SIG_IGN);
+    const rlimit limit{100'000, 100'000};
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    return write_until_full(path, "File too large");
+  });
+  REQUIRE(report.status == 0);  // the child saw "File too large" and closed without throwing
   CHECK(std::filesystem::file_size(path) <= 100'000);
-  CHECK(counts[0] > 50);
-  const RecordingReader reader(path);
-  check_frames_are_a_prefix(reader, counts[0], counts[1]);
+  CHECK(report.markers > 50);
+  check_frames_are_a_prefix(RecordingReader(path), report.markers, report.solved);
 }
 
 TEST_CASE("Recording: a full tmpfs ends the file at its last whole chunk", "[recording][disk]") {
@@ -560,13 +582,7 @@ TEST_CASE("Recording: a full tmpfs ends the file at its last whole chunk", "[rec
   const auto dir = facecap::test::scratch_dir("recording-tmpfs");
   const auto mount_point = dir / "mnt";
   std::filesystem::create_directories(mount_point);
-  int fds[2];
-  REQUIRE(::pipe(fds) == 0);
-  const pid_t child = ::fork();
-  REQUIRE(child >= 0);
-  if (child == 0) {
-    ::close(fds[0]);
-    uint64_t report[3] = {0, 0, 0};  // status (0 ok, 1 no namespace, 2 wrong error), markers, solved
+  const ChildReport report = in_child([&] {
     const uid_t uid = ::getuid();
     const gid_t gid = ::getgid();
     bool entered = ::unshare(CLONE_NEWNS) == 0;
@@ -578,37 +594,17 @@ TEST_CASE("Recording: a full tmpfs ends the file at its last whole chunk", "[rec
     }
     entered = entered && ::mount("none", "/", nullptr, MS_REC | MS_PRIVATE, nullptr) == 0 &&
               ::mount("tmpfs", mount_point.c_str(), "tmpfs", 0, "size=192k") == 0;
-    if (!entered) {
-      report[0] = 1;
-    } else {
-      try {
-        const auto path = mount_point / "take.fcrec";
-        RecordingWriter writer(path, test_header(), {.buffer_bytes = 16 << 10});
-        const auto result = append_until_failure(writer, 5000);
-        report[0] = result.second.find("No space left on device") == std::string::npos ? 2 : 0;
-        report[1] = writer.marker_frames();
-        report[2] = writer.solved_frames();
-        writer.close();
-        std::filesystem::copy_file(path, dir / "copied.fcrec", std::filesystem::copy_options::overwrite_existing);
-      } catch (...) {
-        report[0] = 2;
-      }
-    }
-    [[maybe_unused]] const ssize_t n = ::write(fds[1], report, sizeof report);
-    ::_exit(0);
-  }
-  ::close(fds[1]);
-  uint64_t report[3] = {2, 0, 0};
-  CHECK(::read(fds[0], report, sizeof report) == ssize_t(sizeof report));
-  ::close(fds[0]);
-  int status = 0;
-  ::waitpid(child, &status, 0);
-  if (report[0] == 1) {
+    if (!entered) return ChildReport{1};
+    const ChildReport written = write_until_full(mount_point / "take.fcrec", "No space left on device");
+    std::filesystem::copy_file(mount_point / "take.fcrec", dir / "copied.fcrec",
+                               std::filesystem::copy_options::overwrite_existing);
+    return written;
+  });
+  if (report.status == 1) {
     WARN("SKIPPED: no mount namespace for a small tmpfs here (needs root or unprivileged user namespaces)");
     return;
   }
-  REQUIRE(report[0] == 0);
-  CHECK(report[1] > 50);
-  const RecordingReader reader(dir / "copied.fcrec");
-  check_frames_are_a_prefix(reader, report[1], report[2]);
+  REQUIRE(report.status == 0);
+  CHECK(report.markers > 50);
+  check_frames_are_a_prefix(RecordingReader(dir / "copied.fcrec"), report.markers, report.solved);
 }
