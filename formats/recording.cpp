@@ -574,8 +574,9 @@ void RecordingReader::scan(std::size_t chunks_begin) {
     std::string why;
     const auto chunk = chunk_at(bytes_, at, why);
     const bool frame = chunk && (chunk->code == kMarkerChunk || chunk->code == kSolvedChunk);
-    if (frame && chunk->payload.size() < 16) why = fmt::format("frame chunk at byte {} has only {} payload bytes", at, chunk->payload.size());
-    if (!chunk || (frame && chunk->payload.size() < 16)) {
+    const bool short_frame = frame && chunk->payload.size() < 16;  // no room for its number and time
+    if (short_frame) why = fmt::format("frame chunk at byte {} has only {} payload bytes", at, chunk->payload.size());
+    if (!chunk || short_frame) {
       const std::size_t next = chunk ? at + kChunkHeaderBytes + chunk->payload.size() : resync(at + 1);
       if (next >= bytes_.size()) {
         truncated_ = true;

@@ -17,12 +17,12 @@ namespace facecap::outputs {
 
 struct RecorderOptions {
   std::filesystem::path file;
-  formats::RecordingWriter::WriteFn write = nullptr;  // tests inject write failures; null: pwrite(2)
   formats::RecordingHeader header;
   std::size_t queue_frames = 512;
   bool markers = true;
   bool solved = true;
   bool vertices = false;  // solved meshes too (large); a re-solve reproduces them otherwise
+  formats::RecordingWriter::WriteFn write = nullptr;  // tests inject write failures; null: pwrite(2)
 };
 
 struct RecorderCounters {
