@@ -371,12 +371,18 @@ void Controller::finish_stopped_take() {
   try {
     const std::optional<outputs::TakeSummary> summary = parts_.takes->finish_stopped();
     if (!summary) return;
-    spdlog::info("take {} stopped: {} marker frames, {} solved frames, {} dropped", summary->file.string(),
-                 summary->counters.marker_frames, summary->counters.solved_frames, summary->counters.dropped);
+    if (summary->failure.empty())
+      spdlog::info("take {} stopped: {} marker frames, {} solved frames, {} dropped", summary->file.string(),
+                   summary->counters.marker_frames, summary->counters.solved_frames, summary->counters.dropped);
+    else
+      spdlog::error("take {} FAILED: {}; it holds {} marker frames and {} solved frames, {} frames dropped",
+                    summary->file.string(), summary->failure, summary->counters.marker_frames,
+                    summary->counters.solved_frames, summary->counters.dropped);
     answer = {200,
               {{"file", summary->file.string()}, {"take", slate_.take}, {"seconds", seconds_since(take_started_)},
                {"marker_frames", summary->counters.marker_frames}, {"solved_frames", summary->counters.solved_frames},
-               {"dropped", summary->counters.dropped}, {"errors", summary->counters.errors}}};
+               {"dropped", summary->counters.dropped}, {"errors", summary->counters.errors},
+               {"failure", summary->failure}}};
   } catch (const Error& e) {
     answer = error_reply(500, fmt::format("the take's file could not be finished: {}", e.what()));
   }

@@ -307,6 +307,8 @@ std::string Daemon::status_line(const Figures& w) const {
     line += fmt::format(", source frames lost {}", w.source_overwritten + w.source_late);
   if (w.source_errors > 0) line += fmt::format(", source errors {}", w.source_errors);
   if (w.outputs_dropped > 0) line += fmt::format(", outputs dropped {}", w.outputs_dropped);
+  for (const auto& sink : sinks_)
+    if (sink->health().failed) line += fmt::format(", output {} FAILED", sink->name());
   if (const std::string flagged = flagged_text(w); !flagged.empty()) line += ", " + flagged;
   if (const drivers::SourceHealth source = source_->health(); !source.state.empty())
     line += fmt::format(", source: {}", source.state.view());
@@ -510,8 +512,11 @@ void Daemon::shutdown(const std::string& reason) {
         delivery = fmt::format(", received -> sent p50 {:.2f} p99 {:.2f} ms", ms(snapshot.quantile_ns(0.5)),
                                ms(snapshot.quantile_ns(0.99)));
       }
-      spdlog::info("output {} stopped: {} frames offered, {} delivered, {} dropped{}{}", sink->description(), h.offered,
-                   h.delivered, h.dropped, h.errors ? fmt::format(", {} errors", h.errors) : "", delivery);
+      // A failed output says so at error level: "0 dropped" must never hide a take not on disk.
+      spdlog::log(h.failed ? spdlog::level::err : spdlog::level::info,
+                  "output {} {}: {} frames offered, {} delivered, {} dropped{}{}", sink->description(),
+                  h.failed ? "FAILED" : "stopped", h.offered, h.delivered, h.dropped,
+                  h.errors ? fmt::format(", {} errors", h.errors) : "", delivery);
     } catch (const std::exception& e) {
       spdlog::error("output {}: {}", sink->description(), e.what());
     }

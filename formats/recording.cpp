@@ -243,6 +243,7 @@ int64_t realtime_now_ns() {
 
 RecordingWriter::RecordingWriter(const std::filesystem::path& path, const RecordingHeader& header, Options options)
     : path_(path.string()), options_(options) {
+  if (!options_.write) options_.write = ::pwrite;
   const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | (options.overwrite ? O_TRUNC : O_EXCL);
   fd_ = ::open(path_.c_str(), flags, 0644);
   if (fd_ < 0) throw file_error(path_, fmt::format("cannot create recording: {}", std::strerror(errno)));
@@ -254,7 +255,14 @@ RecordingWriter::RecordingWriter(const std::filesystem::path& path, const Record
   ByteWriter p(payload_);
   encode_header(p, header, header.created_unix_ns != 0 ? header.created_unix_ns : realtime_now_ns());
   append_chunk(kHeadChunk, payload_);
-  flush();  // the header reaches the file at once: a recording killed early still names its rig
+  try {
+    flush();  // the header reaches the file at once: a recording killed early still names its rig
+  } catch (const Error&) {
+    ::close(fd_);
+    fd_ = -1;
+    ::unlink(path_.c_str());  // a file without its header holds nothing
+    throw;
+  }
 }
 
 RecordingWriter::~RecordingWriter() {
@@ -276,52 +284,88 @@ void RecordingWriter::append_chunk(uint32_t code, const std::vector<char>& paylo
   w.u32(size);
   w.u64(chunk_checksum(code, size, payload.data()));
   w.bytes(std::string_view(payload.data(), payload.size()));
+  buffer_chunk_ends_.push_back(buffer_.size());
   if (buffer_.size() >= options_.buffer_bytes) flush();
 }
 
 void RecordingWriter::append_marker_frame(const MarkerFrame& frame) {
-  if (!is_open()) throw file_error(path_, "append to a closed recording");
+  if (!is_open() || !failure_.empty())
+    throw file_error(path_, failure_.empty() ? "append to a closed recording" : "recording stopped: " + failure_);
   payload_.clear();
   ByteWriter w(payload_);
   encode_marker_frame(w, frame);
   index_.push_back({ChunkKind::kMarkerFrame, bytes_written(), frame.frame_no, frame.source_time_ns});
-  append_chunk(kMarkerChunk, payload_);
   ++marker_frames_;
+  append_chunk(kMarkerChunk, payload_);
 }
 
 void RecordingWriter::append_solved_frame(const SolvedFrame& frame) {
-  if (!is_open()) throw file_error(path_, "append to a closed recording");
+  if (!is_open() || !failure_.empty())
+    throw file_error(path_, failure_.empty() ? "append to a closed recording" : "recording stopped: " + failure_);
   payload_.clear();
   ByteWriter w(payload_);
   encode_solved_frame(w, frame);
   index_.push_back({ChunkKind::kSolvedFrame, bytes_written(), frame.frame_no, frame.source_time_ns});
-  append_chunk(kSolvedChunk, payload_);
   ++solved_frames_;
+  append_chunk(kSolvedChunk, payload_);
 }
 
-void RecordingWriter::write_out(const char* data, std::size_t size) {
-  while (size > 0) {
-    const ssize_t n = ::write(fd_, data, size);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      throw file_error(path_, fmt::format("write failed: {}", std::strerror(errno)));
+void RecordingWriter::write_buffer() {
+  std::size_t done = 0;
+  int error = 0;
+  while (done < buffer_.size()) {
+    // pwrite at the offset we track: a retry after a short write resumes exactly where
+    // the file ends, and a file cut back below never gets a hole.
+    const ssize_t n = options_.write(fd_, buffer_.data() + done, buffer_.size() - done, off_t(file_bytes_ + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      error = n < 0 ? errno : EIO;  // 0 bytes for a non-empty write: no progress is possible
+      break;
     }
-    data += n;
-    size -= std::size_t(n);
-    file_bytes_ += uint64_t(n);
+    done += std::size_t(n);
   }
+  if (error == 0) {
+    file_bytes_ += buffer_.size();
+    buffer_.clear();
+    buffer_chunk_ends_.clear();
+    return;
+  }
+  // Keep the whole chunks that reached the file, drop the partial one and everything after.
+  const auto whole = std::upper_bound(buffer_chunk_ends_.begin(), buffer_chunk_ends_.end(), done);
+  const uint64_t good_end = file_bytes_ + (whole == buffer_chunk_ends_.begin() ? 0 : *(whole - 1));
+  const bool cut = ::ftruncate(fd_, off_t(good_end)) == 0;
+  file_bytes_ = good_end;
+  buffer_.clear();
+  buffer_chunk_ends_.clear();
+  while (!index_.empty() && index_.back().offset >= good_end) {
+    --(index_.back().kind == ChunkKind::kMarkerFrame ? marker_frames_ : solved_frames_);
+    index_.pop_back();
+  }
+  const std::string reason =
+      fmt::format("write failed: {}; the file keeps its first {} bytes ({} marker and {} solved frames){}",
+                  std::strerror(error), good_end, marker_frames_, solved_frames_,
+                  cut ? "" : fmt::format(", and could not be cut back to them ({}): readers drop the partial chunk",
+                                         std::strerror(errno)));
+  if (failure_.empty()) failure_ = reason;
+  throw file_error(path_, reason);
 }
 
 void RecordingWriter::flush(bool durable) {
   if (!is_open()) return;
-  write_out(buffer_.data(), buffer_.size());
-  buffer_.clear();
+  if (!failure_.empty()) throw file_error(path_, "recording stopped: " + failure_);
+  write_buffer();
   if (durable && ::fdatasync(fd_) != 0)
     throw file_error(path_, fmt::format("fdatasync failed: {}", std::strerror(errno)));
 }
 
+bool RecordingWriter::file_deleted() const {
+  struct stat st {};
+  return is_open() && ::fstat(fd_, &st) == 0 && st.st_nlink == 0;
+}
+
 void RecordingWriter::close() {
   if (!is_open()) return;
+  const bool failed_before = !failure_.empty();
   try {
     const uint64_t index_offset = bytes_written();
     payload_.clear();
@@ -340,10 +384,12 @@ void RecordingWriter::close() {
     w.u64(index_offset);
     w.u64(tail_offset);
     append_chunk(kTailChunk, payload_);
-    flush(true);
+    write_buffer();
+    if (::fdatasync(fd_) != 0) throw file_error(path_, fmt::format("fdatasync failed: {}", std::strerror(errno)));
   } catch (...) {
     ::close(fd_);
     fd_ = -1;
+    if (failed_before) return;  // said once, by the write that failed; the file is readable by scanning
     throw;
   }
   const int rc = ::close(fd_);
@@ -489,8 +535,36 @@ bool RecordingReader::load_index(std::size_t chunks_begin) {
       return false;
     previous_end = e.offset + kChunkHeaderBytes;
   }
-  index_ = std::move(entries);
+  // Every indexed chunk is checked once here, so a damaged one costs its frame only.
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    const RecordingIndexEntry& e = entries[i];
+    const auto chunk = chunk_at(bytes_, std::size_t(e.offset), why);
+    const uint32_t expected = e.kind == ChunkKind::kMarkerFrame ? kMarkerChunk : kSolvedChunk;
+    if (chunk && chunk->code == expected) {
+      index_.push_back(e);
+      continue;
+    }
+    if (chunk) why = fmt::format("index points at a {} chunk at byte {}, expected {}", fourcc_text(chunk->code), e.offset,
+                                 fourcc_text(expected));
+    const uint64_t end = i + 1 < entries.size() ? entries[i + 1].offset : index_offset;
+    skipped_.push_back({e.offset, end - e.offset, fmt::format("{} (frame {})", why, e.frame_no)});
+  }
   return true;
+}
+
+std::size_t RecordingReader::resync(std::size_t from) const {
+  // A frame chunk is at most a few MB (a solved mesh); a larger size is damage, and not
+  // checksumming it keeps a hostile file from costing the square of its size.
+  constexpr uint32_t kMaxResyncPayload = 64u << 20;
+  std::string why;
+  for (std::size_t at = from; at + kChunkHeaderBytes <= bytes_.size(); ++at) {
+    uint32_t code = 0, size = 0;
+    std::memcpy(&code, bytes_.data() + at, 4);  // little-endian, as written
+    if (code != kMarkerChunk && code != kSolvedChunk && code != kIndexChunk && code != kTailChunk) continue;
+    std::memcpy(&size, bytes_.data() + at + 4, 4);
+    if (size <= kMaxResyncPayload && chunk_at(bytes_, at, why)) return at;
+  }
+  return bytes_.size();
 }
 
 void RecordingReader::scan(std::size_t chunks_begin) {
@@ -499,17 +573,21 @@ void RecordingReader::scan(std::size_t chunks_begin) {
   while (at < bytes_.size()) {
     std::string why;
     const auto chunk = chunk_at(bytes_, at, why);
-    if (!chunk) {
-      truncated_ = true;
-      stop_reason_ = why;
-      return;
-    }
-    if (chunk->code == kMarkerChunk || chunk->code == kSolvedChunk) {
-      if (chunk->payload.size() < 16) {
+    const bool frame = chunk && (chunk->code == kMarkerChunk || chunk->code == kSolvedChunk);
+    const bool short_frame = frame && chunk->payload.size() < 16;  // no room for its number and time
+    if (short_frame) why = fmt::format("frame chunk at byte {} has only {} payload bytes", at, chunk->payload.size());
+    if (!chunk || short_frame) {
+      const std::size_t next = chunk ? at + kChunkHeaderBytes + chunk->payload.size() : resync(at + 1);
+      if (next >= bytes_.size()) {
         truncated_ = true;
-        stop_reason_ = fmt::format("frame chunk at byte {} has only {} payload bytes", at, chunk->payload.size());
+        stop_reason_ = why;
         return;
       }
+      skipped_.push_back({at, next - at, why});
+      at = next;
+      continue;
+    }
+    if (frame) {
       ByteReader r(chunk->payload, name_);
       const int64_t frame_no = r.i64();
       const int64_t source_time_ns = r.i64();
@@ -519,6 +597,18 @@ void RecordingReader::scan(std::size_t chunks_begin) {
     // HEAD, INDX, TAIL and chunk kinds of later versions carry no frames: skipped.
     at += kChunkHeaderBytes + chunk->payload.size();
   }
+}
+
+std::string RecordingReader::damage_summary() const {
+  std::string text;
+  if (!skipped_.empty()) {
+    uint64_t bytes = 0;
+    for (const Skipped& s : skipped_) bytes += s.bytes;
+    text = fmt::format("{} damaged stretch{} skipped ({} bytes; the first: {})", skipped_.size(),
+                       skipped_.size() == 1 ? "" : "es", bytes, skipped_.front().why);
+  }
+  if (truncated_) text += fmt::format("{}cut off: {}", text.empty() ? "" : "; ", stop_reason_);
+  return text;
 }
 
 std::span<const char> RecordingReader::frame_payload(const std::vector<std::size_t>& entries, std::size_t i,
@@ -652,8 +742,8 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
   for (const auto& [key, value] : {std::pair<const char*, const std::string&>{"take", h.take}, {"actor", h.actor},
                                    {"scene", h.scene}, {"shot", h.shot}, {"notes", h.notes}})
     if (!value.empty()) take.metadata.emplace_back(key, value);
-  if (reader.truncated())
-    take.warnings.push_back(fmt::format("{}: recording cut off: {}", reader.name(), reader.stop_reason()));
+  if (const std::string damage = reader.damage_summary(); !damage.empty())
+    take.warnings.push_back(fmt::format("{}: recording damaged: {}; the rest was read", reader.name(), damage));
   if (duplicates > 0)
     take.warnings.push_back(fmt::format("{}: {} markers repeat a label within their frame, the first {}; the first "
                                         "marker with a label is kept",

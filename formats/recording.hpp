@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include <sys/types.h>
+
 #include "core/frame.hpp"
 #include "formats/take.hpp"
 
@@ -57,13 +59,23 @@ struct RecordingIndexEntry {
 // call it from a recorder thread fed by a queue. Every append adds one whole chunk to an
 // in-memory buffer that reaches the file on flush() or when it grows past a limit, so a
 // killed process leaves whole chunks and at most one partial chunk at the end.
+//
+// A write that fails (disk full, file too large, I/O error) never leaves a partial chunk
+// to be written again on top of itself: the file is cut back to its last whole chunk, the
+// writer fails (appends and flushes throw, the first with the reason), the frames that
+// did not reach the file are subtracted from the counts, and close() still tries to add
+// the index; without it readers find every frame by scanning.
 class RecordingWriter {
  public:
+  // Writes size bytes at offset like pwrite(2); tests inject failures and short writes.
+  using WriteFn = ssize_t (*)(int fd, const void* data, std::size_t size, off_t offset);
   struct Options {
     bool overwrite = false;                           // else an existing file is an error
     std::size_t buffer_bytes = std::size_t(1) << 20;  // flush automatically past this
+    WriteFn write = nullptr;                          // null: pwrite(2)
   };
-  // Creates the file and writes the preamble and HEAD chunk. Throws Error.
+  // Creates the file and writes the preamble and HEAD chunk. Throws Error (and leaves no
+  // file behind when the header could not be written).
   RecordingWriter(const std::filesystem::path& path, const RecordingHeader& header, Options options);
   RecordingWriter(const std::filesystem::path& path, const RecordingHeader& header)
       : RecordingWriter(path, header, Options{}) {}
@@ -71,31 +83,44 @@ class RecordingWriter {
   RecordingWriter(const RecordingWriter&) = delete;
   RecordingWriter& operator=(const RecordingWriter&) = delete;
 
+  // Throws Error when the writer is closed or has failed, or when flushing fails.
   void append_marker_frame(const MarkerFrame& frame);
   void append_solved_frame(const SolvedFrame& frame);
   // Hands buffered chunks to the kernel; durable also waits for the disk (fdatasync).
   void flush(bool durable = false);
-  // Writes INDX and TAIL, syncs and closes. Further appends throw.
+  // Writes INDX and TAIL, syncs and closes. Further appends throw. Throws Error when the
+  // last chunks cannot be written (the file then ends at its last whole chunk). After a
+  // failure it only tries to add the index and closes, without throwing again.
   void close();
 
   bool is_open() const noexcept { return fd_ >= 0; }
+  // Why writing stopped (empty while none failed).
+  const std::string& failure() const noexcept { return failure_; }
+  // True when the file was deleted (or its directory removed) while open: fstat's link
+  // count is 0, and nothing written reaches a file anyone can open.
+  bool file_deleted() const;
+  // Frames in the file or buffered for it: after a failure, only those in the file.
   std::size_t marker_frames() const noexcept { return marker_frames_; }
   std::size_t solved_frames() const noexcept { return solved_frames_; }
   uint64_t bytes_written() const noexcept { return file_bytes_ + buffer_.size(); }
 
  private:
   void append_chunk(uint32_t fourcc, const std::vector<char>& payload);
-  void write_out(const char* data, std::size_t size);
+  // Writes the buffer at file_bytes_; on failure cuts the file back to its last whole
+  // chunk, drops the lost frames from the index and counts, and throws.
+  void write_buffer();
 
   std::string path_;
   Options options_;
   int fd_ = -1;
-  uint64_t file_bytes_ = 0;  // bytes already handed to the kernel
+  uint64_t file_bytes_ = 0;  // bytes in the file, always ending with a whole chunk
   std::vector<char> buffer_;
+  std::vector<std::size_t> buffer_chunk_ends_;  // where each chunk in buffer_ ends
   std::vector<char> payload_;  // reused per frame
   std::vector<RecordingIndexEntry> index_;
   std::size_t marker_frames_ = 0;
   std::size_t solved_frames_ = 0;
+  std::string failure_;
 };
 
 // Reads a recording held in memory or mapped from a file. Frames are decoded on demand,
@@ -121,6 +146,17 @@ class RecordingReader {
   // frames before it are all readable. stop_reason says what was found where.
   bool truncated() const noexcept { return truncated_; }
   const std::string& stop_reason() const noexcept { return stop_reason_; }
+  // Damaged stretches before the end, skipped: the reader went on at the next chunk
+  // whose checksum holds (or, with an index, the next indexed frame).
+  struct Skipped {
+    uint64_t offset = 0;  // where the damaged chunk starts
+    uint64_t bytes = 0;   // how many bytes were skipped
+    std::string why;
+  };
+  const std::vector<Skipped>& skipped() const noexcept { return skipped_; }
+  // What could not be read, in one line ("" when the whole file was read): the stretches
+  // skipped and where the file was cut off.
+  std::string damage_summary() const;
 
   std::size_t marker_frame_count() const noexcept { return marker_entries_.size(); }
   std::size_t solved_frame_count() const noexcept { return solved_entries_.size(); }
@@ -134,6 +170,9 @@ class RecordingReader {
   void open(std::span<const char> bytes);
   bool load_index(std::size_t chunks_begin);
   void scan(std::size_t chunks_begin);
+  // The first offset at or after from where a whole chunk of a known kind with a valid
+  // checksum starts, or the file's size when there is none.
+  std::size_t resync(std::size_t from) const;
   // The checked payload of entries[i]'s chunk, which must be of expected_code's kind.
   std::span<const char> frame_payload(const std::vector<std::size_t>& entries, std::size_t i,
                                       uint32_t expected_code) const;
@@ -148,6 +187,7 @@ class RecordingReader {
   bool index_rebuilt_ = false;
   bool truncated_ = false;
   std::string stop_reason_;
+  std::vector<Skipped> skipped_;
 };
 
 // A recording's marker frames as a take: one slot per distinct label in order of first

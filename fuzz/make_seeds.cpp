@@ -99,6 +99,12 @@ void write_recordings(const fs::path& dir) {
   auto bytes = read_file_bytes(dir / "solved.fcrec");
   bytes.resize(bytes.size() * 2 / 3);
   write(dir / "cut.fcrec", bytes);
+  // A flipped bit in a chunk of each: the reader skips it and resynchronises on the next.
+  bytes[bytes.size() / 2] ^= 0x08;
+  write(dir / "damaged-cut.fcrec", bytes);
+  auto whole = read_file_bytes(dir / "solved.fcrec");
+  whole[whole.size() / 3] ^= 0x08;
+  write(dir / "damaged.fcrec", whole);
 }
 
 align::Calibration small_calibration(const Rig& rig) {

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # facecap quick start: installs the Debian packages facecap needs, builds, and then
 #   run   runs the main job on its built-in default (extra arguments are passed on)
-#   test  runs the whole test suite
+#   test  runs the whole test suite (with CI set, also scripts/sanitize: ASan, UBSan and
+#         TSan runs of the parsers', recorder's and hand-offs' tests, and a libFuzzer smoke)
 # Usage: scripts/quickstart.sh run|test [args...]
 set -euo pipefail
 
@@ -64,8 +65,14 @@ case "$mode" in
     install_packages
     (cd "$here/tests/peers" && npm ci --no-audit --no-fund --loglevel=error)
     build
-    cd "$build_dir"
-    exec ctest --output-on-failure --parallel "$(nproc)" "$@"
+    status=0
+    (cd "$build_dir" && ctest --output-on-failure --parallel "$(nproc)" "$@") || status=$?
+    # In CI (CI set, as CI runs this command) also the sanitizer builds of the parsers',
+    # recorder's and hand-offs' tests and the libFuzzer smoke (scripts/sanitize).
+    if [ -n "${CI:-}" ]; then
+      FACECAP_BUILD_DIR=$build_dir "$here/scripts/sanitize" --ci || status=1
+    fi
+    exit "$status"
     ;;
   *)
     echo "usage: $0 run|test [args...]" >&2

@@ -4,6 +4,8 @@
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -277,4 +279,83 @@ TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working an
   const auto at = out.find("mean vertex error ");
   REQUIRE(at != std::string::npos);
   CHECK(std::stod(out.substr(at + 18)) < 1.0);  // mm
+}
+
+TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file missing at most 100 ms of frames") {
+  // SIGKILL: no handler runs, so the file holds what the recorder had handed to the
+  // kernel. The last frame solved is the one in the shared memory the killed writer left.
+  const fs::path dir = test::scratch_dir("facecapd-kill");
+  const std::string shm = unique_shm("kill");
+  NotifyRecorder notify;
+  DaemonProcess d({"--set", "outputs.shm.name=" + shm, "--set", "outputs.recording.enabled=true", "--set",
+                   "outputs.recording.directory=" + (dir / "recordings").string(), "--set", "source.sim.rate_hz=240",
+                   "--set", "loop.rate_hz=240"},
+                  {"NOTIFY_SOCKET=" + notify.listener.address()}, dir / "facecapd.log");
+  INFO(d.log());
+  REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
+  client::Subscriber reader(shm);
+  facecap_frame f{};
+  const int64_t until = monotonic_now_ns() + 2 * kNsPerSecond;
+  while (monotonic_now_ns() < until) {
+    REQUIRE(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);
+    notify.drain();
+  }
+  ::kill(d.pid(), SIGKILL);
+  CHECK(d.wait_exit(5 * kNsPerSecond) == 128 + SIGKILL);
+  REQUIRE(reader.read_latest(f) == FACECAP_OK);
+  const int64_t last_solved = f.frame_no;
+  std::vector<fs::path> recordings;
+  for (const auto& entry : fs::directory_iterator(dir / "recordings")) recordings.push_back(entry.path());
+  REQUIRE(recordings.size() == 1);
+  const formats::RecordingReader recording(recordings.front());
+  CHECK(recording.index_rebuilt());  // no index: the scan finds the frames
+  CHECK(recording.skipped().empty());
+  REQUIRE(recording.solved_frame_count() > 240);
+  SolvedFrame last;
+  recording.read_solved_frame(recording.solved_frame_count() - 1, last);
+  const double lost_ms = double(last_solved - last.frame_no) * 1000.0 / 240.0;
+  WARN("SIGKILL at 240 Hz: the last frame solved was " << last_solved << ", the last recorded " << last.frame_no << ": "
+       << last_solved - last.frame_no << " frames (" << lost_ms << " ms) lost");
+  CHECK(last.frame_no <= last_solved);
+  CHECK(lost_ms <= 100.0);
+  ::shm_unlink(("/" + shm).c_str());
+}
+
+TEST_CASE("facecapd recording onto a full tmpfs says FAILED, counts the frames not on disk and leaves a readable file") {
+  // A real full disk: a 256 KiB tmpfs in a mount namespace (root, or an unprivileged user
+  // namespace), filled in under a second by the sim's 52 markers and 45 weights at 120 Hz.
+  const fs::path dir = test::scratch_dir("facecapd-full");
+  fs::create_directories(dir / "mnt");
+  const std::string command = fmt::format(
+      "unshare {} sh -c 'mount -t tmpfs -o size=256k tmpfs {mnt} || exit 0; FACECAPD_ALLOW_ROOT=1 timeout -s TERM 4 {} "
+      "--set outputs.shm.name={} --set outputs.recording.enabled=true --set outputs.recording.directory={mnt} "
+      "--set logging.stats_file={stats} >{log} 2>&1; echo exit=$?; cp {mnt}/*.fcrec {copy}' 2>&1",
+      ::geteuid() == 0 ? "-m" : "-rm", kFacecapd, unique_shm("full"), fmt::arg("mnt", (dir / "mnt").string()),
+      fmt::arg("stats", (dir / "stats.json").string()), fmt::arg("log", (dir / "facecapd.log").string()),
+      fmt::arg("copy", (dir / "copy.fcrec").string()));
+  int status = 0;
+  const std::string out = test::run_and_capture(command, &status);
+  if (out.find("exit=") == std::string::npos) {
+    WARN("SKIPPED: no mount namespace for a small tmpfs here (needs root or unprivileged user namespaces): " << out);
+    return;
+  }
+  const std::string log = test::slurp(dir / "facecapd.log");
+  INFO(out << log);
+  CHECK_THAT(out, Contains("exit=124"));  // ran until timeout's SIGTERM: the full disk did not stop it
+  CHECK_THAT(log, Contains("write failed: No space left on device; the file keeps its first") &&
+                      Contains("every later frame is dropped (solving and the other outputs go on)"));
+  CHECK_THAT(log, Contains("[error]") && Contains("FAILED: "));
+  const auto stats = nlohmann::json::parse(test::slurp(dir / "stats.json"));
+  const auto& recording = stats["outputs"]["recording"];
+  CHECK(recording["failed"] == true);
+  CHECK(recording["errors"] == 1);
+  // Solving went on: every frame solved was offered, and is in the file or dropped.
+  CHECK(recording["offered"] == stats["frames_solved"]);
+  CHECK(recording["offered"].get<uint64_t>() == recording["delivered"].get<uint64_t>() + recording["dropped"].get<uint64_t>());
+  CHECK(recording["dropped"].get<uint64_t>() > 0);
+  const formats::RecordingReader file(dir / "copy.fcrec");
+  CHECK(file.skipped().empty());
+  CHECK_FALSE(file.truncated());
+  CHECK(file.solved_frame_count() == recording["delivered"].get<uint64_t>());
+  CHECK(file.solved_frame_count() > 20);
 }

@@ -11,6 +11,7 @@
 #include "formats/c3d.hpp"
 #include "formats/livelinkface.hpp"
 #include "formats/natnet.hpp"
+#include "formats/recording.hpp"
 #include "tests/capture_test_support.hpp"
 #include "tests/formats_test_support.hpp"
 #include "tests/test_support.hpp"
@@ -240,4 +241,58 @@ TEST_CASE("facecap inspect on a capture without a session start uses --natnet-ve
   CHECK(as30.out.find("natnet    bitstream 3.0 (from option)") != std::string::npos);
   CHECK(as30.out.find("2 not NatNet") != std::string::npos);
   CHECK(as30.out.find("error     frames.pcap record 1 @ byte ") != std::string::npos);
+}
+
+TEST_CASE("facecap inspect and convert read a damaged recording's other frames and say what they skipped", "[tools]") {
+  // 120 loop frames (markers and weights), one bit flipped in a marker and in a solved
+  // chunk, the tail cut off (the writer killed): 119 of each kind read back.
+  const auto dir = facecap::test::scratch_dir("tool-damaged-recording");
+  const MarkerTake take = facecap::test::synthetic_take(120, 4);
+  RecordingHeader header;
+  header.units = take.units;
+  header.rate_hz = take.rate_hz;
+  header.marker_labels = take.labels;
+  header.shape_names = {"jawOpen", "eyeBlinkLeft"};
+  header.rig_units = "cm";
+  std::vector<uint64_t> marker_chunk, solved_chunk;
+  {
+    RecordingWriter writer(dir / "clean.fcrec", header);
+    SolvedFrame solved;
+    solved.resize(2, 0);
+    for (std::size_t i = 0; i < take.frames.size(); ++i) {
+      marker_chunk.push_back(writer.bytes_written());
+      writer.append_marker_frame(take.frames[i]);
+      solved.frame_no = take.frames[i].frame_no;
+      solved.weights << 0.5f, float(i) / 200.0f;
+      solved_chunk.push_back(writer.bytes_written());
+      writer.append_solved_frame(solved);
+    }
+    writer.close();
+  }
+  std::vector<char> bytes = read_file_bytes(dir / "clean.fcrec");
+  bytes[marker_chunk[30] + 100] ^= 0x04;
+  bytes[solved_chunk[80] + 9] ^= 0x40;  // the checksum
+  bytes.resize(bytes.size() - 8);
+  write_file_atomically(dir / "damaged.fcrec", bytes);
+
+  const Run inspect = run_facecap(dir, {"inspect", (dir / "damaged.fcrec").string(), "--json"});
+  INFO(inspect.err);
+  REQUIRE(inspect.exit_code == 0);
+  const auto j = nlohmann::json::parse(inspect.out);
+  CHECK(j["frames"] == 119);
+  CHECK(j["solved"]["frames"] == 119);
+  CHECK_THAT(j["warnings"].dump(), Catch::Contains("recording damaged: 2 damaged stretches skipped") &&
+                                       Catch::Contains(fmt::format("at byte {}", marker_chunk[30])));
+
+  const Run trc = run_facecap(dir, {"convert", (dir / "damaged.fcrec").string(), (dir / "out.trc").string()});
+  INFO(trc.err);
+  REQUIRE(trc.exit_code == 0);
+  CHECK_THAT(trc.err, Catch::Contains("2 damaged stretches skipped"));
+  CHECK(read_take(dir / "out.trc").frames.size() == 119);
+
+  const Run csv = run_facecap(dir, {"convert", (dir / "damaged.fcrec").string(), (dir / "out.csv").string()});
+  INFO(csv.err);
+  REQUIRE(csv.exit_code == 0);
+  CHECK_THAT(csv.err, Catch::Contains("damaged: 2 damaged stretches skipped"));
+  CHECK(read_livelinkface(dir / "out.csv").frames.size() == 119);
 }

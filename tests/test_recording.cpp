@@ -1,6 +1,16 @@
 // .fcrec recordings: round trip, index, crash safety (truncation at every byte), versions.
 #include <algorithm>
+#include <array>
+#include <cerrno>
+#include <csignal>
 #include <cstring>
+#include <functional>
+
+#include <sched.h>
+#include <sys/mount.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <catch2/catch.hpp>
 
@@ -235,25 +245,101 @@ TEST_CASE("Recording: existing files are not overwritten unless asked", "[record
   CHECK(RecordingReader(path).marker_frame_count() == 0);
 }
 
-TEST_CASE("Recording: damage is found by checksums", "[recording]") {
+TEST_CASE("Recording: a damaged chunk costs its own frame, with or without the index", "[recording]") {
   const auto bytes = read_file_bytes(write_small_recording(facecap::test::scratch_dir("recording-damage")));
   const RecordingReader full(bytes, "full");
   const uint64_t second = full.index()[1].offset;  // the first solved frame
 
   auto flipped = bytes;
   flipped[second + 40] ^= 0x10;  // inside the payload
+  const std::string why = fmt::format("checksum mismatch in chunk SLVF at byte {}", second);
   const RecordingReader with_index(flipped, "flipped.fcrec");
   CHECK_FALSE(with_index.index_rebuilt());
+  CHECK_FALSE(with_index.truncated());
+  CHECK(with_index.marker_frame_count() == 3);
+  REQUIRE(with_index.solved_frame_count() == 1);
+  REQUIRE(with_index.skipped().size() == 1);
+  CHECK(with_index.skipped()[0].offset == second);
+  CHECK(with_index.skipped()[0].bytes == full.index()[2].offset - second);
+  CHECK(with_index.skipped()[0].why == why + " (frame 100)");
   SolvedFrame solved;
-  CHECK_THROWS_WITH(with_index.read_solved_frame(0, solved),
-                    Catch::Contains(fmt::format("checksum mismatch in chunk SLVF at byte {}", second)));
+  with_index.read_solved_frame(0, solved);
+  check_solved_frame(solved, test_solved_frame(1));
 
-  // Without the tail the scan stops at the damaged chunk and keeps what came before.
+  // Without the tail the scan skips the damaged chunk and resynchronises on the next.
   const RecordingReader scanned(std::span<const char>(flipped).first(flipped.size() - 8), "flipped.fcrec");
   CHECK(scanned.index_rebuilt());
-  CHECK(scanned.truncated());
-  CHECK(scanned.marker_frame_count() == 1);
-  CHECK(scanned.solved_frame_count() == 0);
+  CHECK(scanned.truncated());  // the cut TAIL
+  CHECK(scanned.marker_frame_count() == 3);
+  REQUIRE(scanned.solved_frame_count() == 1);
+  REQUIRE(scanned.skipped().size() == 1);
+  CHECK(scanned.skipped()[0].offset == second);
+  CHECK(scanned.skipped()[0].why == why);
+  CHECK_THAT(scanned.damage_summary(), Catch::StartsWith("1 damaged stretch skipped (") && Catch::Contains(why) &&
+                                           Catch::Contains("; cut off: "));
+  scanned.read_solved_frame(0, solved);
+  check_solved_frame(solved, test_solved_frame(1));
+  MarkerFrame marker;
+  scanned.read_marker_frame(2, marker);
+  check_marker_frame(marker, test_marker_frame(2));
+  // The take keeps every frame it could read and says what it skipped.
+  const MarkerTake take = take_from_recording(scanned);
+  CHECK(take.frames.size() == 3);
+  REQUIRE_FALSE(take.warnings.empty());
+  CHECK_THAT(take.warnings.back(), Catch::Contains("recording damaged: 1 damaged stretch skipped"));
+}
+
+TEST_CASE("Recording: flipped bits anywhere in frame chunks lose those frames only", "[recording]") {
+  // 200 loop frames (a marker and a solved chunk each); one bit flipped in each of 12
+  // chunks, in the header (kind, size, checksum) or the payload.
+  const auto path = facecap::test::scratch_dir("recording-bits") / "take.fcrec";
+  {
+    RecordingWriter writer(path, test_header());
+    for (int64_t i = 0; i < 200; ++i) {
+      writer.append_marker_frame(test_marker_frame(i));
+      writer.append_solved_frame(test_solved_frame(i));
+    }
+    writer.close();
+  }
+  auto bytes = read_file_bytes(path);
+  const RecordingReader clean(bytes, "clean");
+  REQUIRE(clean.index().size() == 400);
+  std::vector<std::size_t> damaged_chunks;
+  for (std::size_t k = 0; k < 12; ++k) {
+    const std::size_t chunk = 7 + 31 * k;  // every kind of chunk, both ends of the file
+    const std::size_t within = std::array<std::size_t, 6>{0, 5, 12, 16, 30, 60}[k % 6];  // kind, size, checksum, payload
+    bytes[clean.index()[chunk].offset + within] ^= char(1 << (k % 8));
+    damaged_chunks.push_back(chunk);
+  }
+  auto frames_left = [&](ChunkKind kind) {
+    std::size_t n = 0;
+    for (std::size_t c = 0; c < 400; ++c)
+      if (clean.index()[c].kind == kind && std::find(damaged_chunks.begin(), damaged_chunks.end(), c) == damaged_chunks.end()) ++n;
+    return n;
+  };
+  const std::size_t want_markers = frames_left(ChunkKind::kMarkerFrame), want_solved = frames_left(ChunkKind::kSolvedFrame);
+  CHECK(want_markers + want_solved == 388);
+  // Indexed, then cut before the INDX (the writer killed before close): the same frames.
+  for (const std::size_t size : {bytes.size(), std::size_t(clean.index().back().offset) + 200}) {
+    INFO("file of " << size << " bytes");
+    const RecordingReader reader(std::span<const char>(bytes).first(size), "damaged.fcrec");
+    CHECK(reader.index_rebuilt() == (size != bytes.size()));
+    CHECK(reader.skipped().size() == 12);
+    const std::size_t last_lost = size == bytes.size() ? 0 : 1;  // the cut removes the last solved frame
+    CHECK(reader.marker_frame_count() == want_markers);
+    CHECK(reader.solved_frame_count() == want_solved - last_lost);
+    // Every frame read is the frame written, in order, none repeated.
+    MarkerFrame marker;
+    int64_t previous = -1;
+    for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) {
+      reader.read_marker_frame(i, marker);
+      CHECK(marker.frame_no > previous);
+      previous = marker.frame_no;
+      check_marker_frame(marker, test_marker_frame(marker.frame_no - 100));
+    }
+    const MarkerTake take = take_from_recording(reader);
+    CHECK(take.frames.size() == want_markers);
+  }
 }
 
 TEST_CASE("Recording: a file for a newer reader is refused; a bad magic is named", "[recording]") {
@@ -327,4 +413,207 @@ TEST_CASE("Recording: a format version 1 header reads without the fields version
   CHECK(reader.header().rig_units.empty());
   CHECK(reader.header().solver_settings.empty());
   CHECK(reader.solved_frame_count() == 2);
+}
+
+namespace {
+
+// A disk that takes bytes up to a limit and then fails with an errno, handing out at most
+// chunk_bytes per call (short writes); what a full disk or a quota does to pwrite(2).
+struct FailingDisk {
+  static inline uint64_t limit = 0;
+  static inline int error = ENOSPC;
+  static inline std::size_t chunk_bytes = 1000;
+  static inline int failures_left = 1 << 30;  // after this many failed calls, writes succeed again
+  static ssize_t write(int fd, const void* data, std::size_t size, off_t offset) {
+    const uint64_t room = uint64_t(offset) < limit ? limit - uint64_t(offset) : 0;
+    if (room == 0 && failures_left > 0) {
+      --failures_left;
+      errno = error;
+      return -1;
+    }
+    const std::size_t n = std::min({size, chunk_bytes, failures_left > 0 ? std::size_t(room) : size});
+    return ::pwrite(fd, data, n, offset);
+  }
+};
+
+// Appends loop frames (a marker and a solved chunk each) until the writer throws; returns
+// how many frames were appended without an error and the error's text.
+std::pair<int64_t, std::string> append_until_failure(RecordingWriter& writer, int64_t frames) {
+  for (int64_t i = 0; i < frames; ++i) {
+    try {
+      writer.append_marker_frame(test_marker_frame(i));
+      writer.append_solved_frame(test_solved_frame(i));
+    } catch (const Error& e) {
+      return {i, e.what()};
+    }
+  }
+  return {frames, ""};
+}
+
+// The file holds exactly frames 0..n-1 of both kinds, nothing repeated or shifted.
+void check_frames_are_a_prefix(const RecordingReader& reader, std::size_t markers, std::size_t solved) {
+  CHECK(reader.skipped().empty());
+  CHECK_FALSE(reader.truncated());
+  REQUIRE(reader.marker_frame_count() == markers);
+  REQUIRE(reader.solved_frame_count() == solved);
+  MarkerFrame marker;
+  SolvedFrame solved_frame;
+  for (std::size_t i = 0; i < markers; ++i) {
+    reader.read_marker_frame(i, marker);
+    check_marker_frame(marker, test_marker_frame(int64_t(i)));
+  }
+  for (std::size_t i = 0; i < solved; ++i) {
+    reader.read_solved_frame(i, solved_frame);
+    check_solved_frame(solved_frame, test_solved_frame(int64_t(i)));
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Recording: short writes resume exactly where the file ends", "[recording][disk]") {
+  const auto path = facecap::test::scratch_dir("recording-short") / "take.fcrec";
+  FailingDisk::limit = uint64_t(1) << 40;
+  FailingDisk::chunk_bytes = 7;  // every chunk split across many calls
+  FailingDisk::failures_left = 0;
+  RecordingWriter writer(path, test_header(), {.buffer_bytes = 4096, .write = &FailingDisk::write});
+  const auto [appended, error] = append_until_failure(writer, 300);
+  CHECK(error.empty());
+  writer.close();
+  const RecordingReader reader(path);
+  CHECK_FALSE(reader.index_rebuilt());
+  check_frames_are_a_prefix(reader, 300, 300);
+}
+
+TEST_CASE("Recording: a full disk ends the file at its last whole chunk, never re-writing a partial one", "[recording][disk]") {
+  const auto dir = facecap::test::scratch_dir("recording-full");
+  FailingDisk::error = ENOSPC;
+  FailingDisk::chunk_bytes = 1000;
+  FailingDisk::limit = 150'000;  // full partway through a chunk of the third 64 KiB buffer
+  SECTION("the disk stays full: no index, the scan reads every frame written") {
+    FailingDisk::failures_left = 1 << 30;
+    const auto path = dir / "stays-full.fcrec";
+    RecordingWriter writer(path, test_header(), {.buffer_bytes = 64 << 10, .write = &FailingDisk::write});
+    const auto [appended, error] = append_until_failure(writer, 2000);
+    CHECK_THAT(error, Catch::Contains("write failed: No space left on device; the file keeps its first"));
+    REQUIRE(appended < 2000);
+    // Later appends and flushes say why the recording stopped, and write nothing.
+    CHECK_THROWS_WITH(writer.append_marker_frame(test_marker_frame(0)), Catch::Contains("recording stopped: write failed"));
+    CHECK_THROWS_WITH(writer.flush(), Catch::Contains("recording stopped"));
+    const std::size_t markers = writer.marker_frames(), solved = writer.solved_frames();
+    CHECK(markers < std::size_t(appended));  // the frames of the failed buffer are not counted
+    CHECK(markers - solved <= 1);
+    writer.close();  // no room for the index: closes without throwing again
+    CHECK(std::filesystem::file_size(path) <= 150'000);
+    const RecordingReader reader(path);
+    CHECK(reader.index_rebuilt());
+    check_frames_are_a_prefix(reader, markers, solved);
+  }
+  SECTION("one moment of ENOSPC: the file stops there, and the index is written at close") {
+    FailingDisk::failures_left = 1;
+    const auto path = dir / "moment.fcrec";
+    RecordingWriter writer(path, test_header(), {.buffer_bytes = 64 << 10, .write = &FailingDisk::write});
+    const auto [appended, error] = append_until_failure(writer, 2000);
+    CHECK_THAT(error, Catch::Contains("No space left on device"));
+    const std::size_t markers = writer.marker_frames(), solved = writer.solved_frames();
+    writer.close();
+    const RecordingReader reader(path);
+    CHECK_FALSE(reader.index_rebuilt());  // the index fitted once space was back
+    check_frames_are_a_prefix(reader, markers, solved);
+    CHECK(markers > 100);
+  }
+}
+
+namespace {
+
+// What a child process's writer did: 0 when it failed with the expected error (1: the
+// child could not set up, 2: another outcome), and the frames the writer counted.
+struct ChildReport {
+  uint64_t status = 2, markers = 0, solved = 0;
+};
+
+// Runs body in a forked child (whose limits and mounts stay there) and returns its report.
+ChildReport in_child(const std::function<ChildReport()>& body) {
+  int fds[2];
+  REQUIRE(::pipe(fds) == 0);
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    ::close(fds[0]);
+    ChildReport report;
+    try {
+      report = body();
+    } catch (...) {
+      report.status = 2;
+    }
+    [[maybe_unused]] const ssize_t n = ::write(fds[1], &report, sizeof report);
+    ::_exit(0);
+  }
+  ::close(fds[1]);
+  ChildReport report;
+  CHECK(::read(fds[0], &report, sizeof report) == ssize_t(sizeof report));
+  ::close(fds[0]);
+  ::waitpid(child, nullptr, 0);
+  return report;
+}
+
+// Writes frames to path until the writer fails; the report says whether it failed with
+// `expected` in its message, and what it counted.
+ChildReport write_until_full(const std::filesystem::path& path, const std::string& expected) {
+  RecordingWriter writer(path, test_header(), {.buffer_bytes = 16 << 10});
+  const auto result = append_until_failure(writer, 5000);
+  ChildReport report{result.second.find(expected) == std::string::npos ? 2u : 0u, writer.marker_frames(),
+                     writer.solved_frames()};
+  writer.close();
+  return report;
+}
+
+}  // namespace
+
+TEST_CASE("Recording: a file-size limit (EFBIG) ends the file at its last whole chunk", "[recording][disk]") {
+  // RLIMIT_FSIZE with SIGXFSZ ignored: the kernel's own EFBIG.
+  const auto path = facecap::test::scratch_dir("recording-efbig") / "take.fcrec";
+  const ChildReport report = in_child([&] {
+    ::signal(SIGXFSZ, SIG_IGN);
+    const rlimit limit{100'000, 100'000};
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    return write_until_full(path, "File too large");
+  });
+  REQUIRE(report.status == 0);  // the child saw "File too large" and closed without throwing
+  CHECK(std::filesystem::file_size(path) <= 100'000);
+  CHECK(report.markers > 50);
+  check_frames_are_a_prefix(RecordingReader(path), report.markers, report.solved);
+}
+
+TEST_CASE("Recording: a full tmpfs ends the file at its last whole chunk", "[recording][disk]") {
+  // A real full file system: a 192 KiB tmpfs in a mount namespace of a child process
+  // (root, or an unprivileged user namespace). The child writes until the disk is full,
+  // closes, and copies the file out of the namespace.
+  const auto dir = facecap::test::scratch_dir("recording-tmpfs");
+  const auto mount_point = dir / "mnt";
+  std::filesystem::create_directories(mount_point);
+  const ChildReport report = in_child([&] {
+    const uid_t uid = ::getuid();
+    const gid_t gid = ::getgid();
+    bool entered = ::unshare(CLONE_NEWNS) == 0;
+    if (!entered && ::unshare(CLONE_NEWUSER | CLONE_NEWNS) == 0) {
+      facecap::test::write_text("/proc/self/setgroups", "deny");
+      facecap::test::write_text("/proc/self/uid_map", fmt::format("0 {} 1", uid));
+      facecap::test::write_text("/proc/self/gid_map", fmt::format("0 {} 1", gid));
+      entered = true;
+    }
+    entered = entered && ::mount("none", "/", nullptr, MS_REC | MS_PRIVATE, nullptr) == 0 &&
+              ::mount("tmpfs", mount_point.c_str(), "tmpfs", 0, "size=192k") == 0;
+    if (!entered) return ChildReport{1};
+    const ChildReport written = write_until_full(mount_point / "take.fcrec", "No space left on device");
+    std::filesystem::copy_file(mount_point / "take.fcrec", dir / "copied.fcrec",
+                               std::filesystem::copy_options::overwrite_existing);
+    return written;
+  });
+  if (report.status == 1) {
+    WARN("SKIPPED: no mount namespace for a small tmpfs here (needs root or unprivileged user namespaces)");
+    return;
+  }
+  REQUIRE(report.status == 0);
+  CHECK(report.markers > 50);
+  check_frames_are_a_prefix(RecordingReader(dir / "copied.fcrec"), report.markers, report.solved);
 }

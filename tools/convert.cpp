@@ -25,6 +25,8 @@ formats::FaceTake solved_weights_of(const std::filesystem::path& input, Progress
   const formats::RecordingReader reader(input);
   if (reader.solved_frame_count() == 0)
     throw file_error(input.string(), "the recording has no solved frames (record from facecapd or facecap solve -o x.fcrec)");
+  if (const std::string damage = reader.damage_summary(); !damage.empty())
+    fmt::print(stderr, "facecap: warning: {}: damaged: {}; converting the frames read\n", input.string(), damage);
   const formats::ArkitWeights arkit(reader.header().shape_names);
   formats::FaceTake face;
   face.rate_hz = reader.header().rate_hz;

@@ -558,8 +558,8 @@ void print_comparison(const Side& a, const Side& b, const Comparison& c) {
 }
 
 void warn_about(const Side& s, const DiffOptions& o) {
-  if (s.reader.truncated())
-    fmt::print(stderr, "facecap: warning: {}: {}; comparing the frames before it\n", s.file, s.reader.stop_reason());
+  if (const std::string damage = s.reader.damage_summary(); !damage.empty())
+    fmt::print(stderr, "facecap: warning: {}: damaged: {}; comparing the frames read\n", s.file, damage);
   if (!o.rig_units.empty() && !s.rig_units_from_option && s.rig_units != o.rig_units) {
     fmt::print(stderr,
                "facecap: warning: {}: its HEAD names rig units '{}'; --rig-units {} is for a recording "

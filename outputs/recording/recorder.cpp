@@ -13,8 +13,11 @@ namespace {
 
 // The writer thread polls the queue; at 120-1000 Hz this batches a few frames per wake.
 constexpr int64_t kPollNs = 2 * kNsPerMs;
-// Buffered chunks reach the kernel at least this often, bounding what a crash loses.
-constexpr int64_t kFlushIntervalNs = kNsPerSecond;
+// Buffered chunks reach the kernel at least this often: a killed facecapd loses at most
+// this much (plus what the queue held), well inside 100 ms at 240 Hz.
+constexpr int64_t kFlushIntervalNs = 50 * kNsPerMs;
+// How often the file is checked for having been deleted under the recorder.
+constexpr int64_t kDeletedCheckIntervalNs = kNsPerSecond;
 
 SolvedFrame sized_frame(Eigen::Index shape_count, Eigen::Index vertex_count) {
   SolvedFrame frame;
@@ -30,7 +33,8 @@ Recorder::Recorder(RecorderOptions options, Eigen::Index vertex_count)
              Entry{false, false, make_marker_frame(options_.header.marker_labels),
                    sized_frame(Eigen::Index(options_.header.shape_names.size()), options_.vertices ? vertex_count : 0)}) {
   std::filesystem::create_directories(options_.file.parent_path().empty() ? "." : options_.file.parent_path());
-  writer_ = std::make_unique<formats::RecordingWriter>(options_.file, options_.header);
+  writer_ = std::make_unique<formats::RecordingWriter>(options_.file, options_.header,
+                                                       formats::RecordingWriter::Options{.write = options_.write});
   thread_ = std::thread([this] { run(); });
 }
 
@@ -73,32 +77,55 @@ SinkHealth Recorder::health() const noexcept {
   return h;
 }
 
+void Recorder::count_written() {
+  marker_frames_.store(writer_->marker_frames(), std::memory_order_relaxed);
+  solved_frames_.store(writer_->solved_frames(), std::memory_order_relaxed);
+}
+
+void Recorder::fail(const std::string& what) {
+  // Every loop frame adds one chunk of each kind recorded, so the frames whole in the file
+  // are the chunks it kept over that; those counted written beyond them were lost.
+  const uint64_t chunks_per_frame = uint64_t(options_.markers) + uint64_t(options_.solved);
+  const uint64_t in_file = writer_->file_deleted() || chunks_per_frame == 0
+                               ? 0
+                               : (writer_->marker_frames() + writer_->solved_frames()) / chunks_per_frame;
+  const uint64_t written = written_.load(std::memory_order_relaxed);
+  const uint64_t lost = written > in_file ? written - in_file : 0;
+  written_.store(written - lost, std::memory_order_relaxed);
+  dropped_.fetch_add(lost, std::memory_order_relaxed);
+  errors_.fetch_add(1, std::memory_order_relaxed);
+  if (in_file == 0) {
+    marker_frames_.store(0, std::memory_order_relaxed);
+    solved_frames_.store(0, std::memory_order_relaxed);
+  } else {
+    count_written();
+  }
+  failure_ = what;
+  spdlog::error("recording {} stopped: {}; it holds {} frames, {} more were lost with the failure, and every later "
+                "frame is dropped (solving and the other outputs go on)",
+                options_.file.string(), what, written - lost, lost);
+  try {
+    writer_->close();  // after a failed write: adds the index if it fits, never throws again
+  } catch (const std::exception&) {
+  }
+}
+
 // The writer thread. Not RT-safe (encodes, allocates, writes).
 void Recorder::run() {
   int64_t last_flush_ns = monotonic_now_ns();
+  int64_t last_deleted_check_ns = last_flush_ns;
   for (;;) {
     const bool stopping = stop_requested_.load(std::memory_order_acquire);
     while (Entry* entry = queue_.front()) {
-      if (writer_ && writer_->is_open()) {
+      if (writer_->is_open()) {
         try {
-          if (entry->has_markers) {
-            writer_->append_marker_frame(entry->markers);
-            marker_frames_.fetch_add(1, std::memory_order_relaxed);
-          }
-          if (entry->has_solved) {
-            writer_->append_solved_frame(entry->solved);
-            solved_frames_.fetch_add(1, std::memory_order_relaxed);
-          }
+          if (entry->has_markers) writer_->append_marker_frame(entry->markers);
+          if (entry->has_solved) writer_->append_solved_frame(entry->solved);
           written_.fetch_add(1, std::memory_order_relaxed);
+          count_written();
         } catch (const std::exception& e) {
-          // Disk full or similar: keep the run going, stop recording, say so once.
-          errors_.fetch_add(1, std::memory_order_relaxed);
-          dropped_.fetch_add(1, std::memory_order_relaxed);
-          spdlog::error("recording {} stopped: {}", options_.file.string(), e.what());
-          try {
-            writer_->close();
-          } catch (const std::exception&) {
-          }
+          dropped_.fetch_add(1, std::memory_order_relaxed);  // this frame
+          fail(e.what());
         }
       } else {
         dropped_.fetch_add(1, std::memory_order_relaxed);  // the recording stopped: not on disk
@@ -107,12 +134,15 @@ void Recorder::run() {
     }
     if (stopping) break;
     const int64_t now = monotonic_now_ns();
-    if (now - last_flush_ns >= kFlushIntervalNs && writer_ && writer_->is_open()) {
+    if (now - last_deleted_check_ns >= kDeletedCheckIntervalNs && writer_->is_open()) {
+      last_deleted_check_ns = now;
+      if (writer_->file_deleted()) fail("the file was deleted (or its directory removed) while recording");
+    }
+    if (now - last_flush_ns >= kFlushIntervalNs && writer_->is_open()) {
       try {
         writer_->flush();
       } catch (const std::exception& e) {
-        errors_.fetch_add(1, std::memory_order_relaxed);
-        spdlog::error("recording {}: flush failed: {}", options_.file.string(), e.what());
+        fail(e.what());
       }
       last_flush_ns = now;
     }
@@ -125,7 +155,14 @@ void Recorder::stop() {
   if (!thread_.joinable()) return;
   stop_requested_.store(true, std::memory_order_release);
   thread_.join();
-  if (writer_ && writer_->is_open()) writer_->close();
+  if (!writer_->is_open()) return;
+  if (writer_->file_deleted()) return fail("the file was deleted (or its directory removed) while recording");
+  try {
+    writer_->close();
+  } catch (const Error& e) {
+    fail(e.what());
+    throw;
+  }
 }
 
 RecorderCounters Recorder::counters() const noexcept {

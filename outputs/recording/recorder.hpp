@@ -22,13 +22,15 @@ struct RecorderOptions {
   bool markers = true;
   bool solved = true;
   bool vertices = false;  // solved meshes too (large); a re-solve reproduces them otherwise
+  formats::RecordingWriter::WriteFn write = nullptr;  // tests inject write failures; null: pwrite(2)
 };
 
 struct RecorderCounters {
   uint64_t marker_frames = 0;  // written
   uint64_t solved_frames = 0;  // written
-  uint64_t dropped = 0;        // loop frames that did not reach the file (queue full, or the recording stopped)
-  uint64_t errors = 0;         // write failures (the run continues; the recording stops)
+  uint64_t dropped = 0;        // loop frames that did not reach the file (queue full, a failed write lost
+                               // them, the recording stopped, or the file was deleted)
+  uint64_t errors = 0;         // write failures and a deleted file (the run continues; the recording stops)
 };
 
 class Recorder final : public OutputSink {
@@ -51,9 +53,12 @@ class Recorder final : public OutputSink {
   bool ready() noexcept override { return queue_.begin_push() != nullptr; }
   SinkHealth health() const noexcept override;
   // Writes what is queued, then the index, syncs and closes. Not RT-safe; idempotent.
+  // Throws Error when the last write fails (counted like any other).
   void stop() override;
 
   RecorderCounters counters() const noexcept;
+  // Why the recording stopped early ("" when it did not). Read it after stop().
+  const std::string& failure() const noexcept { return failure_; }
   const std::filesystem::path& file() const noexcept { return options_.file; }
 
  private:
@@ -64,6 +69,11 @@ class Recorder final : public OutputSink {
     SolvedFrame solved;
   };
   void run();
+  // The writer failed with what: the frames it lost become dropped, the recording stops.
+  // Writer thread (or stop() after it) only.
+  void fail(const std::string& what);
+  // The counters from the writer's frames after a successful append or flush.
+  void count_written();
 
   RecorderOptions options_;
   std::unique_ptr<formats::RecordingWriter> writer_;
@@ -71,6 +81,7 @@ class Recorder final : public OutputSink {
   std::thread thread_;
   std::atomic<bool> stop_requested_{false};
   std::atomic<uint64_t> offered_{0}, written_{0}, marker_frames_{0}, solved_frames_{0}, dropped_{0}, errors_{0};
+  std::string failure_;  // the writer thread's, then stop()'s
 };
 
 // "facecapd-20240131-142501.fcrec" (local time), made unique with -2, -3, ... if taken.

@@ -84,7 +84,8 @@ std::optional<TakeSummary> TakeRecorder::finish_stopped() {
   } catch (const Error& e) {
     failure = e;
   }
-  TakeSummary summary{retired->recorder->file(), retired->recorder->counters(), retired->recorder->health()};
+  TakeSummary summary{retired->recorder->file(), retired->recorder->counters(), retired->recorder->health(),
+                      retired->recorder->failure()};
   lock.lock();
   add(finished_, summary.health);
   live_ = nullptr;

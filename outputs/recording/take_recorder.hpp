@@ -22,6 +22,7 @@ struct TakeSummary {
   std::filesystem::path file;
   RecorderCounters counters;
   SinkHealth health;
+  std::string failure;  // why the take stopped early ("" when it did not)
 };
 
 class TakeRecorder final : public OutputSink {
