@@ -1,12 +1,20 @@
 // The one solve path (pipeline/): where calibrations come from, the marker mapper, and
 // SolvePipeline's status bits.
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <random>
+
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 
+#include "config/schema.hpp"
 #include "core/error.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
+#include "pipeline/temporal_filter.hpp"
 #include "solver/align/calibrate_take.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
@@ -330,4 +338,141 @@ TEST_CASE("a marker back from an occlusion somewhere else, or that really moved,
   scene.solve(
       3, 1000.0, [&](int i, MarkerFrame& f) { f.markers[face_marker].position.x() += i == 0 ? 1e300 : 0.0; }, &implausible);
   CHECK(implausible == std::vector<uint32_t>{1, 0, 0});
+}
+
+// ---- Temporal filter (pipeline/temporal_filter.hpp) ----
+
+namespace {
+
+constexpr double kFilterRateHz = 60.0;
+constexpr int64_t kFilterPeriodNs = kNsPerSecond / 60;
+
+// A first-order low-pass's smoothing factor at cutoff_hz, frame rate kFilterRateHz.
+double low_pass_factor(double cutoff_hz) { return 1.0 / (1.0 + kFilterRateHz / (2.0 * std::numbers::pi * cutoff_hz)); }
+
+}  // namespace
+
+TEST_CASE("the One Euro filter is a first-order low-pass at min_cutoff_hz plus beta times the speed") {
+  const double min_cutoff_hz = 1.0, beta = 0.05;
+  pipeline::OneEuroFilter filter(3, 1, {.min_cutoff_hz = min_cutoff_hz, .beta = beta, .d_cutoff_hz = 1.0});
+  // A step at rest: the first frame passes, the second moves by the factor at the cutoff the
+  // speed estimate gives (its own low-pass of the step's speed).
+  Eigen::MatrixXd x = Eigen::MatrixXd::Zero(3, 1);
+  filter.filter(x, {}, 0);
+  CHECK(x.norm() == 0.0);
+  x << 6.0, 0.0, 8.0;  // 10 units
+  filter.filter(x, {}, kFilterPeriodNs);
+  const double speed = low_pass_factor(1.0) * 10.0 * kFilterRateHz;
+  CHECK(x.norm() == Approx(10.0 * low_pass_factor(min_cutoff_hz + beta * speed)).epsilon(1e-6));
+
+  // A ramp at speed v: the speed estimate converges to v and the output lags by
+  // (1 - a) / a frames, a the factor at min_cutoff_hz + beta v; faster ramps lag less.
+  double previous_lag_frames = std::numeric_limits<double>::infinity();
+  for (const double v : {1.0, 10.0, 100.0}) {
+    pipeline::OneEuroFilter ramp(1, 1, {.min_cutoff_hz = min_cutoff_hz, .beta = beta, .d_cutoff_hz = 1.0});
+    Eigen::MatrixXd y(1, 1);
+    const int frames = 2000;
+    for (int i = 0; i < frames; ++i) {
+      y(0, 0) = v * i / kFilterRateHz;
+      ramp.filter(y, {}, i * kFilterPeriodNs);
+    }
+    const double lag_frames = (v * (frames - 1) / kFilterRateHz - y(0, 0)) / (v / kFilterRateHz);
+    const double a = low_pass_factor(min_cutoff_hz + beta * v);
+    INFO("speed " << v);
+    CHECK(lag_frames == Approx((1.0 - a) / a).epsilon(1e-6));
+    CHECK(lag_frames < previous_lag_frames);
+    previous_lag_frames = lag_frames;
+  }
+}
+
+TEST_CASE("the One Euro filter cuts noise on a still point, restarts a channel back from an occlusion and passes frames whose time does not advance") {
+  pipeline::OneEuroFilter filter(3, 2, {.min_cutoff_hz = 1.0, .beta = 0.05, .d_cutoff_hz = 1.0});
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  Eigen::MatrixXd x(3, 2);
+  double raw_square = 0.0, filtered_square = 0.0;
+  std::vector<uint8_t> present{1, 1};
+  int64_t t = 0;
+  for (int i = 0; i < 600; ++i, t += kFilterPeriodNs) {
+    for (Eigen::Index r = 0; r < 6; ++r) x(r) = noise(rng);
+    if (i >= 300) raw_square += x.col(0).squaredNorm();
+    filter.filter(x, present, t);
+    if (i >= 300) filtered_square += x.col(0).squaredNorm();
+  }
+  // At 1 Hz and 60 Hz white noise keeps about a / (2 - a) of its power (a = 0.095): 5%; the
+  // cutoff the noise's own speed raises allows a few times that.
+  CHECK(filtered_square < 0.25 * raw_square);
+
+  // Marker 1 occluded, back 5 units away: taken as it is, not glided towards.
+  present[1] = 0;
+  x.col(1).setConstant(std::numeric_limits<double>::quiet_NaN());
+  filter.filter(x, present, t);
+  CHECK(x.col(1).hasNaN());  // an absent channel is left alone
+  t += kFilterPeriodNs;
+  present[1] = 1;
+  x.col(1) = Eigen::Vector3d(5.0, 5.0, 5.0);
+  x.col(0).setZero();
+  filter.filter(x, present, t);
+  CHECK(x.col(1) == Eigen::Vector3d(5.0, 5.0, 5.0));
+  CHECK(x.col(0).norm() < 0.3);  // still filtered
+
+  // A replay looping back: the frame passes unfiltered and every channel starts afresh.
+  x.col(0) = Eigen::Vector3d(1.0, 2.0, 3.0);
+  filter.filter(x, present, 0);
+  CHECK(x.col(0) == Eigen::Vector3d(1.0, 2.0, 3.0));
+}
+
+TEST_CASE("filter.mode live filters facecapd's solves and not offline ones, and a recording stores which it was") {
+  config::DaemonConfig c = config::default_config();
+  REQUIRE(c.filter.mode == config::FilterMode::kLive);
+  CHECK(pipeline::solve_settings(c, pipeline::SolveContext::kLive).filter.targets);
+  CHECK_FALSE(pipeline::solve_settings(c, pipeline::SolveContext::kOffline).filter.targets);
+  CHECK_FALSE(pipeline::solve_settings(c, pipeline::SolveContext::kLive).filter.weights);
+  CHECK_THAT(pipeline::solve_settings_toml(c, pipeline::SolveContext::kLive), Contains("[filter]\nmode = \"on\"\n"));
+  CHECK_THAT(pipeline::solve_settings_toml(c, pipeline::SolveContext::kOffline), Contains("[filter]\nmode = \"off\"\n"));
+  c.filter.mode = config::FilterMode::kOn;
+  c.filter.weights = true;
+  CHECK(pipeline::solve_settings(c, pipeline::SolveContext::kOffline).filter.targets);
+  CHECK(pipeline::solve_settings(c, pipeline::SolveContext::kOffline).filter.weights);
+  c.filter.mode = config::FilterMode::kOff;
+  CHECK_FALSE(pipeline::solve_settings(c, pipeline::SolveContext::kLive).filter.weights);
+  CHECK(pipeline::is_solve_setting("filter.beta"));
+}
+
+TEST_CASE("the filtered pipeline halves the weights' jitter on a noisy performance and follows its motion") {
+  const GlitchScene scene;
+  config::DaemonConfig c = config::default_config();
+  const int frames = 240;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0.0, 0.03);  // cm: 0.3 mm
+  std::vector<MarkerFrame> noisy;
+  for (int i = 0; i < frames; ++i) {
+    noisy.push_back(scene.frame(i));
+    for (Marker& m : noisy.back().markers) m.position += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+  }
+  auto solve = [&](pipeline::SolveContext context, bool clean) {
+    pipeline::SolvePipeline pipeline(scene.rig, scene.calibration, {scene.labels, "cm"}, pipeline::solve_settings(c, context));
+    SolvedFrame solved = pipeline.make_solved_frame(false);
+    std::vector<Eigen::VectorXf> weights;
+    for (int i = 0; i < frames; ++i) {
+      pipeline.process(clean ? scene.frame(i) : noisy[std::size_t(i)], solved);
+      weights.push_back(solved.weights);
+    }
+    return weights;
+  };
+  const auto truth = solve(pipeline::SolveContext::kOffline, true);
+  const auto raw = solve(pipeline::SolveContext::kOffline, false);
+  const auto filtered = solve(pipeline::SolveContext::kLive, false);
+  // Jitter: the mean second difference of the weights; error: against the clean solve.
+  double raw_jitter = 0, filtered_jitter = 0, raw_error = 0, filtered_error = 0;
+  for (int i = 60; i < frames; ++i) {
+    const auto f = std::size_t(i);
+    raw_jitter += (raw[f] - 2 * raw[f - 1] + raw[f - 2]).norm();
+    filtered_jitter += (filtered[f] - 2 * filtered[f - 1] + filtered[f - 2]).norm();
+    raw_error += (raw[f] - truth[f]).norm();
+    filtered_error += (filtered[f] - truth[f]).norm();
+  }
+  INFO("jitter " << raw_jitter << " -> " << filtered_jitter << ", error " << raw_error << " -> " << filtered_error);
+  CHECK(filtered_jitter < 0.5 * raw_jitter);
+  CHECK(filtered_error < raw_error);  // the lag costs less than the noise it removes here
 }

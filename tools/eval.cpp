@@ -247,7 +247,7 @@ void add_eval_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
   add_solve_config_options(*cmd, o->settings);
   cmd->callback([o, &exit_code] {
-    const pipeline::SolveSettings settings = pipeline::solve_settings(load_solve_config(o->settings).values);
+    const pipeline::SolveSettings settings = pipeline::solve_settings(load_solve_config(o->settings).values, pipeline::SolveContext::kOffline);
     if (!o->calib.empty()) {
       if (o->truth_weights) throw Error("--truth-weights needs a synthetic take's truth, not --calib");
       TakeEvalOptions t;

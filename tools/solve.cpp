@@ -69,7 +69,7 @@ void run_solve(const Options& o) {
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
 
   const pipeline::SourceDescription source{take.labels, take.units};
-  pipeline::SolveSettings solve_settings = pipeline::solve_settings(settings.values);
+  pipeline::SolveSettings solve_settings = pipeline::solve_settings(settings.values, pipeline::SolveContext::kOffline);
   solve_settings.check_labels = o.check_labels;
   pipeline::SolvePipeline solve(rig, cal, source, solve_settings);
   if (!cal.stable_markers.empty() && solve_settings.mapper.stabilise_head && !solve.mapper().stabilising())
@@ -84,7 +84,7 @@ void run_solve(const Options& o) {
   if (fcrec) {
     const formats::RecordingHeader header = pipeline::make_recording_header(
         rig, cal, source, fmt::format("facecap solve --solver {} of {}", method, o.take), take.rate_hz,
-        pipeline::solve_settings_toml(settings.values));
+        pipeline::solve_settings_toml(settings.values, pipeline::SolveContext::kOffline));
     recording = std::make_unique<formats::RecordingWriter>(output, header, formats::RecordingWriter::Options{.overwrite = o.force});
   }
   ProgressBar bar(fmt::format("solving {} ({})", std::filesystem::path(o.take).filename().string(), method), !o.quiet);
