@@ -14,6 +14,7 @@
 #include "pipeline/marker_mapper.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
+#include "pipeline/source_units.hpp"
 #include "pipeline/temporal_filter.hpp"
 #include "solver/align/calibrate_take.hpp"
 #include "solver/align/profile.hpp"
@@ -475,4 +476,66 @@ TEST_CASE("the filtered pipeline halves the weights' jitter on a noisy performan
   INFO("jitter " << raw_jitter << " -> " << filtered_jitter << ", error " << raw_error << " -> " << filtered_error);
   CHECK(filtered_jitter < 0.5 * raw_jitter);
   CHECK(filtered_error < raw_error);  // the lag costs less than the noise it removes here
+}
+
+// ---- Units (pipeline/source_units.hpp) ----
+
+namespace {
+
+// The scene's first `frames` frames as a take stating `units`, its values times `scale`.
+formats::MarkerTake scene_take(const GlitchScene& scene, int frames, const std::string& units, double scale) {
+  formats::MarkerTake take;
+  take.labels = scene.labels;
+  take.units = units;
+  take.rate_hz = 120.0;
+  for (int i = 0; i < frames; ++i) {
+    take.frames.push_back(scene.frame(i));
+    for (Marker& m : take.frames.back().markers) m.position *= scale;
+  }
+  return take;
+}
+
+}  // namespace
+
+TEST_CASE("a take converted to mm solves as the cm take with a cm calibration, and a mm take stating cm is refused naming mm") {
+  const GlitchScene scene;  // the calibration's take units: cm, the built-in face's
+  REQUIRE(scene.calibration.take_mm_per_unit == 10.0);
+  const formats::MarkerTake cm = scene_take(scene, 60, "cm", 1.0), mm = scene_take(scene, 60, "mm", 10.0);
+  for (const auto* take : {&cm, &mm}) {
+    const pipeline::UnitsCheck check = pipeline::check_take_units(*take, "", scene.calibration);
+    CHECK(check.plausible);
+    CHECK(check.size_ratio == Approx(1.0).epsilon(0.05));
+  }
+  pipeline::SolvePipeline from_cm(scene.rig, scene.calibration, {cm.labels, cm.units}, {});
+  pipeline::SolvePipeline from_mm(scene.rig, scene.calibration, {mm.labels, mm.units}, {});
+  SolvedFrame a = from_cm.make_solved_frame(true), b = from_mm.make_solved_frame(true);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < cm.frames.size(); ++i) {
+    from_cm.process(cm.frames[i], a);
+    from_mm.process(mm.frames[i], b);
+    worst = std::max(worst, double((a.weights - b.weights).cwiseAbs().maxCoeff()));
+  }
+  CHECK(worst < 0.01);
+  CHECK(a.weights.maxCoeff() > 0.3);  // the face moved: the comparison can fail
+
+  // The mm values stating cm: read as cm the face is 10 times the calibrated one.
+  formats::MarkerTake mislabelled = mm;
+  mislabelled.units = "cm";
+  const pipeline::UnitsCheck check = pipeline::check_take_units(mislabelled, "", scene.calibration);
+  CHECK_FALSE(check.plausible);
+  CHECK(check.size_ratio == Approx(10.0).epsilon(0.05));
+  CHECK(check.looks_like == "mm");
+  CHECK_THROWS_WITH(pipeline::require_plausible_units(mislabelled, "", scene.calibration, "take.trc"),
+                    Contains("take.trc") && Contains("read in cm as it states") && Contains("look like mm") &&
+                        Contains("--units mm"));
+  // Told the right units, it passes; a take stating none is read in the calibration's.
+  CHECK_NOTHROW(pipeline::require_plausible_units(mislabelled, "mm", scene.calibration, "take.trc"));
+  formats::MarkerTake unstated = mm;
+  unstated.units.clear();
+  CHECK_THROWS_WITH(pipeline::require_plausible_units(unstated, "", scene.calibration, "take.trc"),
+                    Contains("in the calibration's cm (it states no units)") && Contains("look like mm"));
+  // A face 4 times too large is no unit's mistake.
+  const formats::MarkerTake huge = scene_take(scene, 10, "cm", 4.0);
+  CHECK_THROWS_WITH(pipeline::require_plausible_units(huge, "", scene.calibration, "take.trc"),
+                    Contains("in no unit") && !Contains("--units"));
 }

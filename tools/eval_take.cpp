@@ -12,6 +12,7 @@
 #include "formats/take.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/source_units.hpp"
 #include "pipeline/temporal_filter.hpp"
 #include "solver/collide/metrics.hpp"
 #include "solver/marker_layout.hpp"
@@ -98,7 +99,8 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
   const std::size_t F = o.max_frames > 0 ? std::min<std::size_t>(take.frames.size(), std::size_t(o.max_frames)) : take.frames.size();
 
-  pipeline::MarkerMapper mapper(cal, take.labels, take.units, o.settings.mapper);
+  pipeline::require_plausible_units(take, o.units, cal, o.take);
+  pipeline::MarkerMapper mapper(cal, take.labels, o.units.empty() ? take.units : o.units, o.settings.mapper);
   if (!mapper.stabilising() && o.settings.mapper.stabilise_head)
     throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
                                          mapper.stable_markers_found(), cal.stable_markers.size()));
