@@ -76,6 +76,9 @@ class SolvePipeline {
   const SolveResult& result() const noexcept { return result_; }
   // The last frame's label check or labelling (zeros without either).
   const align::LabelStats& label_stats() const noexcept { return label_stats_; }
+  // The last frame as the mapper took it after the label check (the source's slots) or the
+  // labelling (the calibration's markers, bound ones first); empty without either.
+  const MarkerFrame& labelled_frame() const noexcept { return checked_; }
   std::string_view method() const noexcept { return solver_->name(); }
 
  private:

@@ -20,6 +20,7 @@
 #include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/align_test_support.hpp"
+#include "tests/labelling_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -538,4 +539,30 @@ TEST_CASE("a take converted to mm solves as the cm take with a cm calibration, a
   const formats::MarkerTake huge = scene_take(scene, 10, "cm", 4.0);
   CHECK_THROWS_WITH(pipeline::require_plausible_units(huge, "", scene.calibration, "take.trc"),
                     Contains("in no unit") && !Contains("--units"));
+}
+
+// ---- Labelling that recovers ----
+
+TEST_CASE("labelling recovers within a few frames of a label swap, an occlusion while the head moves 3 cm and a ghost") {
+  const GlitchScene scene;  // 24 face and 4 head markers, 120 Hz, cm
+  std::vector<MarkerFrame> frames;
+  for (int i = 0; i < 260; ++i) frames.push_back(scene.frame(i));
+  test::LabelEvents e;
+  e.swap_a = 3, e.swap_b = 4, e.swap_from = 40;
+  e.occluded = 10, e.occluded_from = 80, e.occluded_to = 140, e.head_move = Eigen::Vector3d(3.0, 1.0, 0.0);
+  e.ghosted = 15, e.ghost_offset = Eigen::Vector3d(0.4, 0.0, 0.0), e.ghost_from = 170, e.ghost_to = 200;
+  for (const bool cloud : {false, true}) {
+    INFO((cloud ? "labelling an unlabelled cloud" : "checking the labels"));
+    const std::vector<bool> right = test::labelled_frames_right(scene.rig, scene.calibration, scene.labels, frames, "cm", e, cloud);
+    const std::size_t before = std::size_t(std::count(right.begin(), right.begin() + 40, true));
+    const std::size_t after_swap = test::frames_to_recover(right, e.swap_from);
+    const std::size_t after_occlusion = test::frames_to_recover(right, e.occluded_to);
+    const std::size_t after_ghost = test::frames_to_recover(right, e.ghost_to);
+    WARN((cloud ? "cloud" : "check") << ": right before the events in " << before << " of 40 frames; frames to recover after the "
+         "swap " << after_swap << ", the occlusion " << after_occlusion << ", the ghost " << after_ghost);
+    CHECK(before == 40);
+    CHECK(after_swap <= 3);
+    CHECK(after_occlusion <= 3);
+    CHECK(after_ghost <= 3);
+  }
 }

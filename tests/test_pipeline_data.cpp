@@ -12,6 +12,7 @@
 #include "pipeline/solve_pipeline.hpp"
 #include "pipeline/source_units.hpp"
 #include "solver/rig.hpp"
+#include "tests/labelling_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -78,4 +79,37 @@ TEST_CASE("JawMoCap converted to mm solves with its cm profile as the cm take wi
   CHECK(check.size_ratio == Approx(10.0).epsilon(0.1));
   CHECK_THROWS_WITH(pipeline::require_plausible_units(mislabelled, "", s.calibration, "mislabelled.trc"),
                     Contains("mislabelled.trc") && Contains("look like mm") && Contains("--units mm"));
+}
+
+TEST_CASE("JawMoCap labelling recovers within a few frames of a label swap, an occlusion while the head moves and a ghost",
+          "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(jaw, "markers/animface/JawMoCap.trc");
+  const JawTake& s = jaw_take(ict, jaw);
+  const std::vector<MarkerFrame> frames(s.take.frames.begin(), s.take.frames.begin() + 420);
+  const auto slot = [&](const char* label) {
+    return std::size_t(std::find(s.take.labels.begin(), s.take.labels.end(), label) - s.take.labels.begin());
+  };
+  test::LabelEvents e;
+  // Neighbouring lip markers swapped for good (the source's labels are wrong from then on),
+  // the chin hidden for a second while the head moves 3 cm, a ghost 4 mm from the upper lip.
+  e.swap_a = slot("Mouth_DownL"), e.swap_b = slot("Mouth_Down"), e.swap_from = 100;
+  e.occluded = slot("Chin"), e.occluded_from = 200, e.occluded_to = 260, e.head_move = Eigen::Vector3d(3.0, 1.0, 0.0);
+  e.ghosted = slot("Mouth_Up"), e.ghost_offset = Eigen::Vector3d(0.4, 0.0, 0.0), e.ghost_from = 320, e.ghost_to = 350;
+  for (const bool cloud : {false, true}) {
+    INFO((cloud ? "labelling an unlabelled cloud" : "checking the labels"));
+    const std::vector<bool> right = test::labelled_frames_right(s.rig, s.calibration, s.take.labels, frames, s.take.units, e, cloud);
+    const auto right_in = [&](std::size_t from, std::size_t to) {
+      return std::size_t(std::count(right.begin() + std::ptrdiff_t(from), right.begin() + std::ptrdiff_t(to), true));
+    };
+    const std::size_t after_occlusion = test::frames_to_recover(right, e.occluded_to);
+    const std::size_t after_ghost = test::frames_to_recover(right, e.ghost_to);
+    WARN("JawMoCap, " << (cloud ? "cloud" : "check") << ": right in " << right_in(0, e.swap_from) << " of " << e.swap_from
+         << " frames before the events and " << right_in(e.swap_from, e.occluded_from) << " of " << e.occluded_from - e.swap_from
+         << " after the swap; frames to recover after the occlusion " << after_occlusion << ", the ghost " << after_ghost);
+    CHECK(right_in(0, e.swap_from) == e.swap_from);
+    CHECK(right_in(e.swap_from, e.occluded_from) == e.occluded_from - e.swap_from);  // every swapped frame corrected
+    CHECK(after_occlusion <= 3);
+    CHECK(after_ghost <= 3);
+  }
 }

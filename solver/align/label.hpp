@@ -14,6 +14,7 @@
 #include <Eigen/Core>
 
 #include "core/frame.hpp"
+#include "solver/align/geometry.hpp"
 
 namespace facecap::align {
 
@@ -86,6 +87,13 @@ class MarkerLabeller {
   LabellerParams params_;
   AssignmentSolver solver_;
   Eigen::Matrix3Xd points_, last_, velocity_, predicted_, aligned_reference_;
+  // The set's rigid motion (reference -> the last frame's points, fitted to the markers
+  // assigned) and each marker's last position carried back by it: a lost marker is
+  // predicted where the set's motion has taken it since, so it is found again after the
+  // head moved while it was hidden.
+  Similarity set_pose_;
+  bool set_pose_known_ = false;
+  Eigen::Matrix3Xd last_in_reference_;
   std::vector<int> lost_frames_;      // K: frames since last seen (0 = seen last frame)
   std::vector<uint8_t> ever_seen_;
   std::vector<double> cost_;
