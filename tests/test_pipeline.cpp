@@ -441,7 +441,7 @@ TEST_CASE("filter.mode live filters facecapd's solves and not offline ones, and 
   CHECK(pipeline::is_solve_setting("filter.beta"));
 }
 
-TEST_CASE("the filtered pipeline halves the weights' jitter on a noisy performance and follows its motion") {
+TEST_CASE("the filtered pipeline halves the weights' jitter on a noisy performance and follows its motion; the weights' filter smooths them more") {
   const GlitchScene scene;
   config::DaemonConfig c = config::default_config();
   const int frames = 240;
@@ -465,17 +465,22 @@ TEST_CASE("the filtered pipeline halves the weights' jitter on a noisy performan
   const auto truth = solve(pipeline::SolveContext::kOffline, true);
   const auto raw = solve(pipeline::SolveContext::kOffline, false);
   const auto filtered = solve(pipeline::SolveContext::kLive, false);
+  c.filter.weights = true;
+  const auto weights_filtered = solve(pipeline::SolveContext::kLive, false);
   // Jitter: the mean second difference of the weights; error: against the clean solve.
-  double raw_jitter = 0, filtered_jitter = 0, raw_error = 0, filtered_error = 0;
+  double raw_jitter = 0, filtered_jitter = 0, weights_jitter = 0, raw_error = 0, filtered_error = 0;
   for (int i = 60; i < frames; ++i) {
     const auto f = std::size_t(i);
     raw_jitter += (raw[f] - 2 * raw[f - 1] + raw[f - 2]).norm();
     filtered_jitter += (filtered[f] - 2 * filtered[f - 1] + filtered[f - 2]).norm();
+    weights_jitter += (weights_filtered[f] - 2 * weights_filtered[f - 1] + weights_filtered[f - 2]).norm();
     raw_error += (raw[f] - truth[f]).norm();
     filtered_error += (filtered[f] - truth[f]).norm();
   }
-  INFO("jitter " << raw_jitter << " -> " << filtered_jitter << ", error " << raw_error << " -> " << filtered_error);
+  INFO("jitter " << raw_jitter << " -> " << filtered_jitter << " (weights filtered too: " << weights_jitter << "), error "
+                 << raw_error << " -> " << filtered_error);
   CHECK(filtered_jitter < 0.5 * raw_jitter);
+  CHECK(weights_jitter < 0.8 * filtered_jitter);  // the weights' own filter smooths what is sent out further
   CHECK(filtered_error < raw_error);  // the lag costs less than the noise it removes here
 }
 
