@@ -25,6 +25,12 @@ std::vector<std::string> calibration_labels(const align::Calibration& calibratio
 
 }  // namespace
 
+OneEuroFilter make_target_filter(const FilterSettings& filter, Eigen::Index markers, double rig_mm_per_unit) {
+  OneEuroParams params = filter.target_params;
+  params.beta *= rig_mm_per_unit;
+  return OneEuroFilter(3, markers, params);
+}
+
 SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                              const SolveSettings& settings)
     : mapper_(calibration, settings.label_markers ? calibration_labels(calibration) : source.labels, source.units,
@@ -41,9 +47,7 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
       source_slots_(Eigen::Index(source.labels.size())) {
   label_markers_ = settings.label_markers;
   if (settings.filter.targets) {
-    OneEuroParams params = settings.filter.target_params;
-    params.beta *= rig_mm_per_unit_;  // per mm/s to per rig unit/s
-    target_filter_.emplace(3, mapper_.marker_count(), params);
+    target_filter_.emplace(make_target_filter(settings.filter, mapper_.marker_count(), rig_mm_per_unit_));
     if (settings.filter.weights) {
       weight_filter_.emplace(1, shape_count_, settings.filter.weight_params);
       filtered_weights_.resize(shape_count_);

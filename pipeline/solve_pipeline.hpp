@@ -35,6 +35,10 @@ struct FilterSettings {
   OneEuroParams weight_params;         // beta in Hz per weight/s
 };
 
+// The targets' filter for `markers` markers in rig space, beta converted from per mm/s to
+// per rig unit/s. Not RT-safe.
+OneEuroFilter make_target_filter(const FilterSettings& filter, Eigen::Index markers, double rig_mm_per_unit);
+
 // How to solve: the [solver] section's method and parameters, and the mapping options.
 struct SolveSettings {
   SolverMethod method = SolverMethod::kNonlinear;

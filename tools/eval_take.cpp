@@ -13,7 +13,6 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
 #include "pipeline/source_units.hpp"
-#include "pipeline/temporal_filter.hpp"
 #include "solver/collide/metrics.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
@@ -139,11 +138,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   // With the filter on, the solvers see filtered targets; fit and held-out error are measured
   // against the unfiltered ones, so that the lag the filter adds counts as error.
   std::optional<pipeline::OneEuroFilter> filter;
-  if (o.settings.filter.targets) {
-    pipeline::OneEuroParams params = o.settings.filter.target_params;
-    params.beta *= cal.rig_mm_per_unit;
-    filter.emplace(3, K, params);
-  }
+  if (o.settings.filter.targets) filter.emplace(pipeline::make_target_filter(o.settings.filter, K, cal.rig_mm_per_unit));
   Eigen::Matrix3Xd raw_targets(3, K);
   std::vector<Eigen::Matrix3Xd> raw_history, filtered_history;  // per frame, for the filter's lag
   Summary stable_mm;
