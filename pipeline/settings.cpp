@@ -8,11 +8,10 @@ namespace facecap::pipeline {
 
 namespace {
 
-// `config` with filter.mode decided for `context`.
-config::DaemonConfig in_context(config::DaemonConfig config, SolveContext context) {
-  if (config.filter.mode == config::FilterMode::kLive)
-    config.filter.mode = context == SolveContext::kLive ? config::FilterMode::kOn : config::FilterMode::kOff;
-  return config;
+// filter.mode decided for `context`: on or off.
+config::FilterMode filter_mode_in(config::FilterMode mode, SolveContext context) {
+  if (mode != config::FilterMode::kLive) return mode;
+  return context == SolveContext::kLive ? config::FilterMode::kOn : config::FilterMode::kOff;
 }
 
 }  // namespace
@@ -25,7 +24,7 @@ SolveSettings solve_settings(const config::DaemonConfig& config, SolveContext co
   settings.label_markers = config.calibration.label_markers;
   settings.mapper.max_marker_speed_mm_s = config.calibration.max_marker_speed_mm_s;
   const config::FilterSection& filter = config.filter;
-  settings.filter.targets = in_context(config, context).filter.mode == config::FilterMode::kOn;
+  settings.filter.targets = filter_mode_in(filter.mode, context) == config::FilterMode::kOn;
   settings.filter.weights = settings.filter.targets && filter.weights;
   settings.filter.target_params = {.min_cutoff_hz = filter.min_cutoff_hz, .beta = filter.beta, .d_cutoff_hz = filter.d_cutoff_hz};
   settings.filter.weight_params = {.min_cutoff_hz = filter.min_cutoff_hz, .beta = filter.weights_beta,
@@ -46,7 +45,8 @@ bool is_solve_setting(std::string_view key_path) {
 }
 
 std::string solve_settings_toml(const config::DaemonConfig& config_as_given, SolveContext context) {
-  const config::DaemonConfig config = in_context(config_as_given, context);
+  config::DaemonConfig config = config_as_given;
+  config.filter.mode = filter_mode_in(config.filter.mode, context);
   std::string out;
   std::string_view section = "\x01";
   for (const config::KeySpec& key : config::config_schema()) {

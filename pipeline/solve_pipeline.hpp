@@ -1,9 +1,9 @@
 #pragma once
 // One frame's work, the same in facecapd's solve loop and in every tool: marker frame ->
 // (label check) -> rig-space targets with the head stabilised (MarkerMapper) -> (temporal
-// filter) -> face solve -> (weight filter) -> SolvedFrame. Built whole off the real-time thread (facecapd builds a new one
-// aside on reload and swaps it in); process() then runs once per frame without
-// allocating, locking, throwing or logging.
+// filter) -> face solve -> (weight filter) -> SolvedFrame. Built whole off the real-time
+// thread (facecapd builds a new one aside on reload and swaps it in); process() then runs
+// once per frame without allocating, locking, throwing or logging.
 #include <cstdint>
 #include <memory>
 #include <optional>

@@ -44,7 +44,6 @@ class OneEuroFilter {
 
   Eigen::Index rows() const noexcept { return filtered_.rows(); }
   Eigen::Index channels() const noexcept { return filtered_.cols(); }
-  const OneEuroParams& params() const noexcept { return params_; }
 
  private:
   OneEuroParams params_;

@@ -156,7 +156,6 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       raw_history.push_back(raw_targets);
       filtered_history.push_back(mapped.targets);
     }
-    const Eigen::Matrix3Xd& solved_targets = mapped.targets;
     head_held += mapped.head_held;
     for (std::size_t i = 0; i < mapper.stable_residual_count(); ++i)
       if (const double r = mapper.stable_residual_mm(i); !std::isnan(r)) stable_mm.add(r);
@@ -166,7 +165,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       const bool run_sample = run.offline ? f % std::size_t(o.offline_every) == 0 : sample;
       if (run.offline && !run_sample) continue;
       const auto t0 = std::chrono::steady_clock::now();
-      run.full->solve(solved_targets, mapped.present, run.result);
+      run.full->solve(mapped.targets, mapped.present, run.result);
       run.solve_ms.add(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
       run.held += (run.result.status & kSolvedTooFewMarkers) != 0;
       for (Eigen::Index k = 0; k < K; ++k)
@@ -192,7 +191,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
         if (!mapped.present[std::size_t(k)]) continue;
         std::copy(mapped.present.begin(), mapped.present.end(), present.begin());
         present[std::size_t(k)] = 0;
-        run.held_out[i]->solve(solved_targets, present, run.held_result);
+        run.held_out[i]->solve(mapped.targets, present, run.held_result);
         if (run.held_result.status & kSolvedTooFewMarkers) continue;
         run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - raw_targets.col(k)).norm() * rig_mm);
       }
