@@ -77,7 +77,7 @@ inline std::vector<bool> labelled_frames_right(const Rig& rig, const align::Cali
       }
     } else {
       for (std::size_t s = 0; s < slots.size(); ++s) {
-        source.markers[s].flags = truth[s] ? 0 : kMarkerMissing;
+        source.markers[s].flags = truth[s] ? 0u : uint32_t(kMarkerMissing);
         source.markers[s].position = truth[s].value_or(Eigen::Vector3d::Zero());
       }
       if (ghost) source.markers[e.ghosted].flags = 0, source.markers[e.ghosted].position = *ghost;

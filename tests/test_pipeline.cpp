@@ -412,14 +412,14 @@ TEST_CASE("the One Euro filter cuts noise on a still point, restarts a channel b
   CHECK(x.col(1).hasNaN());  // an absent channel is left alone
   t += kFilterPeriodNs;
   present[1] = 1;
-  x.col(1) = Eigen::Vector3d(5.0, 5.0, 5.0);
+  x.col(1).setConstant(5.0);
   x.col(0).setZero();
   filter.filter(x, present, t);
   CHECK(x.col(1) == Eigen::Vector3d(5.0, 5.0, 5.0));
   CHECK(x.col(0).norm() < 0.3);  // still filtered
 
   // A replay looping back: the frame passes unfiltered and every channel starts afresh.
-  x.col(0) = Eigen::Vector3d(1.0, 2.0, 3.0);
+  x.col(0) << 1.0, 2.0, 3.0;
   filter.filter(x, present, 0);
   CHECK(x.col(0) == Eigen::Vector3d(1.0, 2.0, 3.0));
 }
