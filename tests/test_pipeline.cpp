@@ -571,3 +571,22 @@ TEST_CASE("labelling recovers within a few frames of a label swap, an occlusion 
     CHECK(after_ghost <= 3);
   }
 }
+
+TEST_CASE("the label check corrects a take that starts with two labels swapped and one whose markers all drop out while swapped") {
+  const GlitchScene scene;
+  std::vector<MarkerFrame> frames;
+  for (int i = 0; i < 120; ++i) frames.push_back(scene.frame(i));
+  test::LabelEvents from_start;
+  from_start.swap_a = 3, from_start.swap_b = 4, from_start.swap_from = 0;
+  const std::vector<bool> right = test::labelled_frames_right(scene.rig, scene.calibration, scene.labels, frames, "cm", from_start, false);
+  CHECK(std::count(right.begin(), right.end(), true) == 120);
+
+  // Every marker missing for 10 frames after the swap: the check starts again from the labels' frame.
+  std::vector<MarkerFrame> gap = frames;
+  for (std::size_t f = 50; f < 60; ++f)
+    for (Marker& m : gap[f].markers) m.flags = kMarkerMissing;
+  test::LabelEvents later;
+  later.swap_a = 3, later.swap_b = 4, later.swap_from = 30;
+  const std::vector<bool> after_gap = test::labelled_frames_right(scene.rig, scene.calibration, scene.labels, gap, "cm", later, false);
+  CHECK(test::frames_to_recover(after_gap, 60) == 0);
+}

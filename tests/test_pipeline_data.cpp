@@ -113,3 +113,17 @@ TEST_CASE("JawMoCap labelling recovers within a few frames of a label swap, an o
     CHECK(after_ghost <= 3);
   }
 }
+
+TEST_CASE("JawMoCap starting with two lip labels swapped is corrected by the label check from the first frame", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(jaw, "markers/animface/JawMoCap.trc");
+  const JawTake& s = jaw_take(ict, jaw);
+  const std::vector<MarkerFrame> frames(s.take.frames.begin(), s.take.frames.begin() + 300);
+  const auto slot = [&](const char* label) {
+    return std::size_t(std::find(s.take.labels.begin(), s.take.labels.end(), label) - s.take.labels.begin());
+  };
+  test::LabelEvents e;
+  e.swap_a = slot("Mouth_DownL"), e.swap_b = slot("Mouth_Down"), e.swap_from = 0;
+  const std::vector<bool> right = test::labelled_frames_right(s.rig, s.calibration, s.take.labels, frames, s.take.units, e, false);
+  CHECK(std::count(right.begin(), right.end(), true) == 300);
+}

@@ -91,6 +91,7 @@ MarkerLabeller::MarkerLabeller(std::vector<std::string> labels, Eigen::Matrix3Xd
   assigned_point_.assign(Ks, -1);
   own_label_.assign(P, -1);
   no_label_.assign(P, -1);
+  claimed_.assign(P, 0);
   fit_weight_.assign(Ks, 0.0);
   fit_src_.resize(3, K);
   fit_dst_.resize(3, K);
@@ -262,10 +263,19 @@ LabelStats MarkerLabeller::check(MarkerFrame& frame) noexcept {
     assigned = assign(n, own_label_, true, 1.0);
   }
   if (!tracking_ || assigned < int(std::ceil(params_.reacquire_fraction * double(K)))) {
-    // No usable prediction: trust the labels this frame.
-    for (Eigen::Index k = 0; k < K; ++k) assigned_point_[std::size_t(k)] = -1;
-    for (int j = 0; j < n; ++j) assigned_point_[std::size_t(own_label_[std::size_t(j)])] = j;
-    assigned = n;
+    // No usable prediction: the reference shape moved onto the points decides, with the
+    // labels' margin (so a take that starts swapped, or is swapped when the set is lost,
+    // is corrected); a marker no gate gives a point keeps the one its label gives, if free.
+    acquire(n);
+    assign(n, own_label_, true, params_.max_gate / params_.gate);
+    std::fill(claimed_.begin(), claimed_.begin() + n, uint8_t{0});
+    for (Eigen::Index k = 0; k < K; ++k)
+      if (assigned_point_[std::size_t(k)] >= 0) claimed_[std::size_t(assigned_point_[std::size_t(k)])] = 1;
+    for (int j = 0; j < n; ++j) {
+      const auto own = std::size_t(own_label_[std::size_t(j)]);
+      if (!claimed_[std::size_t(j)] && assigned_point_[own] < 0) assigned_point_[own] = j, claimed_[std::size_t(j)] = 1;
+    }
+    assigned = int(std::count_if(assigned_point_.begin(), assigned_point_.end(), [](int j) { return j >= 0; }));
     stats.initialised = true;
   }
   tracking_ = true;

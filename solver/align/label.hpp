@@ -66,8 +66,10 @@ class MarkerLabeller {
 
   // Checks a labelled frame whose markers are in this labeller's label order (K markers):
   // swaps the positions of wrongly labelled markers back, flags them kMarkerRelabelled,
-  // and marks points that fit no marker's gate kMarkerOutlier | kMarkerMissing.
-  // Real-time safe.
+  // and marks points that fit no marker's gate kMarkerOutlier | kMarkerMissing. On the
+  // first frame, and after losing the set, the reference shape is moved onto the points
+  // (as label() acquires) and decides with the labels' margin; a marker it finds no point
+  // for keeps its labelled point. Real-time safe.
   LabelStats check(MarkerFrame& frame) noexcept;
 
   void reset() noexcept;
@@ -98,6 +100,7 @@ class MarkerLabeller {
   std::vector<uint8_t> ever_seen_;
   std::vector<double> cost_;
   std::vector<int> row_to_col_, assigned_point_, own_label_, no_label_;
+  std::vector<uint8_t> claimed_;  // max_points: check()'s (re)initialisation, a point taken
   std::vector<double> fit_weight_;
   Eigen::Matrix3Xd fit_src_, fit_dst_;
   bool tracking_ = false;
