@@ -36,6 +36,11 @@ const JawTake& jaw_take(const std::filesystem::path& ict, const std::filesystem:
   return scene;
 }
 
+// The take's slot of a label.
+std::size_t slot_of(const formats::MarkerTake& take, const std::string& label) {
+  return std::size_t(std::find(take.labels.begin(), take.labels.end(), label) - take.labels.begin());
+}
+
 // The first `frames` frames with every value times `scale`, stating `units`.
 formats::MarkerTake converted(const formats::MarkerTake& take, std::size_t frames, double scale, const std::string& units) {
   formats::MarkerTake out = take;
@@ -87,9 +92,7 @@ TEST_CASE("JawMoCap labelling recovers within a few frames of a label swap, an o
   FACECAP_REQUIRE_SHARED_DATA(jaw, "markers/animface/JawMoCap.trc");
   const JawTake& s = jaw_take(ict, jaw);
   const std::vector<MarkerFrame> frames(s.take.frames.begin(), s.take.frames.begin() + 420);
-  const auto slot = [&](const char* label) {
-    return std::size_t(std::find(s.take.labels.begin(), s.take.labels.end(), label) - s.take.labels.begin());
-  };
+  const auto slot = [&](const char* label) { return slot_of(s.take, label); };
   test::LabelEvents e;
   // Neighbouring lip markers swapped for good (the source's labels are wrong from then on),
   // the chin hidden for a second while the head moves 3 cm, a ghost 4 mm from the upper lip.
@@ -119,9 +122,7 @@ TEST_CASE("JawMoCap starting with two lip labels swapped is corrected by the lab
   FACECAP_REQUIRE_SHARED_DATA(jaw, "markers/animface/JawMoCap.trc");
   const JawTake& s = jaw_take(ict, jaw);
   const std::vector<MarkerFrame> frames(s.take.frames.begin(), s.take.frames.begin() + 300);
-  const auto slot = [&](const char* label) {
-    return std::size_t(std::find(s.take.labels.begin(), s.take.labels.end(), label) - s.take.labels.begin());
-  };
+  const auto slot = [&](const char* label) { return slot_of(s.take, label); };
   test::LabelEvents e;
   e.swap_a = slot("Mouth_DownL"), e.swap_b = slot("Mouth_Down"), e.swap_from = 0;
   const std::vector<bool> right = test::labelled_frames_right(s.rig, s.calibration, s.take.labels, frames, s.take.units, e, false);
