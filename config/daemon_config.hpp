@@ -21,6 +21,14 @@ inline constexpr EnumTable kLoopModes{std::array{
               "solve every frame of the source in order as fast as possible (replay only; not real time)"},
 }};
 
+// When the temporal filter ([filter]) runs.
+enum class FilterMode : uint8_t { kLive, kOn, kOff };
+inline constexpr EnumTable kFilterModes{std::array{
+    EnumEntry{FilterMode::kLive, "live", "on when facecapd solves a source, off in facecap solve and eval"},
+    EnumEntry{FilterMode::kOn, "on", "always"},
+    EnumEntry{FilterMode::kOff, "off", "never"},
+}};
+
 struct RigSection {
   std::string path;
   bool cache = true;
@@ -40,6 +48,16 @@ struct CalibrationSection {
 // and the method.
 struct SolverSection : SolverParams {
   SolverMethod method = SolverMethod::kNonlinear;
+};
+
+// The One Euro filter on marker targets (and optionally on weights), pipeline/temporal_filter.hpp.
+struct FilterSection {
+  FilterMode mode = FilterMode::kLive;
+  double min_cutoff_hz = 0.0;
+  double beta = 0.0;  // Hz per mm/s
+  double d_cutoff_hz = 0.0;
+  bool weights = false;
+  double weights_beta = 0.0;  // Hz per weight/s
 };
 
 struct LoopSection {
@@ -148,6 +166,7 @@ struct DaemonConfig {
   RigSection rig;
   CalibrationSection calibration;
   SolverSection solver;
+  FilterSection filter;
   LoopSection loop;
   OutputsSection outputs;
   ControlSection control;

@@ -233,6 +233,29 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
 
+      {FACECAP_CHOICE_KEY(filter.mode, kFilterModes), .default_value = std::string("live"), .reload = Reload::kRebuild,
+       .description = "When to filter the marker targets in time (the One Euro filter, after head stabilisation, so "
+                      "that only the face's own motion is filtered): live sources are filtered, offline solves are "
+                      "not unless asked (facecap solve --set filter.mode=on)."},
+      {FACECAP_KEY(filter.min_cutoff_hz), .default_value = 1.0, .unit = "Hz", .min = 0.01, .max = 1000,
+       .reload = Reload::kRebuild,
+       .description = "The filter's cutoff while the face is still. Lower: less jitter at rest, more lag in slow "
+                      "motion (about 1 / (2 pi min_cutoff_hz) seconds)."},
+      {FACECAP_KEY(filter.beta), .default_value = 0.5, .unit = "Hz per mm/s", .min = 0, .max = 1000,
+       .reload = Reload::kRebuild,
+       .description = "How fast the cutoff rises with a marker's speed (rig space, in the rig's mm). Higher: less lag "
+                      "in fast motion, more noise let through while moving; 0 is a fixed low-pass at min_cutoff_hz."},
+      {FACECAP_KEY(filter.d_cutoff_hz), .default_value = 1.0, .unit = "Hz", .min = 0.01, .max = 1000,
+       .reload = Reload::kRebuild,
+       .description = "The cutoff of the speed estimate beta multiplies (higher: the cutoff follows speed sooner and "
+                      "noisier)."},
+      {FACECAP_KEY(filter.weights), .default_value = false, .reload = Reload::kRebuild,
+       .description = "Also filter the solved weights sent out (not the mesh, which the filtered targets already "
+                      "smooth), with min_cutoff_hz, d_cutoff_hz and weights_beta, whenever the targets are filtered."},
+      {FACECAP_KEY(filter.weights_beta), .default_value = 1.0, .unit = "Hz per weight/s", .min = 0, .max = 1000,
+       .reload = Reload::kRebuild,
+       .description = "How fast the weights' cutoff rises with their speed (a weight going 0 to 1 in a second: 1)."},
+
       {FACECAP_KEY(loop.rate_hz), .default_value = 120.0, .unit = "Hz", .min = 1, .max = 2000,
        .description = "Ticks per second of the fixed-rate solve loop."},
       {FACECAP_CHOICE_KEY(loop.mode, kLoopModes), .default_value = std::string("fixed"),
@@ -400,6 +423,8 @@ const SectionSpec kSections[] = {
     {"rig", "The blendshape rig the markers are solved onto."},
     {"calibration", "How markers relate to the rig."},
     {"solver", "The per-frame face solve (the paper's Eq. 2-5)."},
+    {"filter", "Temporal filtering of the marker targets (and optionally the weights) before the solve "
+               "(docs/solver.md, \"Temporal filter\")."},
     {"loop", "The real-time solve loop."},
     {"outputs.shm", "The shared-memory output renderers read (docs/shm-format.md)."},
     {"outputs.recording", "Recording what the daemon receives and solves (.fcrec, docs/recording-format.md). "

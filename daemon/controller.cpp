@@ -137,7 +137,7 @@ void Controller::rebuild_for_reload(bool calibration_changed) {
   }
   const config::DaemonConfig& c = *parts_.config;
   const drivers::SourceInfo info = parts_.source->info();
-  const pipeline::SolveSettings settings = pipeline::solve_settings(c);
+  const pipeline::SolveSettings settings = pipeline::solve_settings(c, pipeline::SolveContext::kLive);
   std::optional<pipeline::CalibrationSpec> spec;
   if (calibration_changed) spec = pipeline::calibration_spec(c);
   build("rebuilding the solver",
@@ -202,7 +202,7 @@ void Controller::select_actor(const control::SelectActor& request, ReplyFn reply
   const std::string actor = request.name.empty() ? file.stem().string() : request.name;
   const drivers::SourceInfo info = parts_.source->info();
   build(fmt::format("loading actor {}", actor),
-        [rig = parts_.rig, info, settings = pipeline::solve_settings(*parts_.config), file, actor] {
+        [rig = parts_.rig, info, settings = pipeline::solve_settings(*parts_.config, pipeline::SolveContext::kLive), file, actor] {
           const int64_t begin = monotonic_now_ns();
           Built built;
           built.calibration = pipeline::load_calibration({.file = file.string()}, *rig);
@@ -269,7 +269,7 @@ void Controller::step_calibration() {
   const fs::path profile_dir = parts_.config->calibration.profiles_directory;
   // The reply is the build's; calibration_reply_ stays set only to answer 503 on a stop.
   build("calibrating",
-        [rig = parts_.rig, info, settings = pipeline::solve_settings(*parts_.config), file = summary->file,
+        [rig = parts_.rig, info, settings = pipeline::solve_settings(*parts_.config, pipeline::SolveContext::kLive), file = summary->file,
          request = calibration_request_, profile_dir] {
           const int64_t begin = monotonic_now_ns();
           formats::MarkerTake take = formats::take_from_recording(formats::RecordingReader(file));
@@ -317,7 +317,7 @@ formats::RecordingHeader Controller::take_header(const control::StartRecording& 
   formats::RecordingHeader h = pipeline::make_recording_header(
       *parts_.rig, calibration_, {info.labels, info.units}, parts_.source->description(),
       pipeline::recorded_rate_hz(info.nominal_rate_hz, c.loop.rate_hz, c.loop.mode == config::LoopMode::kLockstep),
-      pipeline::solve_settings_toml(c));
+      pipeline::solve_settings_toml(c, pipeline::SolveContext::kLive));
   h.take = slate.take;
   h.actor = slate.actor.empty() ? actor_ : slate.actor;
   h.scene = slate.scene;

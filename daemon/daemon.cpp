@@ -124,14 +124,14 @@ void Daemon::start() {
   const pipeline::SourceDescription source{info.labels, info.units};
 
   const int64_t build_start = monotonic_now_ns();
-  auto solve = std::make_unique<pipeline::SolvePipeline>(*rig_, calibration, source, pipeline::solve_settings(c));
+  auto solve = std::make_unique<pipeline::SolvePipeline>(*rig_, calibration, source, pipeline::solve_settings(c, pipeline::SolveContext::kLive));
   log_pipeline(*solve, calibration, ms(monotonic_now_ns() - build_start) / 1000.0);
 
   const bool lockstep = c.loop.mode == config::LoopMode::kLockstep;
   outputs::SinkContext context;
   context.header = pipeline::make_recording_header(*rig_, calibration, source, source_->description(),
                                                    pipeline::recorded_rate_hz(info.nominal_rate_hz, c.loop.rate_hz, lockstep),
-                                                   pipeline::solve_settings_toml(c));
+                                                   pipeline::solve_settings_toml(c, pipeline::SolveContext::kLive));
   context.vertex_count = uint32_t(rig_->vertex_count());
   context.loop_rate_hz = c.loop.rate_hz;
   io_ = std::make_unique<IoThread>();

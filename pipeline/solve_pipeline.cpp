@@ -25,6 +25,12 @@ std::vector<std::string> calibration_labels(const align::Calibration& calibratio
 
 }  // namespace
 
+OneEuroFilter make_target_filter(const FilterSettings& filter, Eigen::Index markers, double rig_mm_per_unit) {
+  OneEuroParams params = filter.target_params;
+  params.beta *= rig_mm_per_unit;
+  return OneEuroFilter(3, markers, params);
+}
+
 SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                              const SolveSettings& settings)
     : mapper_(calibration, settings.label_markers ? calibration_labels(calibration) : source.labels, source.units,
@@ -40,6 +46,13 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
       vertex_count_(rig.vertex_count()),
       source_slots_(Eigen::Index(source.labels.size())) {
   label_markers_ = settings.label_markers;
+  if (settings.filter.targets) {
+    target_filter_.emplace(make_target_filter(settings.filter, mapper_.marker_count(), rig_mm_per_unit_));
+    if (settings.filter.weights) {
+      weight_filter_.emplace(1, shape_count_, settings.filter.weight_params);
+      filtered_weights_.resize(shape_count_);
+    }
+  }
   if (settings.check_labels || label_markers_) {
     // The labeller's markers: the source's slots for the check, the calibration's when
     // labelling. Predictions start from the calibration frame, in the source's units.
@@ -88,10 +101,18 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   }
   const int64_t checked_ns = monotonic_now_ns();
   mapper_.process(*frame, mapped_);
+  if (target_filter_) target_filter_->filter(mapped_.targets, mapped_.present, markers.source_time_ns);
   const int64_t mapped_ns = monotonic_now_ns();
   solver_->solve(mapped_.targets, mapped_.present, result_);
 
-  out.weights = result_.weights.cast<float>();  // same size: no allocation
+  if (weight_filter_) {  // the weights sent out; the solver's result (its warm start) stays as solved
+    filtered_weights_ = result_.weights;  // same size: no allocation
+    weight_filter_->filter(Eigen::Map<Eigen::MatrixXd>(filtered_weights_.data(), 1, filtered_weights_.size()), {},
+                           markers.source_time_ns);
+    out.weights = filtered_weights_.cast<float>();
+  } else {
+    out.weights = result_.weights.cast<float>();  // same size: no allocation
+  }
   if (out.vertices.cols() == result_.vertices.cols()) out.vertices = result_.vertices.cast<float>();
   out.head_rotation = mapped_.head_rotation;
   out.head_translation = mapped_.head_translation;

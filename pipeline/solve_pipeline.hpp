@@ -1,9 +1,9 @@
 #pragma once
 // One frame's work, the same in facecapd's solve loop and in every tool: marker frame ->
-// (label check) -> rig-space targets with the head stabilised (MarkerMapper) -> face
-// solve -> SolvedFrame. Built whole off the real-time thread (facecapd builds a new one
-// aside on reload and swaps it in); process() then runs once per frame without
-// allocating, locking, throwing or logging.
+// (label check) -> rig-space targets with the head stabilised (MarkerMapper) -> (temporal
+// filter) -> face solve -> (weight filter) -> SolvedFrame. Built whole off the real-time
+// thread (facecapd builds a new one aside on reload and swaps it in); process() then runs
+// once per frame without allocating, locking, throwing or logging.
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -14,6 +14,7 @@
 
 #include "core/frame.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/temporal_filter.hpp"
 #include "solver/align/label.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/rig.hpp"
@@ -25,6 +26,18 @@ struct SourceDescription {
   std::vector<std::string> labels;  // MarkerFrame::markers order
   std::string units;                // "mm", "cm", "m"; empty when unknown (the calibration's are assumed)
 };
+
+// The temporal filter ([filter]): One Euro on the mapped targets, optionally on the weights.
+struct FilterSettings {
+  bool targets = false;
+  bool weights = false;                // only with targets
+  OneEuroParams target_params;         // beta in Hz per mm/s (the rig's mm)
+  OneEuroParams weight_params;         // beta in Hz per weight/s
+};
+
+// The targets' filter for `markers` markers in rig space, beta converted from per mm/s to
+// per rig unit/s. Not RT-safe.
+OneEuroFilter make_target_filter(const FilterSettings& filter, Eigen::Index markers, double rig_mm_per_unit);
 
 // How to solve: the [solver] section's method and parameters, and the mapping options.
 struct SolveSettings {
@@ -38,6 +51,7 @@ struct SolveSettings {
   // labels they came with, are matched to the calibration's markers, so that a face is
   // solved from an unlabelled point cloud. Implies the check.
   bool label_markers = false;
+  FilterSettings filter;
 };
 
 class SolvePipeline {
@@ -60,11 +74,15 @@ class SolvePipeline {
   // What a loop prefetches ahead of a frame (FaceSolver::streamed_memory). RT-safe.
   std::span<const std::span<const std::byte>> streamed_memory() const noexcept { return solver_->streamed_memory(); }
   const MarkerMapper& mapper() const noexcept { return mapper_; }
-  // The last frame's mapping and solve, for tools that report more than a SolvedFrame.
+  // The last frame's mapping (its targets filtered when the filter is on) and solve, for
+  // tools that report more than a SolvedFrame.
   const MappedFrame& mapped() const noexcept { return mapped_; }
   const SolveResult& result() const noexcept { return result_; }
   // The last frame's label check or labelling (zeros without either).
   const align::LabelStats& label_stats() const noexcept { return label_stats_; }
+  // The last frame as the mapper took it after the label check (the source's slots) or the
+  // labelling (the calibration's markers, bound ones first); empty without either.
+  const MarkerFrame& labelled_frame() const noexcept { return checked_; }
   std::string_view method() const noexcept { return solver_->name(); }
 
  private:
@@ -77,6 +95,8 @@ class SolvePipeline {
   MarkerFrame checked_;  // the frame after the label check or labelling, sized at construction
   std::vector<Eigen::Vector3d> points_;  // label_markers: a frame's present points, sized to its slots
   MappedFrame mapped_;
+  std::optional<OneEuroFilter> target_filter_, weight_filter_;
+  Eigen::VectorXd filtered_weights_;  // M, with the weight filter
   SolveResult result_;
   align::LabelStats label_stats_;
   std::vector<MarkerBinding> bindings_;  // per calibration marker, for the fit residuals

@@ -246,6 +246,23 @@ TEST_CASE("facecap calibrate and solve give clear errors on bad input", "[tools]
                         (dir / "out.txt").string()});
   CHECK(r.exit_code == 1);
   CHECK(r.err.find(".csv") != std::string::npos);
+  // A take in mm whose header says cm (the profile was made in mm): refused by solve and
+  // eval, naming the units it looks like; told --units mm, it solves.
+  formats::write_take(dir / "says_cm.trc", to_take(synthetic, "cm"));
+  const std::vector<std::string> solve_says_cm = {"solve", "--rig", "builtin", "--calib", (dir / "a.toml").string(), "--take",
+                                                  (dir / "says_cm.trc").string(), "-o", (dir / "units.csv").string(), "-q"};
+  r = run_facecap(dir, solve_says_cm);
+  CHECK(r.exit_code == 1);
+  CHECK_THAT(r.err, Catch::Contains("says_cm.trc: read in cm as it states, its face is 10 times the size of the calibrated "
+                                    "one: its values look like mm; pass --units mm if they are"));
+  r = run_facecap(dir, {"eval", "--rig", "builtin", "--calib", (dir / "a.toml").string(), "--take", (dir / "says_cm.trc").string()});
+  CHECK(r.exit_code == 1);
+  CHECK_THAT(r.err, Catch::Contains("look like mm"));
+  std::vector<std::string> told = solve_says_cm;
+  told.insert(told.end(), {"--units", "mm"});
+  r = run_facecap(dir, told);
+  INFO(r.out << r.err);
+  CHECK(r.exit_code == 0);
 }
 
 TEST_CASE("facecap eval on a real AnimFace take reports held-out error for every solver", "[tools][data]") {

@@ -320,7 +320,7 @@ TEST_CASE("the v4l2 driver fed rendered images below V4L2: sets by time, unlabel
   lp.max_gate = 20.0;
   lp.label_margin = 1.0;
   align::MarkerLabeller labeller(labels, reference, lp);
-  pipeline::SolvePipeline solve(*scene.rig, scene.calibration, {labels, "mm"}, pipeline::solve_settings(scene.config));
+  pipeline::SolvePipeline solve(*scene.rig, scene.calibration, {labels, "mm"}, pipeline::solve_settings(scene.config, pipeline::SolveContext::kLive));
   SolvedFrame solved = solve.make_solved_frame(false);
 
   source.start({.epoch_ns = monotonic_now_ns()});

@@ -51,7 +51,7 @@ TEST_CASE("solved frames match the sim's ground truth under noise and dropouts a
   const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
   drivers::SimSource sim(c.source.sim, rig, pipeline::rest_marker_set(calibration));
   sim.open();
-  pipeline::SolvePipeline pipeline(*rig, calibration, described(sim), pipeline::solve_settings(c));
+  pipeline::SolvePipeline pipeline(*rig, calibration, described(sim), pipeline::solve_settings(c, pipeline::SolveContext::kLive));
   SolvedFrame solved = pipeline.make_solved_frame(true);
   MarkerFrame markers = make_marker_frame(sim.info().labels);
   const Eigen::Index jaw = *rig->shape_index("jawOpen");
@@ -133,7 +133,7 @@ TEST_CASE("a new solver is swapped in between frames and the old one retired off
   sim.open();
   LoopOptions options;
   options.realtime.fifo = false;
-  const pipeline::SolveSettings settings = pipeline::solve_settings(c);
+  const pipeline::SolveSettings settings = pipeline::solve_settings(c, pipeline::SolveContext::kLive);
   SolveLoop loop(options, sim, std::make_unique<pipeline::SolvePipeline>(*rig, calibration, described(sim), settings), {});
   sim.start({.epoch_ns = monotonic_now_ns()});
   auto tick_until_solved = [&] {
@@ -213,7 +213,7 @@ TEST_CASE("the fixed-rate loop stays on its deadline grid and counts what it ski
   options.rate_hz = kRate;
   options.realtime.fifo = false;
   SolveLoop loop(options, replay,
-                 std::make_unique<pipeline::SolvePipeline>(*rig, calibration, described(replay), pipeline::solve_settings(c)),
+                 std::make_unique<pipeline::SolvePipeline>(*rig, calibration, described(replay), pipeline::solve_settings(c, pipeline::SolveContext::kLive)),
                  {});
   const int64_t start = monotonic_now_ns();
   loop.start();

@@ -45,7 +45,8 @@ TEST_CASE("facecapd in lockstep and facecap solve give the same frames of a real
   take.frames.resize(600);
   const fs::path trc = dir / "jaw.trc";
   formats::write_take(trc, take);
-  // Non-default solver settings, so that a solve with the defaults would differ.
+  // Non-default solver settings, so that a solve with the defaults would differ; the
+  // temporal filter on in both (by default facecapd filters and facecap solve does not).
   test::write_text(dir / "facecapd.toml", fmt::format(R"(version = 1
 [source]
 driver = "replay"
@@ -58,6 +59,8 @@ file = "{}"
 [solver]
 alpha = 0.2
 weight_refinements = 1
+[filter]
+mode = "on"
 [loop]
 mode = "lockstep"
 realtime = false
@@ -80,7 +83,8 @@ vertices = true
     CHECK(reader.solved_frame_count() == 600);
     CHECK(reader.header().rate_hz == take.rate_hz);
     CHECK(reader.header().rig_units == "cm");
-    CHECK_THAT(reader.header().solver_settings, Catch::Contains("alpha = 0.2\n") && Catch::Contains("stabilise_head = true"));
+    CHECK_THAT(reader.header().solver_settings, Catch::Contains("alpha = 0.2\n") && Catch::Contains("stabilise_head = true") &&
+                                                   Catch::Contains("[filter]\nmode = \"on\"\n"));
   }
 
   // The same take offline, with the same profile and the daemon's own configuration file.

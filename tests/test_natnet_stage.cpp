@@ -149,7 +149,9 @@ std::vector<std::string> facecapd_args(const fs::path& dir, uint16_t port, const
       "--set", fmt::format("control.run_seconds={}", seconds),
       "--set", "control.status_interval_s=0.25",
       "--set", "logging.stats_file=" + (dir / (name + "-stats.json")).string(),
-      "--set", "loop.rate_hz=120"};
+      "--set", "loop.rate_hz=120",
+      // Compared frame by frame with facecap solve, which does not filter in time.
+      "--set", "filter.mode=off"};
   args.insert(args.end(), extra.begin(), extra.end());
   return args;
 }

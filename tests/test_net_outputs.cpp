@@ -113,7 +113,7 @@ SolvedFrame solved_frame(int64_t n) {
   const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
   drivers::SimSource sim(c.source.sim, rig, pipeline::rest_marker_set(calibration));
   sim.open();
-  pipeline::SolvePipeline solve(*rig, calibration, {sim.info().labels, sim.info().units}, pipeline::solve_settings(c));
+  pipeline::SolvePipeline solve(*rig, calibration, {sim.info().labels, sim.info().units}, pipeline::solve_settings(c, pipeline::SolveContext::kLive));
   SolvedFrame solved = solve.make_solved_frame(false);
   MarkerFrame markers = make_marker_frame(sim.info().labels);
   for (int64_t i = 0; i <= n; ++i) {

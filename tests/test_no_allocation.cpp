@@ -79,7 +79,7 @@ TEST_CASE("the counter sees allocations by new and by malloc") {
   std::free(q);
 }
 
-TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, every output and solver swap") {
+TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, temporal filters, label check, every output and solver swap") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
   const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
@@ -120,7 +120,9 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, label check, e
   LoopOptions options;
   options.realtime.fifo = false;
   options.prefetch_lead_ns = 800'000;
-  const pipeline::SolveSettings settings = pipeline::solve_settings(c);
+  pipeline::SolveSettings settings = pipeline::solve_settings(c, pipeline::SolveContext::kLive);
+  REQUIRE(settings.filter.targets);  // on for a live source by default; the weights' filter too here
+  settings.filter.weights = true;
   SolveLoop loop(options, sim, std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, settings),
                  {&shm, &recorder, &udp, &vmc, &livelink});
   sim.start({.epoch_ns = monotonic_now_ns()});
@@ -166,7 +168,7 @@ TEST_CASE("a tick pulling from a replay allocates nothing") {
   SolveLoop loop(options, replay,
                  std::make_unique<pipeline::SolvePipeline>(*rig, calibration,
                                                            pipeline::SourceDescription{replay.info().labels, replay.info().units},
-                                                           pipeline::solve_settings(c)),
+                                                           pipeline::solve_settings(c, pipeline::SolveContext::kLive)),
                  {});
   replay.start({.lockstep = true});
   const Counted counted = run_ticks(loop, 120, 0);  // loops the 50-frame take
@@ -252,7 +254,7 @@ TEST_CASE("runtime takes, the control stream and the operator telemetry allocate
   LoopOptions options;
   options.realtime.fifo = false;
   SolveLoop loop(options, sim,
-                 std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, pipeline::solve_settings(c)),
+                 std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, pipeline::solve_settings(c, pipeline::SolveContext::kLive)),
                  {&takes, &stream});
   sim.start({.epoch_ns = monotonic_now_ns()});
 

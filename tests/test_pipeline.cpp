@@ -1,16 +1,26 @@
 // The one solve path (pipeline/): where calibrations come from, the marker mapper, and
 // SolvePipeline's status bits.
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <random>
+
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 
+#include "config/schema.hpp"
 #include "core/error.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
+#include "pipeline/source_units.hpp"
+#include "pipeline/temporal_filter.hpp"
 #include "solver/align/calibrate_take.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/align_test_support.hpp"
+#include "tests/labelling_test_support.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -330,4 +340,253 @@ TEST_CASE("a marker back from an occlusion somewhere else, or that really moved,
   scene.solve(
       3, 1000.0, [&](int i, MarkerFrame& f) { f.markers[face_marker].position.x() += i == 0 ? 1e300 : 0.0; }, &implausible);
   CHECK(implausible == std::vector<uint32_t>{1, 0, 0});
+}
+
+// ---- Temporal filter (pipeline/temporal_filter.hpp) ----
+
+namespace {
+
+constexpr double kFilterRateHz = 60.0;
+constexpr int64_t kFilterPeriodNs = kNsPerSecond / 60;
+
+// A first-order low-pass's smoothing factor at cutoff_hz, frame rate kFilterRateHz.
+double low_pass_factor(double cutoff_hz) { return 1.0 / (1.0 + kFilterRateHz / (2.0 * std::numbers::pi * cutoff_hz)); }
+
+}  // namespace
+
+TEST_CASE("the One Euro filter is a first-order low-pass at min_cutoff_hz plus beta times the speed") {
+  const double min_cutoff_hz = 1.0, beta = 0.05;
+  pipeline::OneEuroFilter filter(3, 1, {.min_cutoff_hz = min_cutoff_hz, .beta = beta, .d_cutoff_hz = 1.0});
+  // A step at rest: the first frame passes, the second moves by the factor at the cutoff the
+  // speed estimate gives (its own low-pass of the step's speed).
+  Eigen::MatrixXd x = Eigen::MatrixXd::Zero(3, 1);
+  filter.filter(x, {}, 0);
+  CHECK(x.norm() == 0.0);
+  x << 6.0, 0.0, 8.0;  // 10 units
+  filter.filter(x, {}, kFilterPeriodNs);
+  const double speed = low_pass_factor(1.0) * 10.0 * kFilterRateHz;
+  CHECK(x.norm() == Approx(10.0 * low_pass_factor(min_cutoff_hz + beta * speed)).epsilon(1e-6));
+
+  // A ramp at speed v: the speed estimate converges to v and the output lags by
+  // (1 - a) / a frames, a the factor at min_cutoff_hz + beta v; faster ramps lag less.
+  double previous_lag_frames = std::numeric_limits<double>::infinity();
+  for (const double v : {1.0, 10.0, 100.0}) {
+    pipeline::OneEuroFilter ramp(1, 1, {.min_cutoff_hz = min_cutoff_hz, .beta = beta, .d_cutoff_hz = 1.0});
+    Eigen::MatrixXd y(1, 1);
+    const int frames = 2000;
+    for (int i = 0; i < frames; ++i) {
+      y(0, 0) = v * i / kFilterRateHz;
+      ramp.filter(y, {}, i * kFilterPeriodNs);
+    }
+    const double lag_frames = (v * (frames - 1) / kFilterRateHz - y(0, 0)) / (v / kFilterRateHz);
+    const double a = low_pass_factor(min_cutoff_hz + beta * v);
+    INFO("speed " << v);
+    CHECK(lag_frames == Approx((1.0 - a) / a).epsilon(1e-6));
+    CHECK(lag_frames < previous_lag_frames);
+    previous_lag_frames = lag_frames;
+  }
+}
+
+TEST_CASE("the One Euro filter cuts noise on a still point, restarts a channel back from an occlusion and passes frames whose time does not advance") {
+  pipeline::OneEuroFilter filter(3, 2, {.min_cutoff_hz = 1.0, .beta = 0.05, .d_cutoff_hz = 1.0});
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  Eigen::MatrixXd x(3, 2);
+  double raw_square = 0.0, filtered_square = 0.0;
+  std::vector<uint8_t> present{1, 1};
+  int64_t t = 0;
+  for (int i = 0; i < 600; ++i, t += kFilterPeriodNs) {
+    for (Eigen::Index r = 0; r < 6; ++r) x(r) = noise(rng);
+    if (i >= 300) raw_square += x.col(0).squaredNorm();
+    filter.filter(x, present, t);
+    if (i >= 300) filtered_square += x.col(0).squaredNorm();
+  }
+  // At 1 Hz and 60 Hz white noise keeps about a / (2 - a) of its power (a = 0.095): 5%; the
+  // cutoff the noise's own speed raises allows a few times that.
+  CHECK(filtered_square < 0.25 * raw_square);
+
+  // Marker 1 occluded, back 5 units away: taken as it is, not glided towards.
+  present[1] = 0;
+  x.col(1).setConstant(std::numeric_limits<double>::quiet_NaN());
+  filter.filter(x, present, t);
+  CHECK(x.col(1).hasNaN());  // an absent channel is left alone
+  t += kFilterPeriodNs;
+  present[1] = 1;
+  x.col(1).setConstant(5.0);
+  x.col(0).setZero();
+  filter.filter(x, present, t);
+  CHECK(x.col(1) == Eigen::Vector3d(5.0, 5.0, 5.0));
+  CHECK(x.col(0).norm() < 0.3);  // still filtered
+
+  // A replay looping back: the frame passes unfiltered and every channel starts afresh.
+  x.col(0) << 1.0, 2.0, 3.0;
+  filter.filter(x, present, 0);
+  CHECK(x.col(0) == Eigen::Vector3d(1.0, 2.0, 3.0));
+}
+
+TEST_CASE("filter.mode live filters facecapd's solves and not offline ones, and a recording stores which it was") {
+  config::DaemonConfig c = config::default_config();
+  REQUIRE(c.filter.mode == config::FilterMode::kLive);
+  CHECK(pipeline::solve_settings(c, pipeline::SolveContext::kLive).filter.targets);
+  CHECK_FALSE(pipeline::solve_settings(c, pipeline::SolveContext::kOffline).filter.targets);
+  CHECK_FALSE(pipeline::solve_settings(c, pipeline::SolveContext::kLive).filter.weights);
+  CHECK_THAT(pipeline::solve_settings_toml(c, pipeline::SolveContext::kLive), Contains("[filter]\nmode = \"on\"\n"));
+  CHECK_THAT(pipeline::solve_settings_toml(c, pipeline::SolveContext::kOffline), Contains("[filter]\nmode = \"off\"\n"));
+  c.filter.mode = config::FilterMode::kOn;
+  c.filter.weights = true;
+  CHECK(pipeline::solve_settings(c, pipeline::SolveContext::kOffline).filter.targets);
+  CHECK(pipeline::solve_settings(c, pipeline::SolveContext::kOffline).filter.weights);
+  c.filter.mode = config::FilterMode::kOff;
+  CHECK_FALSE(pipeline::solve_settings(c, pipeline::SolveContext::kLive).filter.weights);
+  CHECK(pipeline::is_solve_setting("filter.beta"));
+}
+
+TEST_CASE("the filtered pipeline halves the weights' jitter on a noisy performance and follows its motion; the weights' filter smooths them more") {
+  const GlitchScene scene;
+  config::DaemonConfig c = config::default_config();
+  const int frames = 240;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0.0, 0.03);  // cm: 0.3 mm
+  std::vector<MarkerFrame> noisy;
+  for (int i = 0; i < frames; ++i) {
+    noisy.push_back(scene.frame(i));
+    for (Marker& m : noisy.back().markers) m.position += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+  }
+  auto solve = [&](pipeline::SolveContext context, bool clean) {
+    pipeline::SolvePipeline pipeline(scene.rig, scene.calibration, {scene.labels, "cm"}, pipeline::solve_settings(c, context));
+    SolvedFrame solved = pipeline.make_solved_frame(false);
+    std::vector<Eigen::VectorXf> weights;
+    for (int i = 0; i < frames; ++i) {
+      pipeline.process(clean ? scene.frame(i) : noisy[std::size_t(i)], solved);
+      weights.push_back(solved.weights);
+    }
+    return weights;
+  };
+  const auto truth = solve(pipeline::SolveContext::kOffline, true);
+  const auto raw = solve(pipeline::SolveContext::kOffline, false);
+  const auto filtered = solve(pipeline::SolveContext::kLive, false);
+  c.filter.weights = true;
+  const auto weights_filtered = solve(pipeline::SolveContext::kLive, false);
+  // Jitter: the mean second difference of the weights; error: against the clean solve.
+  double raw_jitter = 0, filtered_jitter = 0, weights_jitter = 0, raw_error = 0, filtered_error = 0;
+  for (int i = 60; i < frames; ++i) {
+    const auto f = std::size_t(i);
+    raw_jitter += (raw[f] - 2 * raw[f - 1] + raw[f - 2]).norm();
+    filtered_jitter += (filtered[f] - 2 * filtered[f - 1] + filtered[f - 2]).norm();
+    weights_jitter += (weights_filtered[f] - 2 * weights_filtered[f - 1] + weights_filtered[f - 2]).norm();
+    raw_error += (raw[f] - truth[f]).norm();
+    filtered_error += (filtered[f] - truth[f]).norm();
+  }
+  INFO("jitter " << raw_jitter << " -> " << filtered_jitter << " (weights filtered too: " << weights_jitter << "), error "
+                 << raw_error << " -> " << filtered_error);
+  CHECK(filtered_jitter < 0.5 * raw_jitter);
+  CHECK(weights_jitter < 0.8 * filtered_jitter);  // the weights' own filter smooths what is sent out further
+  CHECK(filtered_error < raw_error);  // the lag costs less than the noise it removes here
+}
+
+// ---- Units (pipeline/source_units.hpp) ----
+
+namespace {
+
+// The scene's first `frames` frames as a take stating `units`, its values times `scale`.
+formats::MarkerTake scene_take(const GlitchScene& scene, int frames, const std::string& units, double scale) {
+  formats::MarkerTake take;
+  take.labels = scene.labels;
+  take.units = units;
+  take.rate_hz = 120.0;
+  for (int i = 0; i < frames; ++i) {
+    take.frames.push_back(scene.frame(i));
+    for (Marker& m : take.frames.back().markers) m.position *= scale;
+  }
+  return take;
+}
+
+}  // namespace
+
+TEST_CASE("a take converted to mm solves as the cm take with a cm calibration, and a mm take stating cm is refused naming mm") {
+  const GlitchScene scene;  // the calibration's take units: cm, the built-in face's
+  REQUIRE(scene.calibration.take_mm_per_unit == 10.0);
+  const formats::MarkerTake cm = scene_take(scene, 60, "cm", 1.0), mm = scene_take(scene, 60, "mm", 10.0);
+  for (const auto* take : {&cm, &mm}) {
+    const pipeline::UnitsCheck check = pipeline::check_take_units(*take, "", scene.calibration);
+    CHECK(check.plausible);
+    CHECK(check.size_ratio == Approx(1.0).epsilon(0.05));
+  }
+  pipeline::SolvePipeline from_cm(scene.rig, scene.calibration, {cm.labels, cm.units}, {});
+  pipeline::SolvePipeline from_mm(scene.rig, scene.calibration, {mm.labels, mm.units}, {});
+  SolvedFrame a = from_cm.make_solved_frame(true), b = from_mm.make_solved_frame(true);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < cm.frames.size(); ++i) {
+    from_cm.process(cm.frames[i], a);
+    from_mm.process(mm.frames[i], b);
+    worst = std::max(worst, double((a.weights - b.weights).cwiseAbs().maxCoeff()));
+  }
+  CHECK(worst < 0.01);
+  CHECK(a.weights.maxCoeff() > 0.3);  // the face moved: the comparison can fail
+
+  // The mm values stating cm: read as cm the face is 10 times the calibrated one.
+  formats::MarkerTake mislabelled = mm;
+  mislabelled.units = "cm";
+  const pipeline::UnitsCheck check = pipeline::check_take_units(mislabelled, "", scene.calibration);
+  CHECK_FALSE(check.plausible);
+  CHECK(check.size_ratio == Approx(10.0).epsilon(0.05));
+  CHECK(check.looks_like == "mm");
+  CHECK_THROWS_WITH(pipeline::require_plausible_units(mislabelled, "", scene.calibration, "take.trc"),
+                    Contains("take.trc") && Contains("read in cm as it states") && Contains("look like mm") &&
+                        Contains("--units mm"));
+  // Told the right units, it passes; a take stating none is read in the calibration's.
+  CHECK_NOTHROW(pipeline::require_plausible_units(mislabelled, "mm", scene.calibration, "take.trc"));
+  formats::MarkerTake unstated = mm;
+  unstated.units.clear();
+  CHECK_THROWS_WITH(pipeline::require_plausible_units(unstated, "", scene.calibration, "take.trc"),
+                    Contains("in the calibration's cm (it states no units)") && Contains("look like mm"));
+  // A face 4 times too large is no unit's mistake.
+  const formats::MarkerTake huge = scene_take(scene, 10, "cm", 4.0);
+  CHECK_THROWS_WITH(pipeline::require_plausible_units(huge, "", scene.calibration, "take.trc"),
+                    Contains("in no unit") && !Contains("--units"));
+}
+
+// ---- Labelling that recovers ----
+
+TEST_CASE("labelling recovers within a few frames of a label swap, an occlusion while the head moves 3 cm and a ghost") {
+  const GlitchScene scene;  // 24 face and 4 head markers, 120 Hz, cm
+  std::vector<MarkerFrame> frames;
+  for (int i = 0; i < 260; ++i) frames.push_back(scene.frame(i));
+  test::LabelEvents e;
+  e.swap_a = 3, e.swap_b = 4, e.swap_from = 40;
+  e.occluded = 10, e.occluded_from = 80, e.occluded_to = 140, e.head_move = Eigen::Vector3d(3.0, 1.0, 0.0);
+  e.ghosted = 15, e.ghost_offset = Eigen::Vector3d(0.4, 0.0, 0.0), e.ghost_from = 170, e.ghost_to = 200;
+  for (const bool cloud : {false, true}) {
+    INFO((cloud ? "labelling an unlabelled cloud" : "checking the labels"));
+    const std::vector<bool> right = test::labelled_frames_right(scene.rig, scene.calibration, scene.labels, frames, "cm", e, cloud);
+    const std::size_t before = std::size_t(std::count(right.begin(), right.begin() + 40, true));
+    const std::size_t after_swap = test::frames_to_recover(right, e.swap_from);
+    const std::size_t after_occlusion = test::frames_to_recover(right, e.occluded_to);
+    const std::size_t after_ghost = test::frames_to_recover(right, e.ghost_to);
+    WARN((cloud ? "cloud" : "check") << ": right before the events in " << before << " of 40 frames; frames to recover after the "
+         "swap " << after_swap << ", the occlusion " << after_occlusion << ", the ghost " << after_ghost);
+    CHECK(before == 40);
+    CHECK(after_swap <= 3);
+    CHECK(after_occlusion <= 3);
+    CHECK(after_ghost <= 3);
+  }
+}
+
+TEST_CASE("the label check corrects a take that starts with two labels swapped and one whose markers all drop out while swapped") {
+  const GlitchScene scene;
+  std::vector<MarkerFrame> frames;
+  for (int i = 0; i < 120; ++i) frames.push_back(scene.frame(i));
+  test::LabelEvents from_start;
+  from_start.swap_a = 3, from_start.swap_b = 4, from_start.swap_from = 0;
+  const std::vector<bool> right = test::labelled_frames_right(scene.rig, scene.calibration, scene.labels, frames, "cm", from_start, false);
+  CHECK(std::count(right.begin(), right.end(), true) == 120);
+
+  // Every marker missing for 10 frames after the swap: the check starts again from the labels' frame.
+  std::vector<MarkerFrame> gap = frames;
+  for (std::size_t f = 50; f < 60; ++f)
+    for (Marker& m : gap[f].markers) m.flags = kMarkerMissing;
+  test::LabelEvents later;
+  later.swap_a = 3, later.swap_b = 4, later.swap_from = 30;
+  const std::vector<bool> after_gap = test::labelled_frames_right(scene.rig, scene.calibration, scene.labels, gap, "cm", later, false);
+  CHECK(test::frames_to_recover(after_gap, 60) == 0);
 }

@@ -32,7 +32,7 @@ struct Options {
   bool json = false;
   bool truth_weights = false;
   // Real takes (--calib).
-  std::string calib;
+  std::string calib, take_units;
   int every = 10;
   int offline_every = 200;
   int max_frames = 0;
@@ -238,6 +238,9 @@ void add_eval_command(CLI::App& app, int& exit_code) {
       ->capture_default_str()->check(CLI::PositiveNumber)->needs(calib);
   cmd->add_option("--offline-every", o->offline_every, "With --calib: solve offline solvers (meshik) on every Nth frame only")
       ->capture_default_str()->check(CLI::PositiveNumber)->needs(calib);
+  cmd->add_option("--units", o->take_units, "With --calib: the take's units mm|cm|m, when it states them wrongly")
+      ->check(CLI::IsMember({"mm", "cm", "m"}))
+      ->needs(calib);
   cmd->add_option("--max-frames", o->max_frames, "With --calib: only the first N frames (0: all)")->needs(calib);
   cmd->add_flag("--progress", o->progress, "With --calib: progress on stderr (default: on a terminal)")->needs(calib);
   cmd->add_option("--solver", o->solvers, "all, or a comma-separated list of solvers")->capture_default_str();
@@ -247,7 +250,7 @@ void add_eval_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
   add_solve_config_options(*cmd, o->settings);
   cmd->callback([o, &exit_code] {
-    const pipeline::SolveSettings settings = pipeline::solve_settings(load_solve_config(o->settings).values);
+    const pipeline::SolveSettings settings = pipeline::solve_settings(load_solve_config(o->settings).values, pipeline::SolveContext::kOffline);
     if (!o->calib.empty()) {
       if (o->truth_weights) throw Error("--truth-weights needs a synthetic take's truth, not --calib");
       TakeEvalOptions t;
@@ -256,6 +259,7 @@ void add_eval_command(CLI::App& app, int& exit_code) {
       t.calib = o->calib;
       t.solvers = o->solvers;
       t.rig_units = o->rig_units_override;
+      t.units = o->take_units;
       t.every = o->every;
       t.offline_every = o->offline_every;
       t.max_frames = o->max_frames;

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -11,6 +12,7 @@
 #include "formats/take.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/source_units.hpp"
 #include "solver/collide/metrics.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
@@ -59,6 +61,31 @@ struct SolverRun {
   int held = 0;
 };
 
+// The delay d (seconds) that best explains the filtered targets as the unfiltered ones d
+// earlier: argmin_d of the mean squared distance |filtered(t) - raw(t - d)| over the
+// markers present, with raw(t - d) interpolated linearly between frames; searched in steps
+// of a tenth of a frame up to 20 frames.
+double filter_lag_s(const std::vector<Eigen::Matrix3Xd>& raw, const std::vector<Eigen::Matrix3Xd>& filtered, double rate_hz) {
+  constexpr int kMaxFrames = 20, kSteps = 10;
+  double best_cost = std::numeric_limits<double>::infinity(), best_shift = 0.0;
+  for (int step = 0; step <= kMaxFrames * kSteps; ++step) {
+    const double shift = double(step) / kSteps;
+    const auto whole = std::size_t(shift);
+    const double frac = shift - double(whole);
+    double cost = 0.0;
+    std::size_t n = 0;
+    for (std::size_t f = whole + 1; f < raw.size(); ++f) {
+      const Eigen::Matrix3Xd earlier = (1.0 - frac) * raw[f - whole] + frac * raw[f - whole - 1];
+      for (Eigen::Index k = 0; k < earlier.cols(); ++k) {
+        const double d2 = (filtered[f].col(k) - earlier.col(k)).squaredNorm();
+        if (std::isfinite(d2)) cost += d2, ++n;
+      }
+    }
+    if (n > 0 && cost / double(n) < best_cost) best_cost = cost / double(n), best_shift = shift;
+  }
+  return best_shift / rate_hz;
+}
+
 }  // namespace
 
 nlohmann::json evaluate_take(const TakeEvalOptions& o) {
@@ -71,7 +98,8 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
   const std::size_t F = o.max_frames > 0 ? std::min<std::size_t>(take.frames.size(), std::size_t(o.max_frames)) : take.frames.size();
 
-  pipeline::MarkerMapper mapper(cal, take.labels, take.units, o.settings.mapper);
+  pipeline::require_plausible_units(take, o.units, cal, o.take);
+  pipeline::MarkerMapper mapper(cal, take.labels, o.units.empty() ? take.units : o.units, o.settings.mapper);
   if (!mapper.stabilising() && o.settings.mapper.stabilise_head)
     throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
                                          mapper.stable_markers_found(), cal.stable_markers.size()));
@@ -107,6 +135,12 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     return count;
   };
   auto mapped = mapper.make_output();
+  // With the filter on, the solvers see filtered targets; fit and held-out error are measured
+  // against the unfiltered ones, so that the lag the filter adds counts as error.
+  std::optional<pipeline::OneEuroFilter> filter;
+  if (o.settings.filter.targets) filter.emplace(pipeline::make_target_filter(o.settings.filter, K, cal.rig_mm_per_unit));
+  Eigen::Matrix3Xd raw_targets(3, K);
+  std::vector<Eigen::Matrix3Xd> raw_history, filtered_history;  // per frame, for the filter's lag
   Summary stable_mm;
   int head_held = 0;
   std::size_t sampled = 0;
@@ -116,6 +150,12 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   const auto& bindings = model->markers;
   for (std::size_t f = 0; f < F; ++f) {
     mapper.process(take.frames[f], mapped);
+    raw_targets = mapped.targets;
+    if (filter) {
+      filter->filter(mapped.targets, mapped.present, take.frames[f].source_time_ns);
+      raw_history.push_back(raw_targets);
+      filtered_history.push_back(mapped.targets);
+    }
     head_held += mapped.head_held;
     for (std::size_t i = 0; i < mapper.stable_residual_count(); ++i)
       if (const double r = mapper.stable_residual_mm(i); !std::isnan(r)) stable_mm.add(r);
@@ -130,7 +170,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       run.held += (run.result.status & kSolvedTooFewMarkers) != 0;
       for (Eigen::Index k = 0; k < K; ++k)
         if (mapped.present[std::size_t(k)])
-          run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
+          run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - raw_targets.col(k)).norm() * rig_mm);
       if (run.frames_solved >= 2 && !run.offline) {
         // Second difference: how much the mesh shakes beyond steady motion.
         run.jitter_mm.add(((run.result.vertices - 2.0 * run.previous + run.previous2).colwise().norm().mean()) * rig_mm);
@@ -153,7 +193,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
         present[std::size_t(k)] = 0;
         run.held_out[i]->solve(mapped.targets, present, run.held_result);
         if (run.held_result.status & kSolvedTooFewMarkers) continue;
-        run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
+        run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - raw_targets.col(k)).norm() * rig_mm);
       }
     }
     bar.update(f + 1, F);
@@ -177,6 +217,13 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
                             "flips on frames 0, every, 2*every, ...; held-out solvers see only those frames. Offline solvers "
                             "(meshik) are solved on frames 0, offline_every, ... only, and report no jitter"}};
   j["stable_residual_mm"] = stable_mm.json();
+  if (filter) {
+    const pipeline::OneEuroParams& p = o.settings.filter.target_params;
+    j["filter"] = {{"min_cutoff_hz", p.min_cutoff_hz},
+                   {"beta", p.beta},
+                   {"d_cutoff_hz", p.d_cutoff_hz},
+                   {"lag_ms", filter_lag_s(raw_history, filtered_history, take.rate_hz > 0 ? take.rate_hz : 60.0) * 1e3}};
+  }
   j["head_pose_held_frames"] = head_held;
   j["rest_intersections"] = neutral_intersections;
   // Rig mm to the actor's mm: take length = rig length / scale, in the take's units.

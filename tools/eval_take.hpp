@@ -12,6 +12,7 @@ namespace facecap::tools {
 
 struct TakeEvalOptions {
   std::string rig, take, calib, solvers = "all", rig_units;
+  std::string units;       // the take's, when it states them wrongly (empty: as stated)
   int every = 10;          // held-out and mesh checks on every Nth frame (all frames solved)
   int offline_every = 200; // offline solvers (meshik, ~0.6 s a solve): only every Nth frame, no jitter
   int max_frames = 0;      // 0: the whole take

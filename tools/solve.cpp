@@ -15,6 +15,7 @@
 #include "pipeline/recording_header.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
+#include "pipeline/source_units.hpp"
 #include "tools/align_support.hpp"
 #include "tools/commands.hpp"
 #include "tools/progress.hpp"
@@ -25,7 +26,7 @@ namespace facecap::tools {
 namespace {
 
 struct Options {
-  std::string rig, calib, take, output, solver, rig_units;
+  std::string rig, calib, take, output, solver, rig_units, units;
   bool force = false, quiet = false, vertices = false, check_labels = false;
   SolveConfigOptions settings;
 };
@@ -67,9 +68,10 @@ void run_solve(const Options& o) {
   const formats::MarkerTake take = formats::read_take(o.take);
   for (const auto& w : take.warnings) fmt::print(stderr, "facecap: warning: {}: {}\n", o.take, w);
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
+  pipeline::require_plausible_units(take, o.units, cal, o.take);
 
-  const pipeline::SourceDescription source{take.labels, take.units};
-  pipeline::SolveSettings solve_settings = pipeline::solve_settings(settings.values);
+  const pipeline::SourceDescription source{take.labels, o.units.empty() ? take.units : o.units};
+  pipeline::SolveSettings solve_settings = pipeline::solve_settings(settings.values, pipeline::SolveContext::kOffline);
   solve_settings.check_labels = o.check_labels;
   pipeline::SolvePipeline solve(rig, cal, source, solve_settings);
   if (!cal.stable_markers.empty() && solve_settings.mapper.stabilise_head && !solve.mapper().stabilising())
@@ -84,7 +86,7 @@ void run_solve(const Options& o) {
   if (fcrec) {
     const formats::RecordingHeader header = pipeline::make_recording_header(
         rig, cal, source, fmt::format("facecap solve --solver {} of {}", method, o.take), take.rate_hz,
-        pipeline::solve_settings_toml(settings.values));
+        pipeline::solve_settings_toml(settings.values, pipeline::SolveContext::kOffline));
     recording = std::make_unique<formats::RecordingWriter>(output, header, formats::RecordingWriter::Options{.overwrite = o.force});
   }
   ProgressBar bar(fmt::format("solving {} ({})", std::filesystem::path(o.take).filename().string(), method), !o.quiet);
@@ -133,6 +135,9 @@ void add_solve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--solver", opts->solver, "nonlinear, linear, dt or meshik (offline only: slow); the same as --set "
                                             "solver.method=NAME");
   cmd->add_option("--rig-units", opts->rig_units, "Rig units mm|cm|m (default: guessed from the face's size)");
+  cmd->add_option("--units", opts->units, "The take's units mm|cm|m, when it states them wrongly or not at all "
+                                          "(default: as it states them)")
+      ->check(CLI::IsMember({"mm", "cm", "m"}));
   add_solve_config_options(*cmd, opts->settings);
   cmd->add_flag("--check-labels", opts->check_labels, "Check the take's labels each frame and correct swaps");
   cmd->add_flag("--vertices", opts->vertices, "Store solved meshes in a .fcrec (large)");

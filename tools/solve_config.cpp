@@ -9,7 +9,7 @@
 namespace facecap::tools {
 
 void add_solve_config_options(CLI::App& command, SolveConfigOptions& options) {
-  command.add_option("--config", options.file, "facecapd configuration whose [solver] section (and "
+  command.add_option("--config", options.file, "facecapd configuration whose [solver] and [filter] sections (and "
                                                "calibration.stabilise_head) to solve with")
       ->check(CLI::ExistingFile);
   command.add_option("--set", options.sets, "Override one solve setting, e.g. --set solver.alpha=0.2 (repeatable)");
@@ -20,7 +20,7 @@ SolveConfig load_solve_config(const SolveConfigOptions& options, const std::opti
   for (const std::string& set : options.sets) {
     const std::string key = set.substr(0, set.find('='));
     if (!pipeline::is_solve_setting(key.substr(0, key.find_last_not_of(" \t") + 1)))
-      throw Error(fmt::format("--set {}: only the [solver] keys and calibration.stabilise_head affect a solve", set));
+      throw Error(fmt::format("--set {}: only the [solver] and [filter] keys and calibration.stabilise_head, label_markers and max_marker_speed_mm_s affect a solve", set));
   }
   SolveConfig out;
   const std::string with_sets = options.sets.empty() ? "" : " with --set";

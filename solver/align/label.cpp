@@ -83,6 +83,7 @@ MarkerLabeller::MarkerLabeller(std::vector<std::string> labels, Eigen::Matrix3Xd
   velocity_.setZero(3, K);
   predicted_ = reference_;
   aligned_reference_ = reference_;
+  last_in_reference_ = reference_;
   lost_frames_.assign(Ks, 0);
   ever_seen_.assign(Ks, 0);
   cost_.assign(Ks * (P + Ks), 0.0);
@@ -90,6 +91,7 @@ MarkerLabeller::MarkerLabeller(std::vector<std::string> labels, Eigen::Matrix3Xd
   assigned_point_.assign(Ks, -1);
   own_label_.assign(P, -1);
   no_label_.assign(P, -1);
+  claimed_.assign(P, 0);
   fit_weight_.assign(Ks, 0.0);
   fit_src_.resize(3, K);
   fit_dst_.resize(3, K);
@@ -100,12 +102,16 @@ void MarkerLabeller::reset() noexcept {
   std::fill(lost_frames_.begin(), lost_frames_.end(), 0);
   std::fill(ever_seen_.begin(), ever_seen_.end(), uint8_t(0));
   velocity_.setZero();
+  set_pose_known_ = false;
 }
 
 void MarkerLabeller::predict() noexcept {
-  for (Eigen::Index k = 0; k < marker_count(); ++k)
-    predicted_.col(k) = lost_frames_[std::size_t(k)] == 0 ? Eigen::Vector3d(last_.col(k) + velocity_.col(k))
-                                                          : Eigen::Vector3d(last_.col(k));
+  for (Eigen::Index k = 0; k < marker_count(); ++k) {
+    if (lost_frames_[std::size_t(k)] == 0)
+      predicted_.col(k) = last_.col(k) + velocity_.col(k);
+    else
+      predicted_.col(k) = set_pose_known_ ? set_pose_.apply(Eigen::Vector3d(last_in_reference_.col(k))) : Eigen::Vector3d(last_.col(k));
+  }
 }
 
 int MarkerLabeller::assign(int n, std::span<const int> own_label, bool use_margin, double gate_scale) noexcept {
@@ -176,6 +182,21 @@ void MarkerLabeller::update(int n) noexcept {
     lost_frames_[ks] = 0;
     ever_seen_[ks] = 1;
   }
+  // The set's rigid motion from the markers seen this frame; their last positions carried
+  // back by it (a lost marker keeps the one it had when last seen).
+  int seen = 0;
+  for (Eigen::Index k = 0; k < marker_count(); ++k) {
+    const bool found = assigned_point_[std::size_t(k)] >= 0;
+    fit_weight_[std::size_t(k)] = found ? 1.0 : 0.0;
+    fit_src_.col(k) = reference_.col(k);
+    fit_dst_.col(k) = found ? Eigen::Vector3d(last_.col(k)) : Eigen::Vector3d::Zero();
+    seen += found;
+  }
+  set_pose_known_ = seen >= 3 && fit_similarity(fit_src_, fit_dst_, fit_weight_, false, set_pose_);
+  if (!set_pose_known_) return;
+  const Eigen::Matrix3d back = set_pose_.rotation.transpose();
+  for (Eigen::Index k = 0; k < marker_count(); ++k)
+    if (assigned_point_[std::size_t(k)] >= 0) last_in_reference_.col(k) = back * (last_.col(k) - set_pose_.translation);
 }
 
 LabelStats MarkerLabeller::label(std::span<const Eigen::Vector3d> points, MarkerFrame& out) noexcept {
@@ -242,10 +263,19 @@ LabelStats MarkerLabeller::check(MarkerFrame& frame) noexcept {
     assigned = assign(n, own_label_, true, 1.0);
   }
   if (!tracking_ || assigned < int(std::ceil(params_.reacquire_fraction * double(K)))) {
-    // No usable prediction: trust the labels this frame.
-    for (Eigen::Index k = 0; k < K; ++k) assigned_point_[std::size_t(k)] = -1;
-    for (int j = 0; j < n; ++j) assigned_point_[std::size_t(own_label_[std::size_t(j)])] = j;
-    assigned = n;
+    // No usable prediction: the reference shape moved onto the points decides, with the
+    // labels' margin (so a take that starts swapped, or is swapped when the set is lost,
+    // is corrected); a marker no gate gives a point keeps the one its label gives, if free.
+    acquire(n);
+    assign(n, own_label_, true, params_.max_gate / params_.gate);
+    std::fill(claimed_.begin(), claimed_.begin() + n, uint8_t{0});
+    for (Eigen::Index k = 0; k < K; ++k)
+      if (assigned_point_[std::size_t(k)] >= 0) claimed_[std::size_t(assigned_point_[std::size_t(k)])] = 1;
+    for (int j = 0; j < n; ++j) {
+      const auto own = std::size_t(own_label_[std::size_t(j)]);
+      if (!claimed_[std::size_t(j)] && assigned_point_[own] < 0) assigned_point_[own] = j, claimed_[std::size_t(j)] = 1;
+    }
+    assigned = int(std::count_if(assigned_point_.begin(), assigned_point_.end(), [](int j) { return j >= 0; }));
     stats.initialised = true;
   }
   tracking_ = true;

@@ -14,6 +14,7 @@
 #include <Eigen/Core>
 
 #include "core/frame.hpp"
+#include "solver/align/geometry.hpp"
 
 namespace facecap::align {
 
@@ -65,8 +66,10 @@ class MarkerLabeller {
 
   // Checks a labelled frame whose markers are in this labeller's label order (K markers):
   // swaps the positions of wrongly labelled markers back, flags them kMarkerRelabelled,
-  // and marks points that fit no marker's gate kMarkerOutlier | kMarkerMissing.
-  // Real-time safe.
+  // and marks points that fit no marker's gate kMarkerOutlier | kMarkerMissing. On the
+  // first frame, and after losing the set, the reference shape is moved onto the points
+  // (as label() acquires) and decides with the labels' margin; a marker it finds no point
+  // for keeps its labelled point. Real-time safe.
   LabelStats check(MarkerFrame& frame) noexcept;
 
   void reset() noexcept;
@@ -86,10 +89,18 @@ class MarkerLabeller {
   LabellerParams params_;
   AssignmentSolver solver_;
   Eigen::Matrix3Xd points_, last_, velocity_, predicted_, aligned_reference_;
+  // The set's rigid motion (reference -> the last frame's points, fitted to the markers
+  // assigned) and each marker's last position carried back by it: a lost marker is
+  // predicted where the set's motion has taken it since, so it is found again after the
+  // head moved while it was hidden.
+  Similarity set_pose_;
+  bool set_pose_known_ = false;
+  Eigen::Matrix3Xd last_in_reference_;
   std::vector<int> lost_frames_;      // K: frames since last seen (0 = seen last frame)
   std::vector<uint8_t> ever_seen_;
   std::vector<double> cost_;
   std::vector<int> row_to_col_, assigned_point_, own_label_, no_label_;
+  std::vector<uint8_t> claimed_;  // max_points: check()'s (re)initialisation, a point taken
   std::vector<double> fit_weight_;
   Eigen::Matrix3Xd fit_src_, fit_dst_;
   bool tracking_ = false;
