@@ -2,6 +2,7 @@
 // Synthetic marker takes of the built-in face for the alignment tests: markers bound to
 // the rig, moved by its articulated ground truth, then put through a rigid transform and
 // a unit change into "capture" coordinates with Gaussian noise.
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -12,6 +13,8 @@
 #include <Eigen/Geometry>
 
 #include "core/frame.hpp"
+#include "pipeline/solve_pipeline.hpp"
+#include "solver/align/calibrate_take.hpp"
 #include "solver/align/geometry.hpp"
 #include "solver/builtin_face.hpp"
 #include "solver/face_solver.hpp"
@@ -106,6 +109,162 @@ inline SyntheticTake make_synthetic_take(const SyntheticTakeOptions& o) {
     t.weights.push_back(w);
   }
   return t;
+}
+
+// A take as an optical facial set records it: face markers on an actor whose face is the
+// rig's scaled by face_scale, a head rig (headband markers head_rig_mm off the skin,
+// rigid with the head), and an "Unlabeled" ghost slot present in ghost_fraction of the
+// frames; any rotation and position, mm. The face rests for rest_frames, then blends
+// six of the rig's shapes smoothly (linear blend), with a few degrees of head sway.
+struct HeadRigTakeOptions {
+  unsigned seed = 1;
+  double face_scale = 1.0;
+  double head_rig_mm = 40.0;
+  int head_markers = 4;
+  double ghost_fraction = 0.01;
+  double noise_mm = 0.2;
+  int rest_frames = 60;
+  int motion_frames = 120;
+  double rate_hz = 60.0;
+  double rig_mm_per_unit = 10.0;
+};
+
+struct HeadRigTake {
+  SyntheticTake take;              // labels: the layout's, then H0.., then "Unlabeled"
+  std::size_t face_markers = 0;
+  std::vector<std::string> head_labels;
+};
+
+inline HeadRigTake make_head_rig_take(const Rig& rig, std::vector<MarkerBinding> layout, const HeadRigTakeOptions& o) {
+  std::mt19937 rng(o.seed);
+  std::normal_distribution<double> g;
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  HeadRigTake out;
+  SyntheticTake& t = out.take;
+  t.layout = std::move(layout);
+  out.face_markers = t.layout.size();
+  for (const auto& b : t.layout) t.labels.push_back(b.label);
+  // Head rig: forehead vertices across the top of the face's front, pushed head_rig_mm
+  // out along their normals.
+  const Eigen::Index V = rig.vertex_count();
+  Eigen::Matrix3Xd normal = Eigen::Matrix3Xd::Zero(3, V);
+  for (Eigen::Index tri = 0; tri < rig.triangle_count(); ++tri) {
+    const Eigen::Vector3d a = rig.neutral.col(rig.triangles(0, tri)), b = rig.neutral.col(rig.triangles(1, tri)),
+                          c = rig.neutral.col(rig.triangles(2, tri));
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    for (int j = 0; j < 3; ++j) normal.col(rig.triangles(j, tri)) += n;
+  }
+  const BoundingBox box = bounding_box(rig.neutral);
+  std::vector<int> head_vertices;
+  for (int h = 0; h < o.head_markers; ++h) {
+    const double x = box.min.x() + box.size().x() * (0.25 + 0.5 * h / std::max(1, o.head_markers - 1));
+    const double y = box.max.y() - box.size().y() * (h % 2 == 0 ? 0.12 : 0.2);
+    int best = -1;
+    double best_d = 1e300;
+    for (Eigen::Index v = 0; v < V; ++v) {
+      if (normal.col(v).normalized().z() < 0.5) continue;  // facing forwards
+      const double d = std::hypot(rig.neutral(0, v) - x, rig.neutral(1, v) - y) - 1e-3 * rig.neutral(2, v);
+      if (d < best_d) best_d = d, best = int(v);
+    }
+    head_vertices.push_back(best);
+    out.head_labels.push_back("H" + std::to_string(h));
+    t.labels.push_back(out.head_labels.back());
+  }
+  t.labels.push_back("Unlabeled");
+  t.take_mm_per_unit = 1.0;
+  t.rig_to_take.rotation = random_rotation(rng);
+  t.rig_to_take.scale = o.rig_mm_per_unit;
+  t.rig_to_take.translation = Eigen::Vector3d(g(rng), g(rng), g(rng)) * 300.0;
+  // The actor's face: the rig's scaled about its centre.
+  const Eigen::Vector3d centre = rig.neutral.rowwise().mean();
+  std::vector<Eigen::Index> shapes;
+  for (int i = 0; i < 6; ++i) shapes.push_back(Eigen::Index(u(rng) * double(rig.shape_count() - 1)));
+  const int F = o.rest_frames + o.motion_frames;
+  for (int f = 0; f < F; ++f) {
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+    if (f >= o.rest_frames)
+      for (std::size_t i = 0; i < shapes.size(); ++i)
+        w[shapes[i]] = 0.4 * (1.0 - std::cos(2.0 * std::numbers::pi * (0.5 + 0.2 * double(i)) * (f - o.rest_frames) / o.rate_hz));
+    Eigen::Matrix3Xd pose = rig.neutral;
+    for (Eigen::Index s = 0; s < rig.shape_count(); ++s)
+      if (w[s] != 0.0) pose += w[s] * Eigen::Map<const Eigen::Matrix3Xd>(rig.deltas.col(s).data(), 3, V);
+    pose = ((pose.colwise() - centre) * o.face_scale).colwise() + centre;
+    const double a = 3.0 * std::numbers::pi / 180.0 * std::sin(2.0 * std::numbers::pi * 0.3 * f / o.rate_hz);
+    align::Similarity head;
+    head.rotation = Eigen::AngleAxisd(a, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
+    head.translation = Eigen::Vector3d(0.5 * std::sin(0.05 * f), 0.3 * std::cos(0.04 * f), 0.0);
+    MarkerFrame frame;
+    frame.frame_no = f + 1;
+    frame.source_time_ns = int64_t(double(f) / o.rate_hz * 1e9);
+    auto add = [&](const Eigen::Vector3d& rig_point, bool present) {
+      Marker m;
+      m.id = int32_t(frame.markers.size());
+      m.label.assign(t.labels[frame.markers.size()]);
+      m.position = t.rig_to_take.apply(head.apply(rig_point)) + Eigen::Vector3d(g(rng), g(rng), g(rng)) * o.noise_mm;
+      if (!present) m.flags |= kMarkerMissing;
+      frame.markers.push_back(m);
+    };
+    for (const auto& b : t.layout) add(layout_point(b, pose), true);
+    for (int v : head_vertices) {
+      const Eigen::Vector3d skin = ((rig.neutral.col(v) - centre) * o.face_scale) + centre;
+      add(skin + normal.col(v).normalized() * (o.head_rig_mm / o.rig_mm_per_unit), true);
+    }
+    add(centre + Eigen::Vector3d(g(rng), g(rng), g(rng)) * (30.0 / o.rig_mm_per_unit), u(rng) < o.ghost_fraction);
+    t.frames.push_back(std::move(frame));
+    t.weights.push_back(w);
+  }
+  return out;
+}
+
+// Calibrates a head-rig take as `facecap calibrate` does (auto-neutral, everything found)
+// and checks what issue 20 asks: the ghost slot left out, the head markers found and kept
+// off the face, the actor's face size recovered (no pull towards small), every face marker
+// bound within 1 mm of where it truly sits, and the take solved through the pipeline
+// facecapd runs (the head markers stabilising) at rest near the rig's neutral. Returns the
+// worst bound point's distance from the truth, rig mm.
+inline double check_head_rig_calibration(const Rig& rig, const std::vector<MarkerBinding>& layout, const HeadRigTakeOptions& o) {
+  const HeadRigTake h = make_head_rig_take(rig, layout, o);
+  align::TakeCalibrationOptions options;
+  options.neutral.rate_hz = o.rate_hz;
+  options.neutral.take_mm_per_unit = 1.0;
+  options.calibration.rig_mm_per_unit = o.rig_mm_per_unit;
+  const align::TakeCalibration t = align::calibrate_take(rig, h.take.labels, h.take.frames, options);
+  const align::Calibration& cal = t.calibration;
+  INFO("seed " << o.seed << ", face " << o.face_scale << "x the rig's: scale " << cal.take_to_rig.scale << ", face size ratio "
+               << cal.face_size_ratio() << ", head markers " << cal.head_markers.size() << ", start " << cal.start_index);
+  CHECK(cal.take_mm_per_unit == 1.0);
+  CHECK(t.ignored_slots == std::vector<int>{int(h.take.labels.size()) - 1});
+  CHECK(cal.neutral_of("Unlabeled") == nullptr);
+  for (const auto& label : h.head_labels) {
+    INFO(label);
+    CHECK(cal.find(label) < 0);
+    CHECK(cal.find_head(label) >= 0);
+  }
+  CHECK(!cal.scale_at_band_limit);
+  CHECK(std::abs(cal.face_size_ratio() / o.face_scale - 1.0) < 0.02);
+  REQUIRE(cal.markers.size() == h.face_markers);
+  double worst = 0.0;
+  for (std::size_t k = 0; k < h.face_markers; ++k) {
+    const double mm = (cal.markers[k].bound_point - layout_point(layout[k], rig.neutral)).norm() * o.rig_mm_per_unit;
+    INFO(h.take.labels[k] << " bound " << mm << " mm from the truth");
+    CHECK(mm < 1.0);
+    worst = std::max(worst, mm);
+  }
+  pipeline::SolvePipeline solve(rig, cal, {h.take.labels, "mm"}, pipeline::SolveSettings{});
+  SolvedFrame solved = solve.make_solved_frame(true);
+  double rest_mm = 0.0;
+  uint32_t held = 0;
+  for (int f = 0; f < o.rest_frames; ++f) {
+    solve.process(h.take.frames[std::size_t(f)], solved);
+    rest_mm = std::max(rest_mm, (solved.vertices.cast<double>() - rig.neutral).colwise().norm().maxCoeff() * o.rig_mm_per_unit);
+    held |= solved.flags & kSolvedHeadPoseHeld;
+  }
+  INFO("largest vertex distance from the rig's neutral at rest " << rest_mm << " mm (marker noise " << o.noise_mm << " mm)");
+  CHECK(held == 0);
+  // The pinned solve passes the markers' noise into the mesh (noise-free, this is 0):
+  // 1.0-1.5 mm at 0.2 mm noise on the built-in face.
+  CHECK(rest_mm < 2.0);
+  return worst;
 }
 
 }  // namespace facecap::test

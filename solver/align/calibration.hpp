@@ -67,6 +67,7 @@ struct Calibration {
   double hull_rms_mm = 0.0;     // rig mm, the winning start's hull ICP residual
   double trimmed_rms_mm = 0.0;  // rig mm, surface ICP residual over the kept markers
   int start_index = -1;         // which start won (diagnostics)
+  bool scale_at_band_limit = false;  // the fit ended at its scale band's end (not stored: a note says so)
   std::vector<std::string> notes;  // what the operator should know (excluded markers, ...)
   // Shapes left out of Eq. 2 (find_unobserved_shapes). observability_known is false for
   // profiles written before it was stored: readers decide it then from the bindings.
@@ -74,6 +75,9 @@ struct Calibration {
   double observable_shape_mm = kObservableShapeMm;  // the threshold it was decided with
   std::vector<UnobservedShape> unobserved_shapes;
 
+  // The actor's face size over the rig's: actor mm per rig mm (1 / take_to_rig's scale,
+  // in millimetres on both sides).
+  double face_size_ratio() const { return take_mm_per_unit / (take_to_rig.scale * rig_mm_per_unit); }
   // Index of a label in markers, or -1.
   int find(const std::string& label) const;
   // Index of a label in head_markers, or -1.
