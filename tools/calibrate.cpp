@@ -135,7 +135,9 @@ void run_calibrate(const Options& o, bool frame_given) {
   cal.observable_shape_mm = o.observable_mm;
   align::find_unobserved_shapes(cal, rig);
   std::vector<std::string> unobserved;
-  for (const auto& u : cal.unobserved_shapes) unobserved.push_back(fmt::format("{} ({:.2f} mm)", u.name, u.max_displacement_mm));
+  for (const auto& u : cal.unobserved_shapes)
+    unobserved.push_back(u.same_as.empty() ? fmt::format("{} ({:.2f} mm)", u.name, u.max_displacement_mm)
+                                           : fmt::format("{} (as {}, {:.2f} mm apart)", u.name, u.same_as, u.distinct_mm));
 
   if (cal.scale_at_band_limit)
     fmt::print(stderr, "facecap: warning: {}: the scale ended at the end of its search band ({:.4f}; the face would be {:.2f}x "
@@ -177,6 +179,10 @@ void run_calibrate(const Options& o, bool frame_given) {
     nlohmann::json shapes = nlohmann::json::object();
     for (const auto& u : cal.unobserved_shapes) shapes[u.name] = u.max_displacement_mm;
     j["unobserved_shapes"] = shapes;
+    nlohmann::json same = nlohmann::json::object();
+    for (const auto& u : cal.unobserved_shapes)
+      if (!u.same_as.empty()) same[u.name] = {{"same_as", u.same_as}, {"distinct_mm", u.distinct_mm}};
+    j["indistinct_shapes"] = same;
     j["notes"] = cal.notes;
     std::puts(j.dump(2).c_str());
     return;
@@ -205,8 +211,9 @@ void run_calibrate(const Options& o, bool frame_given) {
   fmt::print("stable markers: {}; after stabilisation their residual median is {:.3f} mm over {} frames ({} held)\n",
              fmt::join(cal.stable_markers, ", "), stable_median, take.frames.size(), held);
   if (!unobserved.empty())
-    fmt::print("{} of {} shapes move no marker by {} mm at full weight: the markers cannot observe them, the weight fit "
-               "leaves them at 0: {}\n", unobserved.size(), rig.shape_count(), cal.observable_shape_mm, fmt::join(unobserved, ", "));
+    fmt::print("{} of {} shapes move no marker by {} mm at full weight, or move them within {} mm of a larger shape: the "
+               "markers cannot observe them, the weight fit leaves them at 0: {}\n",
+               unobserved.size(), rig.shape_count(), cal.observable_shape_mm, cal.distinct_shape_mm, fmt::join(unobserved, ", "));
   for (const auto& n : cal.notes) fmt::print("note: {}\n", n);
   fmt::print("wrote {}\n", o.output);
 }

@@ -31,7 +31,7 @@ namespace facecap::align {
 
 // 2: [[head_marker]] entries (written only by profiles that have them).
 // 3: [observability] and [[unobserved_shape]] (written by profiles that decided them).
-inline constexpr int kCalibrationProfileVersion = 3;
+inline constexpr int kCalibrationProfileVersion = 4;
 
 std::string write_calibration_profile(const Calibration& calibration);
 void save_calibration_profile(const std::filesystem::path& path, const Calibration& calibration);
