@@ -50,7 +50,11 @@ std::vector<TrianglePair> intersecting_pairs(const Eigen::Matrix3Xi& triangles, 
 int64_t count_new_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
                                      const Eigen::Matrix3Xd& positions);
 
-// Triangles whose normal points against their rest normal (dot product < 0).
+// The triangles whose normal points against their rest normal (dot product < 0), in
+// increasing order.
+std::vector<Eigen::Index> flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
+                                            const Eigen::Matrix3Xd& positions);
+// Their count.
 // Zero-area triangles (rest or current) are not counted.
 int64_t count_flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
                                 const Eigen::Matrix3Xd& positions);
