@@ -21,6 +21,7 @@
 #include "solver/align/stabilise.hpp"
 #include "solver/align/surface.hpp"
 #include "tests/align_test_support.hpp"
+#include "tests/head_rig_check.hpp"
 #include "tests/alloc_counter.hpp"
 #include "tests/test_support.hpp"
 

@@ -19,6 +19,7 @@
 #include "solver/rig.hpp"
 #include "solver/marker_layout.hpp"
 #include "tests/align_test_support.hpp"
+#include "tests/head_rig_check.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;

@@ -272,5 +272,25 @@ TEST_CASE("facecap eval on a real AnimFace take reports held-out error for every
     const double heldout = eval["solvers"][name]["heldout_mm"]["median"].get<double>();
     CHECK(heldout > 0.1);
     CHECK(heldout < 5.0);
+    // Flips and crossings by region, split into the rig's own (its linear blend of the
+    // same weights) and the solve's; the parts add up to the totals.
+    for (const char* what : {"flipped", "intersections"}) {
+      INFO(what);
+      const auto& m = eval["solvers"][name][what];
+      double in_blend = 0, added = 0;
+      for (const char* region : {"lips", "eyelids", "elsewhere"}) {
+        in_blend += m["per_checked_frame_by_region"][region]["in_rig_blend"].get<double>();
+        added += m["per_checked_frame_by_region"][region]["added_by_solve"].get<double>();
+      }
+      const double total = m[std::string(what) == "flipped" ? "triangles_per_checked_frame" : "new_pairs_per_checked_frame"];
+      CHECK(in_blend + added == Approx(total));
+      CHECK(m["added_by_solve_per_checked_frame"].get<double>() == Approx(added));
+      // The linear solve is the rig's linear blend: it adds nothing of its own.
+      if (std::string(name) == "linear") CHECK(added == 0.0);
+    }
   }
+  // ICT's lips fold and cross in its own shapes (its neutral has 124 crossing pairs at the
+  // lip corners): the lips hold most of what the linear blend shows.
+  const auto& lips = eval["solvers"]["linear"]["intersections"]["per_checked_frame_by_region"];
+  CHECK(lips["lips"]["in_rig_blend"].get<double>() > lips["elsewhere"]["in_rig_blend"].get<double>());
 }
