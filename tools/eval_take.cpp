@@ -93,6 +93,7 @@ struct SolverRun {
   Eigen::Matrix3Xd previous, previous2;                // the two previous frames' meshes
   int frames_solved = 0;
   Summary heldout_mm, fit_mm, jitter_mm, solve_ms;
+  std::vector<Summary> heldout_by_marker;              // one per held-out marker
   // The held-out error scaled by `scale`: in the actor's millimetres.
   nlohmann::json scaled(Summary& s, double scale) {
     Summary out;
@@ -136,6 +137,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     run.full = make_solver(method, model);
     run.result = run.full->make_result();
     for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(method, model));
+    run.heldout_by_marker.resize(face_markers.size());
     run.held_result = run.full->make_result();
     runs.push_back(std::move(run));
   }
@@ -214,7 +216,9 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
         present[std::size_t(k)] = 0;
         run.held_out[i]->solve(mapped.targets, present, run.held_result);
         if (run.held_result.status & kSolvedTooFewMarkers) continue;
-        run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm);
+        const double error = (binding_point(bindings[std::size_t(k)], run.held_result.vertices) - mapped.targets.col(k)).norm() * rig_mm;
+        run.heldout_mm.add(error);
+        run.heldout_by_marker[i].add(error);
       }
     }
     bar.update(f + 1, F);
@@ -245,8 +249,12 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   j["actor_mm_per_rig_mm"] = actor_mm_per_rig_mm;
   nlohmann::json per = nlohmann::json::object();
   for (auto& run : runs) {
+    nlohmann::json by_marker = nlohmann::json::object();
+    for (std::size_t i = 0; i < face_markers.size(); ++i)
+      by_marker[face_labels[i]] = run.scaled(run.heldout_by_marker[i], actor_mm_per_rig_mm);
     per[run.name] = {{"heldout_mm", run.heldout_mm.json()},
                      {"heldout_actor_mm", run.scaled(run.heldout_mm, actor_mm_per_rig_mm)},
+                     {"heldout_actor_mm_by_marker", by_marker},
                      {"fit_mm", run.fit_mm.json()},
                      {"jitter_mm", run.offline ? nlohmann::json(nullptr) : run.jitter_mm.json()},
                      {"intersections", {{"new_pairs_per_checked_frame", run.checked_frames ? double(run.intersections) / double(run.checked_frames) : 0.0},

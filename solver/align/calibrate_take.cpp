@@ -34,9 +34,6 @@ std::vector<int> find_head_markers(std::span<const MarkerFrame> frames, const st
                                    const TakeCalibration& t, const TakeCalibrationOptions& o) {
   const Calibration& c = t.calibration;
   const double take_mm = c.take_mm_per_unit;
-  std::vector<int> face_stable;
-  for (int s : t.stable_slots)
-    if (!contains(t.head_slots, s)) face_stable.push_back(s);
   double own = 0;
   int pairs = 0;
   for (std::size_t i = 0; i < t.stable_slots.size(); ++i)

@@ -93,8 +93,6 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
   NeutralFrame best;
   best.window_score = inf;
   best.candidate_frames = candidates;
-  for (std::size_t k = 0; k < K; ++k)
-    if (!required[k]) best.ignored_slots.push_back(int(k));
   for (std::size_t start = 0; start + W <= F; ++start) {
     double dsum = 0, vsum = 0;
     bool usable = true;

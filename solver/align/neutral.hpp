@@ -3,7 +3,7 @@
 // the face at rest is still and looks like the take's typical resting shape. Each frame
 // with every marker present is stabilised on the stable markers (marker slots present in
 // fewer than half of the frames, a ghost slot or a marker lost for most of the take, are
-// ignored and reported); per frame the RMS
+// ignored: mostly_present_slots); per frame the RMS
 // marker speed (mm/s, over 50 ms) and the largest marker distance (mm) to the median shape of the
 // stillest 30% of frames are measured; the
 // window (window_seconds) with the lowest mean of distance + speed_weight_s x speed wins,
@@ -35,7 +35,6 @@ struct NeutralFrame {
   double speed_mm_s = 0.0;       // mean RMS marker speed over the chosen window
   double window_score = 0.0;
   std::size_t candidate_frames = 0;  // frames with every marker present
-  std::vector<int> ignored_slots;    // present in fewer than half of the frames: not required
 };
 
 // stable_slots: markers for stabilisation (>= 3), e.g. from find_stable_markers. Throws

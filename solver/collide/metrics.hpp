@@ -51,11 +51,10 @@ int64_t count_new_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Ei
                                      const Eigen::Matrix3Xd& positions);
 
 // The triangles whose normal points against their rest normal (dot product < 0), in
-// increasing order.
+// increasing order. Zero-area triangles (rest or current) are not counted.
 std::vector<Eigen::Index> flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
                                             const Eigen::Matrix3Xd& positions);
 // Their count.
-// Zero-area triangles (rest or current) are not counted.
 int64_t count_flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
                                 const Eigen::Matrix3Xd& positions);
 
