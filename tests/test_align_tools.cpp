@@ -69,6 +69,24 @@ TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a syntheti
   REQUIRE(r.exit_code == 0);
   for (const auto& label : synthetic.labels) CHECK(r.out.find(label) != std::string::npos);
   CHECK(r.out.find("residual median") != std::string::npos);
+  // --head names markers for the head pose only; a --stable marker that --markers leaves
+  // out is one too. Neither is bound; both stabilise.
+  const std::string a = synthetic.labels[0], b = synthetic.labels[1], c = synthetic.labels[2];
+  std::string some;
+  for (std::size_t k = 3; k < synthetic.labels.size(); ++k) some += (some.empty() ? "" : ",") + synthetic.labels[k];
+  r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", trc.string(), "--markers", some, "--head", a + "," + b,
+                        "--stable", b + "," + c + "," + synthetic.labels[3], "-o", (dir / "heads.toml").string(), "--json"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto heads = nlohmann::json::parse(r.out);
+  CHECK(heads["head_markers"] == nlohmann::json({a, b, c}));
+  CHECK(heads["markers"].size() == synthetic.labels.size() - 3);
+  CHECK(heads["stable_markers"] == nlohmann::json({b, c, synthetic.labels[3]}));
+  CHECK(heads["scale_at_band_limit"] == false);
+  CHECK(std::abs(heads["face_size_ratio"].get<double>() - 1.0) < 0.02);
+  const auto head_profile = align::load_calibration_profile(dir / "heads.toml");
+  CHECK(head_profile.find(a) < 0);
+  CHECK(head_profile.find_head(a) >= 0);
   // Refuses to overwrite without --force.
   r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", trc.string(), "-o", (dir / "actor.toml").string()});
   CHECK(r.exit_code == 1);
