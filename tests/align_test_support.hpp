@@ -2,6 +2,7 @@
 // Synthetic marker takes of the built-in face for the alignment tests: markers bound to
 // the rig, moved by its articulated ground truth, then put through a rigid transform and
 // a unit change into "capture" coordinates with Gaussian noise.
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -106,6 +107,111 @@ inline SyntheticTake make_synthetic_take(const SyntheticTakeOptions& o) {
     t.weights.push_back(w);
   }
   return t;
+}
+
+// A take as an optical facial set records it: face markers on an actor whose face is the
+// rig's scaled by face_scale, a head rig (headband markers head_rig_mm off the skin,
+// rigid with the head), and an "Unlabeled" ghost slot present in ghost_fraction of the
+// frames; any rotation and position, mm. The face rests for rest_frames, then blends
+// six of the rig's shapes smoothly (linear blend), with a few degrees of head sway.
+struct HeadRigTakeOptions {
+  unsigned seed = 1;
+  double face_scale = 1.0;
+  double head_rig_mm = 40.0;
+  int head_markers = 4;
+  double ghost_fraction = 0.01;
+  double noise_mm = 0.2;
+  int rest_frames = 60;
+  int motion_frames = 120;
+  double rate_hz = 60.0;
+  double rig_mm_per_unit = 10.0;
+};
+
+struct HeadRigTake {
+  SyntheticTake take;              // labels: the layout's, then H0.., then "Unlabeled"
+  std::size_t face_markers = 0;
+  std::vector<std::string> head_labels;
+};
+
+inline HeadRigTake make_head_rig_take(const Rig& rig, std::vector<MarkerBinding> layout, const HeadRigTakeOptions& o) {
+  std::mt19937 rng(o.seed);
+  std::normal_distribution<double> g;
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  HeadRigTake out;
+  SyntheticTake& t = out.take;
+  t.layout = std::move(layout);
+  out.face_markers = t.layout.size();
+  for (const auto& b : t.layout) t.labels.push_back(b.label);
+  // Head rig: forehead vertices across the top of the face's front, pushed head_rig_mm
+  // out along their normals.
+  const Eigen::Index V = rig.vertex_count();
+  Eigen::Matrix3Xd normal = Eigen::Matrix3Xd::Zero(3, V);
+  for (Eigen::Index tri = 0; tri < rig.triangle_count(); ++tri) {
+    const Eigen::Vector3d a = rig.neutral.col(rig.triangles(0, tri)), b = rig.neutral.col(rig.triangles(1, tri)),
+                          c = rig.neutral.col(rig.triangles(2, tri));
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    for (int j = 0; j < 3; ++j) normal.col(rig.triangles(j, tri)) += n;
+  }
+  const BoundingBox box = bounding_box(rig.neutral);
+  std::vector<int> head_vertices;
+  for (int h = 0; h < o.head_markers; ++h) {
+    const double x = box.min.x() + box.size().x() * (0.25 + 0.5 * h / std::max(1, o.head_markers - 1));
+    const double y = box.max.y() - box.size().y() * (h % 2 == 0 ? 0.12 : 0.2);
+    int best = -1;
+    double best_d = 1e300;
+    for (Eigen::Index v = 0; v < V; ++v) {
+      if (normal.col(v).normalized().z() < 0.5) continue;  // facing forwards
+      const double d = std::hypot(rig.neutral(0, v) - x, rig.neutral(1, v) - y) - 1e-3 * rig.neutral(2, v);
+      if (d < best_d) best_d = d, best = int(v);
+    }
+    head_vertices.push_back(best);
+    out.head_labels.push_back("H" + std::to_string(h));
+    t.labels.push_back(out.head_labels.back());
+  }
+  t.labels.push_back("Unlabeled");
+  t.take_mm_per_unit = 1.0;
+  t.rig_to_take.rotation = random_rotation(rng);
+  t.rig_to_take.scale = o.rig_mm_per_unit;
+  t.rig_to_take.translation = Eigen::Vector3d(g(rng), g(rng), g(rng)) * 300.0;
+  // The actor's face: the rig's scaled about its centre.
+  const Eigen::Vector3d centre = rig.neutral.rowwise().mean();
+  std::vector<Eigen::Index> shapes;
+  for (int i = 0; i < 6; ++i) shapes.push_back(Eigen::Index(u(rng) * double(rig.shape_count() - 1)));
+  const int F = o.rest_frames + o.motion_frames;
+  for (int f = 0; f < F; ++f) {
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
+    if (f >= o.rest_frames)
+      for (std::size_t i = 0; i < shapes.size(); ++i)
+        w[shapes[i]] = 0.4 * (1.0 - std::cos(2.0 * std::numbers::pi * (0.5 + 0.2 * double(i)) * (f - o.rest_frames) / o.rate_hz));
+    Eigen::Matrix3Xd pose = rig.neutral;
+    for (Eigen::Index s = 0; s < rig.shape_count(); ++s)
+      if (w[s] != 0.0) pose += w[s] * Eigen::Map<const Eigen::Matrix3Xd>(rig.deltas.col(s).data(), 3, V);
+    pose = ((pose.colwise() - centre) * o.face_scale).colwise() + centre;
+    const double a = 3.0 * std::numbers::pi / 180.0 * std::sin(2.0 * std::numbers::pi * 0.3 * f / o.rate_hz);
+    align::Similarity head;
+    head.rotation = Eigen::AngleAxisd(a, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
+    head.translation = Eigen::Vector3d(0.5 * std::sin(0.05 * f), 0.3 * std::cos(0.04 * f), 0.0);
+    MarkerFrame frame;
+    frame.frame_no = f + 1;
+    frame.source_time_ns = int64_t(double(f) / o.rate_hz * 1e9);
+    auto add = [&](const Eigen::Vector3d& rig_point, bool present) {
+      Marker m;
+      m.id = int32_t(frame.markers.size());
+      m.label.assign(t.labels[frame.markers.size()]);
+      m.position = t.rig_to_take.apply(head.apply(rig_point)) + Eigen::Vector3d(g(rng), g(rng), g(rng)) * o.noise_mm;
+      if (!present) m.flags |= kMarkerMissing;
+      frame.markers.push_back(m);
+    };
+    for (const auto& b : t.layout) add(layout_point(b, pose), true);
+    for (int v : head_vertices) {
+      const Eigen::Vector3d skin = ((rig.neutral.col(v) - centre) * o.face_scale) + centre;
+      add(skin + normal.col(v).normalized() * (o.head_rig_mm / o.rig_mm_per_unit), true);
+    }
+    add(centre + Eigen::Vector3d(g(rng), g(rng), g(rng)) * (30.0 / o.rig_mm_per_unit), u(rng) < o.ghost_fraction);
+    t.frames.push_back(std::move(frame));
+    t.weights.push_back(w);
+  }
+  return out;
 }
 
 }  // namespace facecap::test

@@ -21,6 +21,7 @@
 #include "solver/align/stabilise.hpp"
 #include "solver/align/surface.hpp"
 #include "tests/align_test_support.hpp"
+#include "tests/head_rig_check.hpp"
 #include "tests/alloc_counter.hpp"
 #include "tests/test_support.hpp"
 
@@ -155,6 +156,20 @@ TEST_CASE("Synthetic take in any pose and units calibrates back within 1 mm") {
     CHECK(std::abs(E.scale - 1.0) < 0.01);
   }
   WARN("synthetic calibration: worst bound point " << worst << " mm from the truth (0.3 mm noise, 6 poses, mm/cm/m)");
+}
+
+TEST_CASE("A take with a head rig 40 mm off the skin and a 1 percent ghost slot calibrates at faces 0.8 to 1.25x the rig's") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  double worst = 0.0;
+  unsigned seed = 1;
+  for (const double face_scale : {0.8, 0.9, 1.0, 1.1, 1.25}) {
+    test::HeadRigTakeOptions o;
+    o.seed = seed++;
+    o.face_scale = face_scale;
+    worst = std::max(worst, test::check_head_rig_calibration(rig, test::builtin_marker_layout(), o));
+  }
+  WARN("built-in face, head rig 40 mm off the skin, ghost slot, faces 0.8-1.25x: worst bound point " << worst
+                                                                                                   << " mm from the truth");
 }
 
 TEST_CASE("Plain ICP converges wrong from 30 to 50 degree turns where hull then surface ICP does not") {
@@ -510,7 +525,7 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   }
   CHECK_NOTHROW(check_profile_matches_rig(back, rig, "actor.toml"));
   // The shapes left out of the weight fit, and the threshold they were decided at.
-  CHECK(text.find("version = 3\n") != std::string::npos);
+  CHECK(text.find("version = 4\n") != std::string::npos);
   CHECK(back.observability_known);
   CHECK(back.observable_shape_mm == cal.observable_shape_mm);
   REQUIRE(back.unobserved_shapes.size() == cal.unobserved_shapes.size());
@@ -525,10 +540,24 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   CHECK(one.unfitted_shapes() == std::vector<std::string>{rig.shape_names[1]});
   CHECK(one.unobserved_shapes[0].max_displacement_mm == 0.25);
   // A profile from before version 3 has no [observability]: undecided, and read as before.
+  // Version 3 has no distinct_mm and no same_as: read as it was decided.
+  Calibration v3 = cal;
+  v3.distinct_shape_mm = 0.0;
+  v3.unobserved_shapes = {{rig.shape_names[1], 0.25}};
+  const std::string v3_text = write_calibration_profile(v3);
+  CHECK(v3_text.find("\nversion = 3\n") != std::string::npos);
+  CHECK(read_calibration_profile(v3_text, "actor.toml").distinct_shape_mm == 0.0);
+  Calibration same = cal;
+  same.unobserved_shapes = {{rig.shape_names[2], 3.6, rig.shape_names[1], 0.57}};
+  const Calibration same_back = read_calibration_profile(write_calibration_profile(same), "actor.toml");
+  REQUIRE(same_back.unobserved_shapes.size() == 1);
+  CHECK(same_back.unobserved_shapes[0].same_as == rig.shape_names[1]);
+  CHECK(same_back.unobserved_shapes[0].distinct_mm == 0.57);
   Calibration undecided = cal;
   undecided.observability_known = false;
   const std::string older = write_calibration_profile(undecided);
   CHECK(older.find("version = 3") == std::string::npos);
+  CHECK(older.find("version = 4") == std::string::npos);
   CHECK_FALSE(read_calibration_profile(older, "actor.toml").observability_known);
   decided.unobserved_shapes = {{"noSuchShape", 0.25}};
   CHECK_THROWS_WITH(check_profile_matches_rig(read_calibration_profile(write_calibration_profile(decided), "actor.toml"), rig,
@@ -551,8 +580,8 @@ TEST_CASE("Calibration profile round-trips and is read strictly with line number
   CHECK_THROWS_WITH(read_calibration_profile(unknown, "actor.toml"),
                     Catch::Contains(fmt::format("actor.toml:{}:", line_of(unknown, "residual_cm"))) && Catch::Contains("unknown key 'residual_cm'"));
   std::string newer = unsummed;
-  REQUIRE(newer.find("\nversion = 3\n") != std::string::npos);
-  newer.replace(newer.find("\nversion = 3\n") + 1, 11, "version = 9");
+  REQUIRE(newer.find("\nversion = 4\n") != std::string::npos);
+  newer.replace(newer.find("\nversion = 4\n") + 1, 11, "version = 9");
   CHECK_THROWS_WITH(read_calibration_profile(newer, "actor.toml"), Catch::Contains("version 9"));
   std::string bad_rotation = unsummed;
   bad_rotation.replace(bad_rotation.find("rotation = [["), 13, "rotation = [[2, ");

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include <catch2/catch.hpp>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <sys/wait.h>
 
@@ -68,6 +69,24 @@ TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a syntheti
   REQUIRE(r.exit_code == 0);
   for (const auto& label : synthetic.labels) CHECK(r.out.find(label) != std::string::npos);
   CHECK(r.out.find("residual median") != std::string::npos);
+  // --head names markers for the head pose only; a --stable marker that --markers leaves
+  // out is one too. Neither is bound; both stabilise.
+  const std::string a = synthetic.labels[0], b = synthetic.labels[1], c = synthetic.labels[2];
+  std::string some;
+  for (std::size_t k = 3; k < synthetic.labels.size(); ++k) some += (some.empty() ? "" : ",") + synthetic.labels[k];
+  r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", trc.string(), "--markers", some, "--head", a + "," + b,
+                        "--stable", b + "," + c + "," + synthetic.labels[3], "-o", (dir / "heads.toml").string(), "--json"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  const auto heads = nlohmann::json::parse(r.out);
+  CHECK(heads["head_markers"] == nlohmann::json({a, b, c}));
+  CHECK(heads["markers"].size() == synthetic.labels.size() - 3);
+  CHECK(heads["stable_markers"] == nlohmann::json({b, c, synthetic.labels[3]}));
+  CHECK(heads["scale_at_band_limit"] == false);
+  CHECK(std::abs(heads["face_size_ratio"].get<double>() - 1.0) < 0.02);
+  const auto head_profile = align::load_calibration_profile(dir / "heads.toml");
+  CHECK(head_profile.find(a) < 0);
+  CHECK(head_profile.find_head(a) >= 0);
   // Refuses to overwrite without --force.
   r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", trc.string(), "-o", (dir / "actor.toml").string()});
   CHECK(r.exit_code == 1);
@@ -217,14 +236,16 @@ TEST_CASE("facecap calibrate and solve give clear errors on bad input", "[tools]
   r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", (dir / "take.trc").string(), "--frame", "999", "-o", (dir / "a.toml").string()});
   CHECK(r.exit_code == 1);
   CHECK(r.err.find("no frame number 999") != std::string::npos);
-  // A marker missing in every frame is left out with a note; the rest calibrates.
+  // A marker missing in every frame is left out (of the neutral search, the stable markers
+  // and the fit) with a note; the rest calibrates.
   auto gappy = to_take(synthetic, "mm");
   for (auto& f : gappy.frames) formats::set_missing(f.markers[5]);
   formats::write_take(dir / "gappy.trc", gappy);
   r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", (dir / "gappy.trc").string(), "--frame", "5", "-o", (dir / "g.toml").string()});
   INFO(r.out << r.err);
   CHECK(r.exit_code == 0);
-  CHECK(r.out.find("is missing in the calibration frame") != std::string::npos);
+  CHECK(r.out.find(fmt::format("'{}' present in fewer than half of the take's frames: left out", gappy.labels[5])) !=
+        std::string::npos);
   // A profile made for another rig.
   r = run_facecap(dir, {"calibrate", "--rig", "builtin", "--take", (dir / "take.trc").string(), "--frame", "5", "-o", (dir / "a.toml").string()});
   REQUIRE(r.exit_code == 0);
@@ -289,5 +310,25 @@ TEST_CASE("facecap eval on a real AnimFace take reports held-out error for every
     const double heldout = eval["solvers"][name]["heldout_mm"]["median"].get<double>();
     CHECK(heldout > 0.1);
     CHECK(heldout < 5.0);
+    // Flips and crossings by region, split into the rig's own (its linear blend of the
+    // same weights) and the solve's; the parts add up to the totals.
+    for (const char* what : {"flipped", "intersections"}) {
+      INFO(what);
+      const auto& m = eval["solvers"][name][what];
+      double in_blend = 0, added = 0;
+      for (const char* region : {"lips", "eyelids", "elsewhere"}) {
+        in_blend += m["per_checked_frame_by_region"][region]["in_rig_blend"].get<double>();
+        added += m["per_checked_frame_by_region"][region]["added_by_solve"].get<double>();
+      }
+      const double total = m[std::string(what) == "flipped" ? "triangles_per_checked_frame" : "new_pairs_per_checked_frame"];
+      CHECK(in_blend + added == Approx(total));
+      CHECK(m["added_by_solve_per_checked_frame"].get<double>() == Approx(added));
+      // The linear solve is the rig's linear blend: it adds nothing of its own.
+      if (std::string(name) == "linear") CHECK(added == 0.0);
+    }
   }
+  // ICT's lips fold and cross in its own shapes (its neutral has 124 crossing pairs at the
+  // lip corners): the lips hold most of what the linear blend shows.
+  const auto& lips = eval["solvers"]["linear"]["intersections"]["per_checked_frame_by_region"];
+  CHECK(lips["lips"]["in_rig_blend"].get<double>() > lips["elsewhere"]["in_rig_blend"].get<double>());
 }

@@ -393,7 +393,10 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   CHECK(calibrated["actor"] == "alice");
   CHECK(calibrated["frames"].get<uint64_t>() >= 100);
   CHECK(calibrated["residual_mm"]["median"].get<double>() < 1.0);
-  CHECK(calibrated["markers_in_source"] == 52);
+  // The sim's 48 face markers and 2 of its 4 headband markers are bound: the two above the
+  // brow (58-62 mm off the face) are found as head markers, the two at temple height sit
+  // within 10 mm of the built-in face, where a skin marker could be.
+  CHECK(calibrated["markers_in_source"] == 50);
   CHECK(fs::exists(dir / "profiles" / "alice.toml"));
   CHECK(post(client, "/calibrate", {{"seconds", 1.0}, {"save", "alice"}}, 409)["error"].get<std::string>().starts_with("profile \"alice\" exists"));
   const json actors = get_json(client, "/actors");
@@ -402,12 +405,12 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   CHECK(actors["actors"][0]["usable"] == true);
   CHECK(post(client, "/actor", {{"name", "carol"}}, 404)["error"].get<std::string>().starts_with("no profile \"carol\""));
   const json swapped = post(client, "/actor", {{"name", "alice"}});
-  CHECK(swapped["markers"] == 52);
+  CHECK(swapped["markers"] == 50);
   CHECK(swapped["head_stabilised"] == true);
   std::this_thread::sleep_for(std::chrono::milliseconds(600));
   status = get_json(client, "/status");
   CHECK(status["actor"] == "alice");
-  CHECK(status["window"]["markers_expected"] == 52.0);
+  CHECK(status["window"]["markers_expected"] == 50.0);
   CHECK(status["window"]["quality"] == "good");
   CHECK(status["totals"]["pipeline_swaps"] == 2);
   INFO("missed deadlines over the run: " << status["totals"]["missed_deadlines"]);
@@ -447,7 +450,7 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
       CHECK(message["weights"].size() == 45);
       CHECK(message["vertices"].size() == 3 * 6174);
       CHECK(message["markers"]["residual_mm"].size() == 52);
-      CHECK(message["telemetry"]["markers_expected"] == 52);
+      CHECK(message["telemetry"]["markers_expected"] == 50);
       (frames == 0 ? first_ns : last_ns) = message["receive_time_ns"].get<int64_t>();
       ++frames;
     }

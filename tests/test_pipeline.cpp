@@ -154,7 +154,7 @@ TEST_CASE("a calibration with head-rig markers round-trips through the profile a
   const pipeline::Calibration calibration = pipeline::default_calibration(rig, 8, 4);
   const std::string text = align::write_calibration_profile(calibration);
   // Head markers need version 2; which shapes the markers observe, version 3.
-  CHECK(text.find(calibration.observability_known ? "version = 3" : "version = 2") != std::string::npos);
+  CHECK(text.find(calibration.observability_known ? "version = 4" : "version = 2") != std::string::npos);
   const pipeline::Calibration back = pipeline::read_calibration(text, "embedded", rig);
   REQUIRE(back.head_markers.size() == 4);
   CHECK(back.head_markers[3].label == calibration.head_markers[3].label);

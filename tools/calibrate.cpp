@@ -24,7 +24,7 @@ namespace facecap::tools {
 namespace {
 
 struct Options {
-  std::string rig, take, output, markers, stable, units, rig_units;
+  std::string rig, take, output, markers, stable, head, units, rig_units;
   int64_t frame = 0;
   bool auto_neutral = false;
   int stable_count = 6;
@@ -66,7 +66,16 @@ double median_of(std::vector<double> v) {
 void run_calibrate(const Options& o, bool frame_given) {
   const Rig rig = load_rig(o.rig);
   const double rig_mm = rig_mm_per_unit(rig, o.rig_units);
-  formats::MarkerTake take = select_markers(formats::read_take(o.take), split_list(o.markers), o.take);
+  // --stable and --head markers stay in the take when --markers leaves them out: a stable
+  // marker that is not calibrated is a head marker (head pose only, not bound).
+  std::vector<std::string> kept = split_list(o.markers);
+  const std::vector<std::string> stable_names = split_list(o.stable), head_names = split_list(o.head);
+  std::vector<std::string> unbound = head_names;
+  if (!kept.empty())
+    for (const auto& n : stable_names)
+      if (std::find(kept.begin(), kept.end(), n) == kept.end()) unbound.push_back(n);
+  if (!kept.empty()) kept.insert(kept.end(), unbound.begin(), unbound.end());
+  formats::MarkerTake take = select_markers(formats::read_take(o.take), kept, o.take);
   for (const auto& w : take.warnings) fmt::print(stderr, "facecap: warning: {}: {}\n", o.take, w);
   pipeline::check_calibration_take(take, o.take);
 
@@ -86,14 +95,17 @@ void run_calibrate(const Options& o, bool frame_given) {
   topts.stable_count = o.stable_count;
   // Stable markers: named, or found (mutual distances vary least over this take, among
   // the markers the rig moves least).
-  if (!o.stable.empty()) {
-    for (const auto& n : split_list(o.stable)) {
-      const auto it = std::find(take.labels.begin(), take.labels.end(), n);
-      if (it == take.labels.end()) throw file_error(o.take, fmt::format("--stable names '{}', which the take does not have", n));
-      topts.stable_slots.push_back(int(it - take.labels.begin()));
-    }
-    if (topts.stable_slots.size() < 3) throw Error("--stable: name at least 3 markers");
-  }
+  auto slot_of = [&](const std::string& option, const std::string& n) {
+    const auto it = std::find(take.labels.begin(), take.labels.end(), n);
+    if (it == take.labels.end()) throw file_error(o.take, fmt::format("{} names '{}', which the take does not have", option, n));
+    return int(it - take.labels.begin());
+  };
+  for (const auto& n : stable_names) topts.stable_slots.push_back(slot_of("--stable", n));
+  if (!stable_names.empty() && topts.stable_slots.size() < 3) throw Error("--stable: name at least 3 markers");
+  for (const auto& n : unbound)
+    if (const int slot = slot_of(std::find(head_names.begin(), head_names.end(), n) != head_names.end() ? "--head" : "--stable", n);
+        std::find(topts.head_slots.begin(), topts.head_slots.end(), slot) == topts.head_slots.end())
+      topts.head_slots.push_back(slot);
   if (frame_given) topts.frame = frame_index(take, o.frame, o.take);
   const align::TakeCalibration result = align::calibrate_take(rig, take.labels, take.frames, topts);
   align::Calibration cal = result.calibration;
@@ -123,8 +135,14 @@ void run_calibrate(const Options& o, bool frame_given) {
   cal.observable_shape_mm = o.observable_mm;
   align::find_unobserved_shapes(cal, rig);
   std::vector<std::string> unobserved;
-  for (const auto& u : cal.unobserved_shapes) unobserved.push_back(fmt::format("{} ({:.2f} mm)", u.name, u.max_displacement_mm));
+  for (const auto& u : cal.unobserved_shapes)
+    unobserved.push_back(u.same_as.empty() ? fmt::format("{} ({:.2f} mm)", u.name, u.max_displacement_mm)
+                                           : fmt::format("{} (as {}, {:.2f} mm apart)", u.name, u.same_as, u.distinct_mm));
 
+  if (cal.scale_at_band_limit)
+    fmt::print(stderr, "facecap: warning: {}: the scale ended at the end of its search band ({:.4f}; the face would be {:.2f}x "
+                       "the rig's): check the units (--units) and the markers (--markers, --head)\n",
+               o.take, cal.take_to_rig.scale, cal.face_size_ratio());
   if (!o.force && std::filesystem::exists(o.output)) throw file_error(o.output, "exists; pass --force to replace it");
   align::save_calibration_profile(o.output, cal);
 
@@ -141,6 +159,13 @@ void run_calibrate(const Options& o, bool frame_given) {
     j["units"] = unit_name(cal.take_mm_per_unit);
     j["units_detected"] = cal.units_detected;
     j["scale"] = cal.take_to_rig.scale;
+    j["scale_at_band_limit"] = cal.scale_at_band_limit;
+    j["face_size_ratio"] = cal.face_size_ratio();
+    std::vector<std::string> heads, ignored;
+    for (const auto& h : cal.head_markers) heads.push_back(h.label);
+    for (int s : result.ignored_slots) ignored.push_back(take.labels[std::size_t(s)]);
+    j["head_markers"] = heads;
+    j["ignored_markers"] = ignored;
     j["hull_rms_mm"] = cal.hull_rms_mm;
     j["trimmed_rms_mm"] = cal.trimmed_rms_mm;
     j["residual_mm"] = {{"median", median_of(residuals)}, {"max", *std::max_element(residuals.begin(), residuals.end())}};
@@ -154,6 +179,10 @@ void run_calibrate(const Options& o, bool frame_given) {
     nlohmann::json shapes = nlohmann::json::object();
     for (const auto& u : cal.unobserved_shapes) shapes[u.name] = u.max_displacement_mm;
     j["unobserved_shapes"] = shapes;
+    nlohmann::json same = nlohmann::json::object();
+    for (const auto& u : cal.unobserved_shapes)
+      if (!u.same_as.empty()) same[u.name] = {{"same_as", u.same_as}, {"distinct_mm", u.distinct_mm}};
+    j["indistinct_shapes"] = same;
     j["notes"] = cal.notes;
     std::puts(j.dump(2).c_str());
     return;
@@ -161,9 +190,10 @@ void run_calibrate(const Options& o, bool frame_given) {
   fmt::print("calibrated {} on {} frame {}{}\n", o.take, rig.name, cal.source_frame,
              !auto_neutral ? "" : fmt::format(" (auto-neutral: {:.2f} mm from the median shape, {:.1f} mm/s)",
                                             neutral.distance_mm, neutral.speed_mm_s));
-  fmt::print("units {} ({}), scale {:.4f} rig units per take unit, hull ICP {:.2f} mm, surface ICP {:.2f} mm (trimmed RMS)\n",
+  fmt::print("units {} ({}), scale {:.4f} rig units per take unit (the face is {:.3f}x the rig's), hull ICP {:.2f} mm, "
+             "surface ICP {:.2f} mm (trimmed RMS)\n",
              unit_name(cal.take_mm_per_unit), cal.units_detected ? "detected" : "given", cal.take_to_rig.scale,
-             cal.hull_rms_mm, cal.trimmed_rms_mm);
+             cal.face_size_ratio(), cal.hull_rms_mm, cal.trimmed_rms_mm);
   fmt::print("\n{:<24} {:>10}  {}\n", "marker", "residual", "bound to (triangle vertices, barycentric)");
   for (const auto& m : cal.markers) {
     const bool stable = std::find(cal.stable_markers.begin(), cal.stable_markers.end(), m.label) != cal.stable_markers.end();
@@ -173,11 +203,17 @@ void run_calibrate(const Options& o, bool frame_given) {
   }
   fmt::print("\nresidual median {:.2f} mm, max {:.2f} mm over {} markers\n", median_of(residuals),
              *std::max_element(residuals.begin(), residuals.end()), residuals.size());
+  if (!cal.head_markers.empty()) {
+    std::vector<std::string> heads;
+    for (const auto& h : cal.head_markers) heads.push_back(h.label);
+    fmt::print("head markers (head pose only, not bound): {}\n", fmt::join(heads, ", "));
+  }
   fmt::print("stable markers: {}; after stabilisation their residual median is {:.3f} mm over {} frames ({} held)\n",
              fmt::join(cal.stable_markers, ", "), stable_median, take.frames.size(), held);
   if (!unobserved.empty())
-    fmt::print("{} of {} shapes move no marker by {} mm at full weight: the markers cannot observe them, the weight fit "
-               "leaves them at 0: {}\n", unobserved.size(), rig.shape_count(), cal.observable_shape_mm, fmt::join(unobserved, ", "));
+    fmt::print("{} of {} shapes move no marker by {} mm at full weight, or move them within {} mm of a larger shape: the "
+               "markers cannot observe them, the weight fit leaves them at 0: {}\n",
+               unobserved.size(), rig.shape_count(), cal.observable_shape_mm, cal.distinct_shape_mm, fmt::join(unobserved, ", "));
   for (const auto& n : cal.notes) fmt::print("note: {}\n", n);
   fmt::print("wrote {}\n", o.output);
 }
@@ -196,7 +232,10 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--average", opts->average,
                   "Average this many frames around the calibration frame (default: the auto-neutral stretch, or 1 with --frame)");
   cmd->add_option("--markers", opts->markers, "Comma-separated markers to calibrate (default: all)");
-  cmd->add_option("--stable", opts->stable, "Comma-separated stable markers for head stabilisation (default: found)");
+  cmd->add_option("--stable", opts->stable,
+                  "Comma-separated stable markers for head stabilisation (default: found); those --markers leaves out are head markers");
+  cmd->add_option("--head", opts->head,
+                  "Comma-separated head-rig markers: head pose only, never bound (default: found, >20 mm off the face and rigid)");
   cmd->add_option("--stable-count", opts->stable_count, "How many stable markers to find")->capture_default_str()->check(CLI::Range(3, 64));
   cmd->add_option("--observable-mm", opts->observable_mm,
                   "Shapes moving no bound marker by this many rig mm at full weight are left out of the weight fit")

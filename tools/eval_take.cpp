@@ -42,6 +42,50 @@ struct Summary {
   }
 };
 
+// Where a flipped triangle or a crossing pair is: the lips and the eyelids fold in many
+// rigs' own shapes (ICT's mouthClose alone flips 416 triangles), elsewhere they should not.
+enum Region : uint8_t { kLips, kEyelids, kElsewhere, kRegionCount };
+constexpr const char* kRegionNames[kRegionCount] = {"lips", "eyelids", "elsewhere"};
+
+// Per triangle: lips when a vertex is moved by mouthRollLower or mouthRollUpper, eyelids
+// when by eyeBlink_L or eyeBlink_R, at least 30% of that shape's largest vertex motion.
+// A rig without those shapes has every triangle elsewhere.
+std::vector<uint8_t> triangle_regions(const Rig& rig) {
+  std::vector<uint8_t> vertex(std::size_t(rig.vertex_count()), kElsewhere);
+  auto mark = [&](std::initializer_list<const char*> shapes, Region region) {
+    for (const char* name : shapes) {
+      const auto s = rig.shape_index(name);
+      if (!s) continue;
+      const Eigen::Map<const Eigen::Matrix3Xd> d(rig.deltas.col(*s).data(), 3, rig.vertex_count());
+      const Eigen::VectorXd motion = d.colwise().norm().transpose();
+      const double cutoff = 0.3 * motion.maxCoeff();
+      for (Eigen::Index v = 0; v < rig.vertex_count(); ++v)
+        if (motion[v] > 0.0 && motion[v] >= cutoff) vertex[std::size_t(v)] = std::min<uint8_t>(vertex[std::size_t(v)], region);
+    }
+  };
+  mark({"mouthRollLower", "mouthRollUpper"}, kLips);
+  mark({"eyeBlink_L", "eyeBlink_R"}, kEyelids);
+  std::vector<uint8_t> out(std::size_t(rig.triangle_count()), kElsewhere);
+  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
+    for (int j = 0; j < 3; ++j) out[std::size_t(t)] = std::min(out[std::size_t(t)], vertex[std::size_t(rig.triangles(j, t))]);
+  return out;
+}
+
+// Flips or crossings per region, split into those the rig's own linear blend of the same
+// weights already has and those the solve adds.
+struct RegionCounts {
+  std::array<int64_t, kRegionCount> in_rig_blend{}, added_by_solve{};
+  nlohmann::json json(int64_t frames) const {
+    nlohmann::json j = nlohmann::json::object();
+    const double n = double(std::max<int64_t>(frames, 1));
+    for (int r = 0; r < kRegionCount; ++r)
+      j[kRegionNames[r]] = {{"in_rig_blend", double(in_rig_blend[std::size_t(r)]) / n},
+                            {"added_by_solve", double(added_by_solve[std::size_t(r)]) / n}};
+    return j;
+  }
+  int64_t added() const { return added_by_solve[0] + added_by_solve[1] + added_by_solve[2]; }
+};
+
 struct SolverRun {
   std::string name;
   bool offline = false;  // too slow to solve every frame: sampled frames only
@@ -51,6 +95,7 @@ struct SolverRun {
   Eigen::Matrix3Xd previous, previous2;                // the two previous frames' meshes
   int frames_solved = 0;
   Summary heldout_mm, fit_mm, jitter_mm, solve_ms;
+  std::vector<Summary> heldout_by_marker;              // one per held-out marker
   // The held-out error scaled by `scale`: in the actor's millimetres.
   nlohmann::json scaled(Summary& s, double scale) {
     Summary out;
@@ -58,6 +103,7 @@ struct SolverRun {
     return out.json();
   }
   int64_t intersections = 0, intersection_frames = 0, flipped = 0, flipped_frames = 0, checked_frames = 0;
+  RegionCounts flipped_by_region, intersections_by_region;  // per checked frame once divided
   int held = 0;
 };
 
@@ -119,6 +165,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     run.full = make_solver(method, model);
     run.result = run.full->make_result();
     for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(method, model));
+    run.heldout_by_marker.resize(face_markers.size());
     run.held_result = run.full->make_result();
     runs.push_back(std::move(run));
   }
@@ -130,10 +177,12 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   const std::vector<TrianglePair> rest_pairs = intersections.pairs(rig.neutral);
   const int64_t neutral_intersections = int64_t(rest_pairs.size());
   auto new_intersections = [&](const Eigen::Matrix3Xd& positions) {
-    int64_t count = 0;
-    for (const auto& p : intersections.pairs(positions)) count += !std::binary_search(rest_pairs.begin(), rest_pairs.end(), p);
-    return count;
+    std::vector<TrianglePair> out;
+    for (const auto& p : intersections.pairs(positions))
+      if (!std::binary_search(rest_pairs.begin(), rest_pairs.end(), p)) out.push_back(p);
+    return out;
   };
+  const std::vector<uint8_t> region = triangle_regions(rig);
   auto mapped = mapper.make_output();
   // With the filter on, the solvers see filtered targets; fit and held-out error are measured
   // against the unfiltered ones, so that the lag the filter adds counts as error.
@@ -179,12 +228,26 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       run.previous = run.result.vertices;
       ++run.frames_solved;
       if (!run_sample) continue;
-      const int64_t hits = new_intersections(run.result.vertices);
-      run.intersections += hits;
-      run.intersection_frames += hits > 0;
-      const int64_t flips = count_flipped_triangles(rig.triangles, rig.neutral, run.result.vertices);
-      run.flipped += flips;
-      run.flipped_frames += flips > 0;
+      const std::vector<TrianglePair> hits = new_intersections(run.result.vertices);
+      run.intersections += int64_t(hits.size());
+      run.intersection_frames += !hits.empty();
+      const std::vector<Eigen::Index> flips = flipped_triangles(rig.triangles, rig.neutral, run.result.vertices);
+      run.flipped += int64_t(flips.size());
+      run.flipped_frames += !flips.empty();
+      // The same weights through the rig's own linear blend: what the shapes already do.
+      const Eigen::Matrix3Xd blend = rig.linear_blend(run.result.weights);
+      const std::vector<Eigen::Index> blend_flips = flipped_triangles(rig.triangles, rig.neutral, blend);
+      for (const Eigen::Index t : flips) {
+        auto& counts = std::binary_search(blend_flips.begin(), blend_flips.end(), t) ? run.flipped_by_region.in_rig_blend
+                                                                                    : run.flipped_by_region.added_by_solve;
+        ++counts[region[std::size_t(t)]];
+      }
+      const std::vector<TrianglePair> blend_hits = new_intersections(blend);
+      for (const auto& p : hits) {
+        auto& counts = std::binary_search(blend_hits.begin(), blend_hits.end(), p) ? run.intersections_by_region.in_rig_blend
+                                                                                  : run.intersections_by_region.added_by_solve;
+        ++counts[std::min(region[std::size_t(p.first)], region[std::size_t(p.second)])];
+      }
       ++run.checked_frames;
       for (std::size_t i = 0; i < face_markers.size(); ++i) {
         const int k = face_markers[i];
@@ -193,7 +256,9 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
         present[std::size_t(k)] = 0;
         run.held_out[i]->solve(mapped.targets, present, run.held_result);
         if (run.held_result.status & kSolvedTooFewMarkers) continue;
-        run.heldout_mm.add((binding_point(bindings[std::size_t(k)], run.held_result.vertices) - raw_targets.col(k)).norm() * rig_mm);
+        const double error = (binding_point(bindings[std::size_t(k)], run.held_result.vertices) - raw_targets.col(k)).norm() * rig_mm;
+        run.heldout_mm.add(error);
+        run.heldout_by_marker[i].add(error);
       }
     }
     bar.update(f + 1, F);
@@ -231,14 +296,22 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   j["actor_mm_per_rig_mm"] = actor_mm_per_rig_mm;
   nlohmann::json per = nlohmann::json::object();
   for (auto& run : runs) {
+    nlohmann::json by_marker = nlohmann::json::object();
+    for (std::size_t i = 0; i < face_markers.size(); ++i)
+      by_marker[face_labels[i]] = run.scaled(run.heldout_by_marker[i], actor_mm_per_rig_mm);
     per[run.name] = {{"heldout_mm", run.heldout_mm.json()},
                      {"heldout_actor_mm", run.scaled(run.heldout_mm, actor_mm_per_rig_mm)},
+                     {"heldout_actor_mm_by_marker", by_marker},
                      {"fit_mm", run.fit_mm.json()},
                      {"jitter_mm", run.offline ? nlohmann::json(nullptr) : run.jitter_mm.json()},
                      {"intersections", {{"new_pairs_per_checked_frame", run.checked_frames ? double(run.intersections) / double(run.checked_frames) : 0.0},
-                                        {"frames_with_new", run.intersection_frames}}},
+                                        {"frames_with_new", run.intersection_frames},
+                                        {"added_by_solve_per_checked_frame", double(run.intersections_by_region.added()) / double(std::max<int64_t>(run.checked_frames, 1))},
+                                        {"per_checked_frame_by_region", run.intersections_by_region.json(run.checked_frames)}}},
                      {"flipped", {{"triangles_per_checked_frame", run.checked_frames ? double(run.flipped) / double(run.checked_frames) : 0.0},
-                                  {"frames_with", run.flipped_frames}}},
+                                  {"frames_with", run.flipped_frames},
+                                  {"added_by_solve_per_checked_frame", double(run.flipped_by_region.added()) / double(std::max<int64_t>(run.checked_frames, 1))},
+                                  {"per_checked_frame_by_region", run.flipped_by_region.json(run.checked_frames)}}},
                      {"checked_frames", run.checked_frames},
                      {"frames_solved", run.frames_solved},
                      {"solve_ms", run.solve_ms.json()},
@@ -271,6 +344,16 @@ void print_take_evaluation(const nlohmann::json& j) {
                s["fit_mm"]["p95"].get<double>(), jitter,
                s["intersections"]["new_pairs_per_checked_frame"].get<double>(), s["flipped"]["triangles_per_checked_frame"].get<double>(),
                s["solve_ms"]["mean"].get<double>());
+  }
+  fmt::print("\nper checked frame, added by the solve (already in the rig's linear blend of the same weights):\n");
+  for (const auto& [name, s] : j["solvers"].items()) {
+    std::string line;
+    for (const char* what : {"flipped", "intersections"})
+      for (const char* region : kRegionNames) {
+        const auto& r = s[what]["per_checked_frame_by_region"][region];
+        line += fmt::format("  {} {} {:.1f} ({:.1f})", what, region, r["added_by_solve"].get<double>(), r["in_rig_blend"].get<double>());
+      }
+    fmt::print("{:<10}{}\n", name, line);
   }
 }
 

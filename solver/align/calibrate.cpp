@@ -36,6 +36,30 @@ void clamp_scale(const Eigen::Matrix3Xd& src, const Eigen::Matrix3Xd& dst, std::
   if (total > 0) T.translation = md / total - T.scale * (T.rotation * (ms / total));
 }
 
+// Sets T's scale to the ratio of the weighted spreads of dst and src about their centroids
+// and refits the translation. Least squares in dst's space (Umeyama) scales by
+// cov(src, dst) / var(src), which shrinks as the correspondences get noisier; against
+// closest points on a surface that feeds on itself (smaller, so closer, so smaller). The
+// spread ratio is the symmetric estimate (Horn 1987): no pull in either direction.
+void spread_scale(const Eigen::Matrix3Xd& src, const Eigen::Matrix3Xd& dst, std::span<const double> w, Similarity& T) {
+  Eigen::Vector3d ms = Eigen::Vector3d::Zero(), md = Eigen::Vector3d::Zero();
+  double total = 0;
+  for (Eigen::Index k = 0; k < src.cols(); ++k) {
+    const double wk = w.empty() ? 1.0 : w[std::size_t(k)];
+    ms += wk * src.col(k), md += wk * dst.col(k), total += wk;
+  }
+  if (!(total > 0)) return;
+  ms /= total, md /= total;
+  double vs = 0, vd = 0;
+  for (Eigen::Index k = 0; k < src.cols(); ++k) {
+    const double wk = w.empty() ? 1.0 : w[std::size_t(k)];
+    vs += wk * (src.col(k) - ms).squaredNorm(), vd += wk * (dst.col(k) - md).squaredNorm();
+  }
+  if (!(vs > 0) || !(vd > 0)) return;
+  T.scale = std::sqrt(vd / vs);
+  T.translation = md - T.scale * (T.rotation * ms);
+}
+
 bool converged(const Similarity& a, const Similarity& b, double length) {
   return rotation_angle(a.rotation.transpose() * b.rotation) < 1e-7 && std::abs(a.scale - b.scale) < 1e-9 * a.scale &&
          (a.translation - b.translation).norm() < 1e-9 * length;
@@ -75,7 +99,9 @@ namespace {
 // One ICP run against the surface; the trimmed RMS over the best (1 - trim) markers.
 // The first steps match points to their closest surface points (point-to-point, wide
 // basin); then Gauss-Newton on the point-to-plane distance, which does not stall on the
-// slow sliding along a smooth face that point-to-point ICP shows.
+// slow sliding along a smooth face that point-to-point ICP shows. Distances are weighed
+// in the points' own units (rig distance / scale): in rig units every distance falls as
+// the scale shrinks, and the fit would shrink the markers onto a patch of the face.
 IcpResult surface_icp(const Eigen::Matrix3Xd& points, const SurfaceIndex& surface, const Similarity& start, double smin,
                       double smax, double trim, double trim_floor, int iterations, double length) {
   const Eigen::Index K = points.cols();
@@ -115,8 +141,10 @@ IcpResult surface_icp(const Eigen::Matrix3Xd& points, const SurfaceIndex& surfac
     Similarity next;
     if (it < kPointToPointSteps) {
       if (!fit_similarity(points, matched, weights, true, next)) break;
+      spread_scale(points, matched, weights, next);
     } else {
-      // Linearised update about the kept points' centroid c: y -> y + w x (y - c) + d (y - c) + tau.
+      // Linearised update about the kept points' centroid c: y -> y + w x (y - c) + d (y - c) + tau,
+      // on the residual in the points' units, res / (s (1 + d)) ~ (res + J p - res d) / s.
       const Eigen::Matrix3Xd Y = r.transform.apply(points);
       Eigen::Vector3d c = Eigen::Vector3d::Zero();
       double total = 0;
@@ -128,8 +156,8 @@ IcpResult surface_icp(const Eigen::Matrix3Xd& points, const SurfaceIndex& surfac
         if (weights[std::size_t(k)] <= 0.0) continue;
         const Eigen::Vector3d n = normal.col(k), a = Y.col(k) - c;
         Eigen::Matrix<double, 7, 1> J;
-        J << a.cross(n), n.dot(a), n;
         const double res = n.dot(Y.col(k) - matched.col(k));
+        J << a.cross(n), n.dot(a) - res, n;
         H += J * J.transpose();
         g += J * res;
       }
@@ -238,7 +266,8 @@ Calibration calibrate(const Rig& rig, const std::vector<std::string>& labels, co
     const IcpResult hull = icp_hulls(HP, HV, start, smin, smax, options.hull_iterations);
     const IcpResult fine = surface_icp(P, surface, hull.transform, smin, smax, options.trim_fraction,
                                        options.trim_floor_mm / options.rig_mm_per_unit, options.surface_iterations, length);
-    if (fine.trimmed_rms < best.trimmed_rms) {
+    // Compared in take units (see surface_icp): a smaller scale must not win by itself.
+    if (fine.trimmed_rms / fine.transform.scale < best.trimmed_rms / best.transform.scale) {
       best = fine;
       best_hull_rms = hull.trimmed_rms;
       cal.start_index = int(i);
@@ -246,6 +275,11 @@ Calibration calibrate(const Rig& rig, const std::vector<std::string>& labels, co
   }
   if (!std::isfinite(best.trimmed_rms)) throw Error("calibrate: no start converged (degenerate marker set?)");
   cal.take_to_rig = best.transform;
+  cal.scale_at_band_limit = best.transform.scale <= smin * (1 + 1e-6) || best.transform.scale >= smax * (1 - 1e-6);
+  if (cal.scale_at_band_limit)
+    cal.notes.push_back(fmt::format("the scale reached the end of its search band ({:.4g} of {:.4g}..{:.4g} rig units per "
+                                    "take unit): the face is {:.2f}x the rig's, or the fit is wrong",
+                                    best.transform.scale, smin, smax, cal.face_size_ratio()));
   cal.hull_rms_mm = best_hull_rms * options.rig_mm_per_unit;
   cal.trimmed_rms_mm = best.trimmed_rms * options.rig_mm_per_unit;
 

@@ -1,13 +1,18 @@
 #pragma once
 // Calibration of a whole take, as `facecap calibrate` runs it:
+//   0. marker slots present in fewer than half of the frames (a ghost or spare slot such
+//      as "Unlabeled") are left out of everything below, with a note;
 //   1. provisional stable markers from the take alone (mutual distances vary least);
 //   2. the calibration frame: given, or the most neutral stretch (find_neutral_frame);
 //   3. the mean of a still stretch around it, head motion removed (average_positions);
-//   4. calibrate() on that mean;
-//   5. final stable markers: the same search restricted to the markers the rig's shapes
+//   4. calibrate() on that mean, head markers left out of the fit;
+//   5. head markers found: bound markers farther than head_marker_mm (actor mm) from the
+//      fitted face and rigid with the stable markers (a headband, a cap, a helmet) become
+//      head markers (head pose only, never bound), then step 4 again without them;
+//   6. final stable markers: the same search restricted to the markers the rig's shapes
 //      move least at their bound points (a jaw moves rigidly too, but it is not the
-//      skull), then steps 3-4 again with them when they changed;
-//   6. the shapes the bound markers cannot observe (find_unobserved_shapes).
+//      skull) and the head markers, then steps 3-4 again with them when they changed;
+//   7. the shapes the bound markers cannot observe (find_unobserved_shapes).
 // Not real-time.
 #include <cstdint>
 #include <optional>
@@ -29,11 +34,18 @@ struct TakeCalibrationOptions {
   int average = 0;                       // frames averaged around the frame; 0: the neutral stretch, or 1 with frame
   std::vector<int> stable_slots;         // given stable markers (skip the search), else empty
   int stable_count = 6;
+  std::vector<int> head_slots;           // given head markers: head pose only, never bound
+  bool find_head_markers = true;         // step 5
+  double head_marker_mm = 20.0;          // actor mm off the fitted face, beyond any face marker on real takes (AnimFace: 13)
+  double head_rigidity_mm = 0.5;         // a head marker's distance deviation to the stable markers may exceed theirs by this
 };
 
 struct TakeCalibration {
   Calibration calibration;          // stable_markers filled in
   std::vector<int> stable_slots;
+  std::vector<int> head_slots;      // given and found
+  std::vector<int> found_head_slots;  // found by step 5
+  std::vector<int> ignored_slots;   // present in fewer than half of the frames
   std::optional<NeutralFrame> neutral;  // when auto-neutral ran
   std::size_t frame = 0;            // index of the calibration frame
   std::size_t first = 0, count = 1; // frames averaged

@@ -19,10 +19,11 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
   if (K < 3) throw Error(fmt::format("auto-neutral: {} markers, at least 3 needed", K));
   if (stable_slots.size() < 3) throw Error("auto-neutral: at least 3 stable markers are needed to remove head motion");
   if (!(o.rate_hz > 0.0)) throw Error("auto-neutral: the take's frame rate is unknown");
+  const std::vector<uint8_t> required = mostly_present_slots(frames);
   auto complete = [&](const MarkerFrame& f) {
     if (f.markers.size() != K) return false;
-    for (const auto& m : f.markers)
-      if (!m.present() || !m.position.allFinite()) return false;
+    for (std::size_t k = 0; k < K; ++k)
+      if (required[k] && (!f.markers[k].present() || !f.markers[k].position.allFinite())) return false;
     return true;
   };
   std::vector<uint8_t> ok(F);
@@ -32,7 +33,8 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
     candidates += ok[f];
     if (ok[f] && first == F) first = f;
   }
-  if (candidates == 0) throw Error("auto-neutral: no frame has every marker present (name a frame with --frame)");
+  if (candidates == 0)
+    throw Error("auto-neutral: no frame has every marker present that is present in most frames (name a frame with --frame)");
   const std::size_t W = std::max<std::size_t>(1, std::size_t(std::lround(o.window_seconds * o.rate_hz)));
   if (F < W) throw Error(fmt::format("auto-neutral: the take has {} frames, shorter than the {}-frame window", F, W));
 
@@ -55,7 +57,8 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
     shape[f].resize(3, Eigen::Index(K));
     const Eigen::Matrix3d Rt = pose.pose.rotation.transpose();
     for (std::size_t k = 0; k < K; ++k)
-      shape[f].col(Eigen::Index(k)) = Rt * (frames[f].markers[k].position - pose.pose.translation);
+      shape[f].col(Eigen::Index(k)) =
+          required[k] ? Eigen::Vector3d(Rt * (frames[f].markers[k].position - pose.pose.translation)) : Eigen::Vector3d::Zero();
   }
   const double mm = o.take_mm_per_unit;
   const double inf = std::numeric_limits<double>::infinity();

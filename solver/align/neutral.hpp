@@ -1,7 +1,9 @@
 #pragma once
 // Finding the most neutral stretch of a take for calibration (`calibrate --auto-neutral`):
 // the face at rest is still and looks like the take's typical resting shape. Each frame
-// with every marker present is stabilised on the stable markers; per frame the RMS
+// with every marker present is stabilised on the stable markers (marker slots present in
+// fewer than half of the frames, a ghost slot or a marker lost for most of the take, are
+// ignored: mostly_present_slots); per frame the RMS
 // marker speed (mm/s, over 50 ms) and the largest marker distance (mm) to the median shape of the
 // stillest 30% of frames are measured; the
 // window (window_seconds) with the lowest mean of distance + speed_weight_s x speed wins,
@@ -36,7 +38,7 @@ struct NeutralFrame {
 };
 
 // stable_slots: markers for stabilisation (>= 3), e.g. from find_stable_markers. Throws
-// Error when no frame has every marker, the take is shorter than the window, or no
+// Error when no frame has every (mostly present) marker, the take is shorter than the window, or no
 // stretch is neutral-looking (the message gives the best stretch's figures).
 NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<const int> stable_slots,
                                 const NeutralSearchOptions& options = {});

@@ -53,7 +53,7 @@ std::string write_calibration_profile(const Calibration& c) {
   auto out = [&body](std::string_view s) { body += s; };
   out("# facecap calibration profile: written by `facecap calibrate`, read by solve, eval and facecapd.\n");
   // The lowest version that holds what is written, so that older readers keep reading the rest.
-  out(fmt::format("version = {}\n", c.observability_known ? 3 : !c.head_markers.empty() ? 2 : 1));
+  out(fmt::format("version = {}\n", !c.observability_known ? (!c.head_markers.empty() ? 2 : 1) : c.distinct_shape_mm > 0.0 ? 4 : 3));
   out("\n[rig]\n");
   out(fmt::format("name = {}\ncontent_hash = \"{:016x}\"\nunits = {}\n", quote(c.rig_name), c.rig_hash, quote(unit_name(c.rig_mm_per_unit))));
   out("\n[source]\n");
@@ -91,9 +91,13 @@ std::string write_calibration_profile(const Calibration& c) {
   if (c.observability_known) {
     out(fmt::format("\n[observability]  # shapes moving no bound point by threshold_mm at full weight are left out of the "
                     "weight fit\nthreshold_mm = {}\n", c.observable_shape_mm));
+    if (c.distinct_shape_mm > 0.0)
+      out(fmt::format("distinct_mm = {}  # nor are shapes moving them within this of a larger fitted shape (same_as)\n",
+                      c.distinct_shape_mm));
     for (const auto& u : c.unobserved_shapes) {
       out("\n[[unobserved_shape]]  # the markers cannot observe it: its weight stays 0\n");
       out(fmt::format("name = {}\nmax_displacement_mm = {}\n", quote(u.name), u.max_displacement_mm));
+      if (!u.same_as.empty()) out(fmt::format("same_as = {}\ndistinct_mm = {}\n", quote(u.same_as), u.distinct_mm));
     }
   }
   // The checksum line goes second; it is left out of its own sum.
@@ -323,8 +327,13 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
   }
   if (const toml::node* node = root.get("observability")) {
     if (!node->is_table()) r.fail(node, "'observability' must be a table", "observability");
-    r.only_keys(*node->as_table(), {"threshold_mm"}, "observability.");
+    r.only_keys(*node->as_table(), {"threshold_mm", "distinct_mm"}, "observability.");
     c.observable_shape_mm = r.number(*node->as_table(), "threshold_mm", "observability.");
+    if (node->as_table()->get("distinct_mm")) {
+      c.distinct_shape_mm = r.number(*node->as_table(), "distinct_mm", "observability.");
+      if (!(c.distinct_shape_mm > 0.0))
+        r.fail(node->as_table()->get("distinct_mm"), "distinct_mm must be > 0", "observability.distinct_mm");
+    }
     if (!(c.observable_shape_mm >= 0.0))
       r.fail(node->as_table()->get("threshold_mm"), "threshold_mm must be >= 0", "observability.threshold_mm");
     c.observability_known = true;
@@ -336,12 +345,16 @@ Calibration read_calibration_profile(std::string_view text, const std::string& n
     std::set<std::string> names;
     for (const auto& node : *shapes->as_array()) {
       const auto& t = *node.as_table();
-      r.only_keys(t, {"name", "max_displacement_mm"}, "unobserved_shape.");
+      r.only_keys(t, {"name", "max_displacement_mm", "same_as", "distinct_mm"}, "unobserved_shape.");
       UnobservedShape u;
       u.name = r.string(t, "name", "unobserved_shape.");
       if (!names.insert(u.name).second)
         r.fail(t.get("name"), fmt::format("shape '{}' appears twice", u.name), "unobserved_shape.name");
       u.max_displacement_mm = r.number(t, "max_displacement_mm", "unobserved_shape.");
+      if (t.get("same_as")) {
+        u.same_as = r.string(t, "same_as", "unobserved_shape.");
+        u.distinct_mm = r.number(t, "distinct_mm", "unobserved_shape.");
+      }
       c.unobserved_shapes.push_back(std::move(u));
     }
   }
@@ -368,8 +381,8 @@ void check_profile_matches_rig(const Calibration& c, const Rig& rig, const std::
         throw Error(fmt::format("marker '{}' binds vertex {}, the rig has {}", m.label, v, rig.vertex_count()),
                     ErrorLocation{.file = profile_name, .key = "marker.vertices"});
   for (const auto& u : c.unobserved_shapes)
-    if (!rig.shape_index(u.name))
-      throw Error(fmt::format("unobserved shape '{}' is not a shape of rig '{}'", u.name, rig.name),
+    if (!rig.shape_index(u.name) || (!u.same_as.empty() && !rig.shape_index(u.same_as)))
+      throw Error(fmt::format("unobserved shape '{}' (same as '{}') is not a shape of rig '{}'", u.name, u.same_as, rig.name),
                   ErrorLocation{.file = profile_name, .key = "unobserved_shape.name"});
 }
 

@@ -31,7 +31,8 @@ namespace facecap::align {
 
 // 2: [[head_marker]] entries (written only by profiles that have them).
 // 3: [observability] and [[unobserved_shape]] (written by profiles that decided them).
-inline constexpr int kCalibrationProfileVersion = 3;
+// 4: [observability] distinct_mm, [[unobserved_shape]] same_as and distinct_mm.
+inline constexpr int kCalibrationProfileVersion = 4;
 
 std::string write_calibration_profile(const Calibration& calibration);
 void save_calibration_profile(const std::filesystem::path& path, const Calibration& calibration);

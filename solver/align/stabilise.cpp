@@ -10,19 +10,45 @@
 
 namespace facecap::align {
 
+namespace {
+bool usable(const Marker& m) { return m.present() && m.position.allFinite(); }
+}  // namespace
+
+std::vector<uint8_t> mostly_present_slots(std::span<const MarkerFrame> frames) {
+  const std::size_t K = frames.empty() ? 0 : frames.front().markers.size();
+  std::vector<std::size_t> count(K, 0);
+  for (const auto& f : frames)
+    for (std::size_t k = 0; k < std::min(K, f.markers.size()); ++k) count[k] += usable(f.markers[k]);
+  std::vector<uint8_t> out(K, 0);
+  for (std::size_t k = 0; k < K; ++k) out[k] = 2 * count[k] >= frames.size();
+  return out;
+}
+
+double distance_deviation(std::span<const MarkerFrame> frames, int a, int b) {
+  double sum = 0, sum2 = 0;
+  std::size_t n = 0;
+  for (const auto& f : frames) {
+    if (std::size_t(std::max(a, b)) >= f.markers.size()) continue;
+    const Marker& p = f.markers[std::size_t(a)];
+    const Marker& q = f.markers[std::size_t(b)];
+    if (!usable(p) || !usable(q)) continue;
+    const double d = (p.position - q.position).norm();
+    sum += d, sum2 += d * d, ++n;
+  }
+  return n >= 2 ? std::sqrt(std::max(0.0, sum2 / double(n) - (sum / double(n)) * (sum / double(n))))
+                : std::numeric_limits<double>::infinity();
+}
+
 std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int count, double* mean_deviation,
                                      std::span<const double> mobility) {
   if (frames.size() < 2) throw Error(fmt::format("stable markers: {} frames, at least 2 needed", frames.size()));
   const std::size_t K = frames.front().markers.size();
   for (const auto& f : frames)
     if (f.markers.size() != K) throw Error("stable markers: frames have different marker counts");
-  auto usable = [](const Marker& m) { return m.present() && m.position.allFinite(); };
   std::vector<int> candidates;
-  for (std::size_t k = 0; k < K; ++k) {
-    std::size_t n = 0;
-    for (const auto& f : frames) n += usable(f.markers[k]);
-    if (2 * n >= frames.size()) candidates.push_back(int(k));
-  }
+  const std::vector<uint8_t> frequent = mostly_present_slots(frames);
+  for (std::size_t k = 0; k < K; ++k)
+    if (frequent[k]) candidates.push_back(int(k));
   if (!mobility.empty()) {
     if (mobility.size() != K) throw Error("stable markers: one mobility per marker needed");
     std::vector<int> by_mobility = candidates;
@@ -37,20 +63,9 @@ std::vector<int> find_stable_markers(std::span<const MarkerFrame> frames, int co
   // Standard deviation of each candidate pair's distance.
   Eigen::MatrixXd deviation = Eigen::MatrixXd::Constant(Eigen::Index(C), Eigen::Index(C), 0.0);
   for (std::size_t a = 0; a < C; ++a)
-    for (std::size_t b = a + 1; b < C; ++b) {
-      double sum = 0, sum2 = 0;
-      std::size_t n = 0;
-      for (const auto& f : frames) {
-        const Marker& p = f.markers[std::size_t(candidates[a])];
-        const Marker& q = f.markers[std::size_t(candidates[b])];
-        if (!usable(p) || !usable(q)) continue;
-        const double d = (p.position - q.position).norm();
-        sum += d, sum2 += d * d, ++n;
-      }
-      const double sd = n >= 2 ? std::sqrt(std::max(0.0, sum2 / double(n) - (sum / double(n)) * (sum / double(n))))
-                               : std::numeric_limits<double>::infinity();
-      deviation(Eigen::Index(a), Eigen::Index(b)) = deviation(Eigen::Index(b), Eigen::Index(a)) = sd;
-    }
+    for (std::size_t b = a + 1; b < C; ++b)
+      deviation(Eigen::Index(a), Eigen::Index(b)) = deviation(Eigen::Index(b), Eigen::Index(a)) =
+          distance_deviation(frames, candidates[a], candidates[b]);
   // Mean position of each candidate (for spread), over the frames where it is present.
   std::vector<Eigen::Vector3d> mean(C, Eigen::Vector3d::Zero());
   for (std::size_t c = 0; c < C; ++c) {

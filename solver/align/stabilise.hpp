@@ -14,6 +14,16 @@
 
 namespace facecap::align {
 
+// Which marker slots are present (and finite) in at least half of the frames: the others
+// (a ghost or spare slot such as "Unlabeled", a marker lost for most of the take) take no
+// part in the neutral search, stable markers or calibration. frames: every frame has the
+// same slots. Not real-time.
+std::vector<uint8_t> mostly_present_slots(std::span<const MarkerFrame> frames);
+
+// Standard deviation over the frames of the distance between slots a and b (take units),
+// over the frames where both are present; infinity with fewer than 2 such frames.
+double distance_deviation(std::span<const MarkerFrame> frames, int a, int b);
+
 // The markers whose mutual distances vary least over frames: for each seed marker a set
 // grows greedily by a marker whose largest distance deviation (standard deviation over
 // the frames where both are present) to the set is within 1.5x the smallest, the one

@@ -95,17 +95,22 @@ int64_t count_new_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Ei
 
 int64_t count_flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
                                 const Eigen::Matrix3Xd& positions) {
+  return int64_t(flipped_triangles(triangles, rest_positions, positions).size());
+}
+
+std::vector<Eigen::Index> flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
+                                            const Eigen::Matrix3Xd& positions) {
   if (rest_positions.cols() != positions.cols())
     throw Error(fmt::format("flipped triangles: rest has {} vertices, positions {}", rest_positions.cols(),
                             positions.cols()));
   check_triangle_indices(triangles, positions.cols());
-  int64_t flipped = 0;
+  std::vector<Eigen::Index> flipped;
   for (Eigen::Index t = 0; t < triangles.cols(); ++t) {
     auto normal = [&](const Eigen::Matrix3Xd& x) {
       const Eigen::Vector3d p0 = x.col(triangles(0, t));
       return Eigen::Vector3d((x.col(triangles(1, t)) - p0).cross(x.col(triangles(2, t)) - p0));
     };
-    if (normal(rest_positions).dot(normal(positions)) < 0.0) ++flipped;
+    if (normal(rest_positions).dot(normal(positions)) < 0.0) flipped.push_back(t);
   }
   return flipped;
 }

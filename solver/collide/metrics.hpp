@@ -50,8 +50,11 @@ std::vector<TrianglePair> intersecting_pairs(const Eigen::Matrix3Xi& triangles, 
 int64_t count_new_intersecting_pairs(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
                                      const Eigen::Matrix3Xd& positions);
 
-// Triangles whose normal points against their rest normal (dot product < 0).
-// Zero-area triangles (rest or current) are not counted.
+// The triangles whose normal points against their rest normal (dot product < 0), in
+// increasing order. Zero-area triangles (rest or current) are not counted.
+std::vector<Eigen::Index> flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
+                                            const Eigen::Matrix3Xd& positions);
+// Their count.
 int64_t count_flipped_triangles(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& rest_positions,
                                 const Eigen::Matrix3Xd& positions);
 
