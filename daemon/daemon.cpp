@@ -569,7 +569,8 @@ void Daemon::publish_status(int64_t now_ns) {
   r.source_driver = drivers::kDriverIds.name(c.source.driver);
   r.source_description = source_->description();
   r.source_rate_hz = source_->info().nominal_rate_hz;
-  const drivers::SourceHealth source = source_->health();
+  const Sample now = take_sample();
+  const drivers::SourceHealth& source = now.source;
   r.source_delivered = source.frames_delivered;
   r.source_overwritten = source.frames_overwritten;
   r.source_late = source.frames_late;
@@ -600,18 +601,18 @@ void Daemon::publish_status(int64_t now_ns) {
   r.quality = kCaptureQualities.name(status_quality_.state);
   r.quality_reasons = status_quality_.reasons;
   const LoopCounters& counters = loop_->counters();
-  r.ticks = counters.ticks.load();
-  r.frames_solved = counters.frames_solved.load();
-  r.idle_ticks = counters.idle_ticks.load();
-  r.missed_deadlines = counters.missed_deadlines.load();
-  r.late_start_misses = counters.late_start_misses.load();
-  r.skipped_ticks = counters.skipped_ticks.load();
+  r.ticks = now.ticks;
+  r.frames_solved = now.frames_solved;
+  r.idle_ticks = now.idle_ticks;
+  r.missed_deadlines = now.missed;
+  r.late_start_misses = now.late_start;
+  r.skipped_ticks = now.skipped;
   r.pipeline_swaps = counters.pipeline_swaps.load();
   r.swap_misses = counters.swap_misses.load();
   r.reloads_accepted = reloads_accepted();
   r.reloads_rejected = reloads_rejected();
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit)
-    r.flagged_frames.emplace_back(solved_flag_name(bit), counters.flagged_frames[bit].load());
+    r.flagged_frames.emplace_back(solved_flag_name(bit), now.flagged[bit]);
   for (std::size_t i = 0; i < loop_->sinks().size(); ++i) {
     const outputs::OutputSink& sink = *loop_->sinks()[i];
     const outputs::SinkHealth h = sink.health();
