@@ -6,9 +6,12 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <thread>
+#include <utility>
 #include <vector>
 
 #include "core/frame.hpp"
+#include "core/realtime.hpp"
 #include "core/rt/latest_mailbox.hpp"
 #include "drivers/api/state_line.hpp"
 
@@ -45,6 +48,16 @@ struct SourceStart {
   // thread reports the same failure).
   int thread_priority = 0;
 };
+
+// A driver's own thread, running `run` at start.thread_priority (SCHED_FIFO, tried) when
+// that is above 0. Not RT-safe.
+template <typename Run>
+std::thread start_driver_thread(const SourceStart& start, Run run) {
+  return std::thread([priority = start.thread_priority, run = std::move(run)]() mutable {
+    if (priority > 0) apply_realtime({.fifo = true, .priority = priority});
+    run();
+  });
+}
 
 class MarkerSource {
  public:

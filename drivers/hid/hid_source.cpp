@@ -10,7 +10,6 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
-#include "core/realtime.hpp"
 #include "core/time.hpp"
 
 namespace facecap::drivers {
@@ -111,10 +110,7 @@ void HidSource::start(const SourceStart& start) {
   if (start.lockstep) throw Error("the hid source runs on the device's clock and cannot run in lockstep");
   stop();
   running_.store(true);
-  thread_ = std::thread([this, priority = start.thread_priority] {
-    if (priority > 0) apply_realtime({.fifo = true, .priority = priority});
-    run();
-  });
+  thread_ = start_driver_thread(start, [this] { run(); });
 }
 
 void HidSource::stop() noexcept {

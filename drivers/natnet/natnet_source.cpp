@@ -7,7 +7,6 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
-#include "core/realtime.hpp"
 #include "core/time.hpp"
 #include "formats/natnet_request.hpp"
 
@@ -194,10 +193,7 @@ void NatNetSource::start(const SourceStart& start) {
   next_keepalive_ns_ = next_echo_ns_ = next_reconnect_ns_ = now;
   next_error_log_ns_ = now + kErrorLogNs;
   running_.store(true, std::memory_order_release);
-  thread_ = std::thread([this, priority = start.thread_priority] {
-    if (priority > 0) apply_realtime({.fifo = true, .priority = priority});
-    run();
-  });
+  thread_ = start_driver_thread(start, [this] { run(); });
 }
 
 void NatNetSource::stop() noexcept {

@@ -10,7 +10,6 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
-#include "core/realtime.hpp"
 #include "core/time.hpp"
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
@@ -204,10 +203,7 @@ void SimSource::start(const SourceStart& start) {
   if (start.lockstep) throw Error("the sim source runs on its own clock and cannot run in lockstep");
   stop();
   running_.store(true);
-  thread_ = std::thread([this, start] {
-    if (start.thread_priority > 0) apply_realtime({.fifo = true, .priority = start.thread_priority});
-    run(start.epoch_ns);
-  });
+  thread_ = start_driver_thread(start, [this, epoch_ns = start.epoch_ns] { run(epoch_ns); });
 }
 
 void SimSource::stop() noexcept {

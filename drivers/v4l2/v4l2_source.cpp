@@ -9,7 +9,6 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
-#include "core/realtime.hpp"
 #include "core/time.hpp"
 #include "drivers/v4l2/v4l2_feed.hpp"
 
@@ -103,10 +102,7 @@ void V4l2Source::start(const SourceStart& start) {
   stop();
   feed_->start();
   running_.store(true);
-  thread_ = std::thread([this, priority = start.thread_priority] {
-    if (priority > 0) apply_realtime({.fifo = true, .priority = priority});
-    run();
-  });
+  thread_ = start_driver_thread(start, [this] { run(); });
 }
 
 void V4l2Source::stop() noexcept {
