@@ -155,6 +155,10 @@ class Reassembler {
 
 }  // namespace
 
+std::string_view capture_file_format(std::span<const char> head) noexcept {
+  return magic(head) == kPcapngBlockType ? "pcapng" : "pcap";
+}
+
 bool looks_like_capture(std::span<const char> head) noexcept {
   const auto m = magic(head);
   if (!m) return false;

@@ -14,6 +14,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace facecap::formats {
@@ -53,6 +54,8 @@ struct CaptureCounts {
 // True for the magic numbers of pcap (microsecond or nanosecond, either byte order) and
 // pcapng files.
 bool looks_like_capture(std::span<const char> head) noexcept;
+// "pcapng" for a pcapng file's first bytes, else "pcap".
+std::string_view capture_file_format(std::span<const char> head) noexcept;
 
 // True for the link types above.
 bool supported_link_type(int link_type) noexcept;

@@ -1,6 +1,5 @@
 #include "drivers/capture/capture_file.hpp"
 
-#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <vector>
@@ -11,14 +10,6 @@
 #include "core/error.hpp"
 
 namespace facecap::capture {
-namespace {
-
-std::string_view format_of(std::span<const char> head) noexcept {
-  constexpr char kPcapngBlockType[4] = {0x0a, 0x0d, 0x0d, 0x0a};  // a palindrome: either byte order
-  return head.size() >= 4 && std::equal(head.begin(), head.begin() + 4, kPcapngBlockType) ? "pcapng" : "pcap";
-}
-
-}  // namespace
 
 struct UdpCapture::State {
   std::string name;
@@ -49,7 +40,7 @@ UdpCapture::UdpCapture(const std::filesystem::path& path) {
   char error[PCAP_ERRBUF_SIZE] = {};
   pcap_t* pcap = pcap_open_offline_with_tstamp_precision(path.c_str(), PCAP_TSTAMP_PRECISION_NANO, error);
   if (!pcap) throw file_error(path.string(), fmt::format("not a readable pcap or pcapng capture: {}", error));
-  state_ = std::make_unique<State>(pcap, path.string(), format_of(head));
+  state_ = std::make_unique<State>(pcap, path.string(), formats::capture_file_format(head));
 }
 
 UdpCapture::UdpCapture(std::span<const char> bytes, const std::string& name) {
@@ -62,7 +53,7 @@ UdpCapture::UdpCapture(std::span<const char> bytes, const std::string& name) {
     std::fclose(file);  // pcap_close closes it once libpcap has taken it
     throw file_error(name, fmt::format("not a readable pcap or pcapng capture: {}", error));
   }
-  state_ = std::make_unique<State>(pcap, name, format_of(bytes));
+  state_ = std::make_unique<State>(pcap, name, formats::capture_file_format(bytes));
 }
 
 UdpCapture::~UdpCapture() = default;
