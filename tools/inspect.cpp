@@ -4,7 +4,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <limits>
 #include <numbers>
 #include <optional>
@@ -91,12 +90,6 @@ std::optional<SolvedSummary> summarise_solved(const std::filesystem::path& path)
     summary.shapes.push_back(shape);
   }
   return summary;
-}
-
-bool is_capture(const std::filesystem::path& path) {
-  char head[4] = {};
-  std::ifstream(path, std::ios::binary).read(head, sizeof head);
-  return formats::looks_like_capture(head);
 }
 
 LoadedFile load(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options) {
