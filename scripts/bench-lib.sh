@@ -38,3 +38,17 @@ control_port_when_ready() {
   echo "FAILED: facecapd did not start its control API within 30 s" >&2
   return 1
 }
+
+# A scratch directory in $work, removed at exit together with the facecapd the script
+# started in the background (its pid in $pid, empty until then).
+# Usage: make_work_dir_with_daemon_cleanup
+make_work_dir_with_daemon_cleanup() {
+  work=$(mktemp -d)
+  pid=""
+  trap 'cleanup_work_dir_and_daemon' EXIT
+}
+cleanup_work_dir_and_daemon() {
+  [ -z "$pid" ] || kill "$pid" 2>/dev/null || true
+  [ -z "$pid" ] || wait "$pid" 2>/dev/null || true
+  rm -rf "$work"
+}

@@ -36,14 +36,7 @@ if ! command -v wrk >/dev/null; then
 fi
 facecap="$build_dir/tools/facecap"
 facecapd="$build_dir/daemon/facecapd"
-work=$(mktemp -d)
-pid=""
-cleanup() {
-  [ -z "$pid" ] || kill "$pid" 2>/dev/null || true
-  [ -z "$pid" ] || wait "$pid" 2>/dev/null || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
+make_work_dir_with_daemon_cleanup
 
 # 28 connections, each waiting 19 ms after every answer: about 1,000 requests a second
 # (wrk 4 has no rate option, and its timers add a few ms to every wait on a busy

@@ -36,14 +36,7 @@ if [ ! -x "$chromium" ] || [ ! -d "$here/dashboard/node_modules/playwright-core"
   exit 77
 fi
 facecapd="$build_dir/daemon/facecapd"
-work=$(mktemp -d)
-pid=""
-cleanup() {
-  [ -z "$pid" ] || kill "$pid" 2>/dev/null || true
-  [ -z "$pid" ] || wait "$pid" 2>/dev/null || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
+make_work_dir_with_daemon_cleanup
 
 # One run: facecapd for `seconds` plus the browsers' start-up allowance; with browsers
 # attached from the first solved frame on when $1 is "browsers".
