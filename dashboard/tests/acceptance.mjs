@@ -173,7 +173,10 @@ try {
   await page.click('#actor-switch');
   await page.waitForFunction(() => !document.getElementById('actor-switch').disabled, null, { timeout: 60000 });
   const switchMessage = await page.textContent('#actor-message');
-  const actorNow = (await status(daemon.port)).actor;
+  // /status is republished every 100 ms: give it a moment to show the swap the page reported.
+  let actorNow = null;
+  await waitFor('/status to name bob', async () => (actorNow = (await status(daemon.port)).actor) === 'bob', 3000)
+    .catch(() => {});
   check('switching actor from the profiles list works', switchMessage.startsWith('actor bob') && actorNow === 'bob',
         `"${switchMessage}", /status actor "${actorNow}"`);
   await waitFor('the page to show actor bob', async () => (await page.textContent('#actor')) === 'bob', 5000);
