@@ -11,7 +11,7 @@
 namespace facecap::pipeline {
 namespace {
 
-constexpr std::size_t kFramesSampled = 200;  // spread over the take
+constexpr std::size_t kFramesSampled = 200;  // spread over a take
 constexpr double kUnitsTried[] = {1.0, 10.0, 1000.0};
 
 // RMS distance of points from their centroid.
@@ -21,30 +21,33 @@ double spread(const Eigen::Matrix3Xd& points) {
 
 }  // namespace
 
-UnitsCheck check_take_units(const formats::MarkerTake& take, std::string_view units, const align::Calibration& calibration) {
-  UnitsCheck out;
-  out.stated_mm_per_unit = millimetres_per_unit(units.empty() ? std::string_view(take.units) : units)
-                               .value_or(calibration.take_mm_per_unit);
-  // Per take slot, the calibration's neutral position (take units), if it has the label.
-  std::vector<const Eigen::Vector3d*> neutral(take.labels.size(), nullptr);
-  for (std::size_t s = 0; s < take.labels.size(); ++s) neutral[s] = calibration.neutral_of(take.labels[s]);
+FaceSizeGauge::FaceSizeGauge(const std::vector<std::string>& labels, std::string_view units,
+                             const align::Calibration& calibration)
+    : stated_mm_per_unit_(millimetres_per_unit(units).value_or(calibration.take_mm_per_unit)),
+      calibration_mm_per_unit_(calibration.take_mm_per_unit),
+      neutral_(labels.size(), nullptr),
+      now_(3, Eigen::Index(labels.size())),
+      then_(3, Eigen::Index(labels.size())) {
+  for (std::size_t s = 0; s < labels.size(); ++s) neutral_[s] = calibration.neutral_of(labels[s]);
+}
 
-  std::vector<double> ratios;
-  const std::size_t step = std::max<std::size_t>(1, take.frames.size() / kFramesSampled);
-  Eigen::Matrix3Xd now(3, Eigen::Index(take.labels.size())), then(3, Eigen::Index(take.labels.size()));
-  for (std::size_t f = 0; f < take.frames.size(); f += step) {
-    Eigen::Index n = 0;
-    const MarkerFrame& frame = take.frames[f];
-    for (std::size_t s = 0; s < neutral.size() && s < frame.markers.size(); ++s) {
-      if (!neutral[s] || !frame.markers[s].present() || !frame.markers[s].position.allFinite()) continue;
-      now.col(n) = frame.markers[s].position;
-      then.col(n) = *neutral[s];
-      ++n;
-    }
-    if (n < 3) continue;
-    const double calibrated = spread(then.leftCols(n)) * calibration.take_mm_per_unit;
-    if (calibrated > 0.0) ratios.push_back(spread(now.leftCols(n)) * out.stated_mm_per_unit / calibrated);
+std::optional<double> FaceSizeGauge::size_ratio(const MarkerFrame& frame) {
+  Eigen::Index n = 0;
+  for (std::size_t s = 0; s < neutral_.size() && s < frame.markers.size(); ++s) {
+    if (!neutral_[s] || !frame.markers[s].present() || !frame.markers[s].position.allFinite()) continue;
+    now_.col(n) = frame.markers[s].position;
+    then_.col(n) = *neutral_[s];
+    ++n;
   }
+  if (n < 3) return std::nullopt;
+  const double calibrated = spread(then_.leftCols(n)) * calibration_mm_per_unit_;
+  if (!(calibrated > 0.0)) return std::nullopt;
+  return spread(now_.leftCols(n)) * stated_mm_per_unit_ / calibrated;
+}
+
+UnitsCheck units_verdict(std::vector<double>& ratios, double stated_mm_per_unit) {
+  UnitsCheck out;
+  out.stated_mm_per_unit = stated_mm_per_unit;
   if (ratios.empty()) return out;
   std::nth_element(ratios.begin(), ratios.begin() + std::ptrdiff_t(ratios.size() / 2), ratios.end());
   out.size_ratio = ratios[ratios.size() / 2];
@@ -57,20 +60,55 @@ UnitsCheck check_take_units(const formats::MarkerTake& take, std::string_view un
   return out;
 }
 
-void require_plausible_units(const formats::MarkerTake& take, std::string_view units, const align::Calibration& calibration,
-                             const std::string& name) {
-  const UnitsCheck check = check_take_units(take, units, calibration);
-  if (check.plausible) return;
-  const std::string_view given = units.empty() ? std::string_view(take.units) : units;
+UnitsCheck check_frames_units(std::span<const MarkerFrame> frames, const std::vector<std::string>& labels,
+                              std::string_view units, const align::Calibration& calibration) {
+  FaceSizeGauge gauge(labels, units, calibration);
+  std::vector<double> ratios;
+  const std::size_t step = std::max<std::size_t>(1, frames.size() / kFramesSampled);
+  for (std::size_t f = 0; f < frames.size(); f += step)
+    if (const auto ratio = gauge.size_ratio(frames[f])) ratios.push_back(*ratio);
+  return units_verdict(ratios, gauge.stated_mm_per_unit());
+}
+
+UnitsCheck check_take_units(const formats::MarkerTake& take, std::string_view units, const align::Calibration& calibration) {
+  return check_frames_units(take.frames, take.labels, units.empty() ? std::string_view(take.units) : units, calibration);
+}
+
+std::string describe_units(const UnitsCheck& check, std::string_view units, std::string_view stated,
+                           std::string_view fix_format) {
+  const std::string_view given = units.empty() ? stated : units;
   const std::string read_as = millimetres_per_unit(given)
                                   ? fmt::format("in {} as {}", unit_name(check.stated_mm_per_unit), units.empty() ? "it states" : "given")
                                   : fmt::format("in the calibration's {} ({})", unit_name(check.stated_mm_per_unit),
                                                 given.empty() ? "it states no units" : fmt::format("'{}' is not mm, cm or m", given));
   const std::string size = fmt::format("read {}, its face is {:.3g} times the size of the calibrated one", read_as, check.size_ratio);
   if (check.looks_like)
-    throw file_error(name, fmt::format("{}: its values look like {}; pass --units {} if they are", size, *check.looks_like,
-                                       *check.looks_like));
-  throw file_error(name, fmt::format("{}, in no unit within {}x of it: is it the calibration's actor?", size, kMaxSizeRatio));
+    return fmt::format("{}: its values look like {}{}", size, *check.looks_like,
+                       fix_format.empty() ? std::string() : "; " + fmt::format(fmt::runtime(fix_format), *check.looks_like));
+  return fmt::format("{}, in no unit within {}x of it: is it the calibration's actor?", size, kMaxSizeRatio);
+}
+
+void require_plausible_units(const formats::MarkerTake& take, std::string_view units, const align::Calibration& calibration,
+                             const std::string& name, std::string_view fix_format) {
+  const UnitsCheck check = check_take_units(take, units, calibration);
+  if (!check.plausible) throw file_error(name, describe_units(check, units, take.units, fix_format));
+}
+
+LiveUnitsCheck::LiveUnitsCheck(const std::vector<std::string>& labels, std::string_view units,
+                               const align::Calibration& calibration)
+    : gauge_(labels, units, calibration) {
+  ratios_.reserve(kMaxFrames);
+}
+
+bool LiveUnitsCheck::add(const MarkerFrame& frame) {
+  if (verdict_) return false;
+  const auto ratio = gauge_.size_ratio(frame);
+  if (!ratio) return false;
+  if (ratios_.empty()) first_ns_ = frame.receive_time_ns;
+  if (ratios_.size() < kMaxFrames) ratios_.push_back(*ratio);
+  if (double(frame.receive_time_ns - first_ns_) < kLiveSeconds * 1e9 || ratios_.size() < kLiveMinFrames) return false;
+  verdict_ = units_verdict(ratios_, gauge_.stated_mm_per_unit());
+  return true;
 }
 
 }  // namespace facecap::pipeline
