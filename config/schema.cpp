@@ -89,6 +89,10 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(source.replay.source_timestamps), .default_value = true,
        .description = "Pace frames by the file's own timestamps (gaps stay gaps); false paces them at the take's "
                       "nominal rate."},
+      {FACECAP_CHOICE_KEY(source.replay.units, drivers::kTakeUnits), .default_value = std::string("stated"),
+       .description = "Units the take's values are read in, for a take that states them wrongly or not at all (as "
+                      "`facecap solve --units`). facecapd refuses a take whose face is not about the calibrated "
+                      "one's size in these units, and says which units it looks like."},
 
       FACECAP_MARKER_DEVICE_KEYS(source.usb, "USB"),
       FACECAP_MARKER_DEVICE_KEYS(source.hid, "HID"),

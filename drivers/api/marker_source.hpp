@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <thread>
 #include <utility>
@@ -83,6 +84,10 @@ class MarkerSource {
   virtual SourceHealth health() const noexcept = 0;
   // No frame will come any more (a replay that ended). RT-safe.
   bool finished() const noexcept { return health().finished; }
+  // Every frame the source will deliver, when it holds them all from open() (a replay's
+  // take, in its window): what facecapd checks before it starts (the units); empty for
+  // live sources. Valid after open(). RT-safe.
+  virtual std::span<const MarkerFrame> recorded_frames() const noexcept { return {}; }
 };
 
 // Base for sources whose own thread produces frames (simulated or network devices):

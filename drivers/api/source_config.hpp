@@ -20,6 +20,15 @@ struct SimOptions {
   int64_t seed = 0;
 };
 
+// The units a replayed take's values are read in.
+enum class TakeUnits : uint8_t { kStated, kMm, kCm, kM };
+inline constexpr EnumTable kTakeUnits{std::array{
+    EnumEntry{TakeUnits::kStated, "stated", "as the take states them (the calibration's when it states none)"},
+    EnumEntry{TakeUnits::kMm, "mm", "millimetres, whatever the take states"},
+    EnumEntry{TakeUnits::kCm, "cm", "centimetres, whatever the take states"},
+    EnumEntry{TakeUnits::kM, "m", "metres, whatever the take states"},
+}};
+
 struct ReplayOptions {
   std::string file;                  // .c3d, .trc, .fcrec, or a NatNet capture (with NatNetOptions' selection)
   double speed = 1.0;                // 0: as fast as the loop takes frames
@@ -27,6 +36,7 @@ struct ReplayOptions {
   double start_s = 0.0;              // window into the take, seconds from its first frame
   double end_s = 0.0;                // 0: to the end
   bool source_timestamps = true;     // pace by the file's times, else by its nominal rate
+  TakeUnits units = TakeUnits::kStated;
 };
 
 // A marker device speaking the facecap marker-device protocol (docs/usb-hid-protocol.md),

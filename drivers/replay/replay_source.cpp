@@ -61,7 +61,7 @@ void ReplaySource::open() {
   cycle_length_ns_ = play_offset_ns_.back() + frame_ns;
 
   info_.labels = take_.labels;
-  info_.units = take_.units;
+  info_.units = options_.units == TakeUnits::kStated ? take_.units : std::string(kTakeUnits.name(options_.units));
   info_.nominal_rate_hz = take_.rate_hz;
   info_.own_clock = false;
 }

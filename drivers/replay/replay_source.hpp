@@ -28,6 +28,9 @@ class ReplaySource final : public MarkerSource {
   bool take_frame(int64_t now_ns, MarkerFrame& out) noexcept override;
   std::string description() const override;
   SourceHealth health() const noexcept override;
+  std::span<const MarkerFrame> recorded_frames() const noexcept override {
+    return std::span<const MarkerFrame>(take_.frames).subspan(begin_, end_ - begin_);
+  }
 
   std::size_t window_frames() const noexcept { return end_ - begin_; }
 
