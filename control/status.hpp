@@ -38,6 +38,12 @@ struct StatusReport {
   double source_rate_hz = 0;
   uint64_t source_delivered = 0, source_overwritten = 0, source_late = 0, source_errors = 0;
   bool source_finished = false;
+  // Its units against the calibration's face (docs/daemon.md "Units"): "checking" (its
+  // first seconds), "plausible" or "implausible"; the face's size over the calibrated one's;
+  // the unit its values look like and what is wrong, when implausible.
+  std::string source_units, source_units_check = "checking";
+  double source_size_ratio = 0;
+  std::string source_units_look_like, source_units_problem;
   // The rig, the solver, the actor and the calibration.
   std::string rig_name, solver;
   uint64_t rig_hash = 0;

@@ -122,6 +122,7 @@ void Daemon::start() {
   spdlog::info("source {}", source_->description());
   const drivers::SourceInfo& info = source_->info();
   const pipeline::SourceDescription source{info.labels, info.units};
+  require_plausible_recorded_units(calibration);
 
   const int64_t build_start = monotonic_now_ns();
   auto solve = std::make_unique<pipeline::SolvePipeline>(*rig_, calibration, source, pipeline::solve_settings(c, pipeline::SolveContext::kLive));
@@ -163,6 +164,8 @@ void Daemon::start() {
   loop_options.prefetch_lead_ns = c.loop.prefetch_lead_us * kNsPerUs;
   loop_options.realtime = {.fifo = c.loop.realtime, .priority = int(c.loop.priority), .cpus = c.loop.cpu_affinity};
   loop_ = std::make_unique<SolveLoop>(loop_options, *source_, std::move(solve), std::move(sinks));
+  units_check_.emplace(info.labels, info.units, calibration);
+  loop_->sample_markers(true);
   const std::string actor = c.calibration.file.empty() ? std::string() : std::filesystem::path(c.calibration.file).stem().string();
   controller_ = std::make_unique<Controller>(
       ControllerParts{.rig = rig_, .source = source_.get(), .loop = loop_.get(), .takes = takes_, .config = &config_.values},
@@ -292,7 +295,49 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
 Figures Daemon::figures_since_start() const { return figures_between(*start_sample_, take_sample()); }
 
 QualityAssessment Daemon::quality(const Figures& window) const {
-  return assess_quality(window.capture, config_.values.quality);
+  QualityAssessment q = assess_quality(window.capture, config_.values.quality);
+  if (!units_problem_.empty()) {  // the worst there is: every marker 10 times off
+    q.state = CaptureQuality::kBad;
+    q.reasons.insert(q.reasons.begin(), "source units: " + units_problem_);
+  }
+  return q;
+}
+
+void Daemon::require_plausible_recorded_units(const pipeline::Calibration& calibration) const {
+  const std::span<const MarkerFrame> frames = source_->recorded_frames();
+  if (frames.empty()) return;  // a live source: watch_source_units
+  const drivers::SourceInfo& info = source_->info();
+  const drivers::TakeUnits units = config_.values.source.replay.units;  // the one source with recorded frames
+  const pipeline::UnitsCheck check = pipeline::check_frames_units(frames, info.labels, info.units, calibration);
+  if (!check.plausible)
+    throw file_error(config_.values.source.replay.file,
+                     pipeline::describe_units(check, units == drivers::TakeUnits::kStated ? "" : info.units, info.units,
+                                              "set source.replay.units = \"{}\" if they are"));
+}
+
+void Daemon::watch_source_units() {
+  if (const uint64_t swaps = loop_->counters().pipeline_swaps.load(); swaps != units_check_swaps_) {
+    // Another calibration (an actor, a reload) may have other units or another face.
+    units_check_swaps_ = swaps;
+    units_check_.emplace(source_->info().labels, source_->info().units, controller_->calibration());
+    units_problem_.clear();
+    loop_->sample_markers(true);
+  }
+  rt::SpscSlots<MarkerFrame>& sampled = loop_->sampled_markers();
+  for (const MarkerFrame* frame = sampled.front(); frame; frame = sampled.front()) {
+    const bool decided = units_check_ && units_check_->add(*frame);
+    sampled.pop();
+    if (!decided) continue;
+    loop_->sample_markers(false);
+    const pipeline::UnitsCheck& verdict = *units_check_->verdict();
+    if (verdict.plausible) {
+      spdlog::info("source units {}: its face is {:.2f} times the size of the calibrated one", source_->info().units.empty()
+                   ? "unstated (the calibration's)" : source_->info().units, verdict.size_ratio);
+    } else {
+      units_problem_ = pipeline::describe_units(verdict, "", source_->info().units, "");
+      spdlog::warn("source units implausible: {}; the face is solved as it comes (docs/daemon.md, \"Units\")", units_problem_);
+    }
+  }
 }
 
 std::string Daemon::status_line(const Figures& w) const {
@@ -457,6 +502,7 @@ void Daemon::supervise_once(int64_t now_ns) {
     next_stats_ns_ = now_ns + int64_t(c.logging.stats_interval_s * kNsPerSecond);
   }
   serve_commands();
+  watch_source_units();
   loop_->collect_retired();
   if (server_ && now_ns >= next_publish_ns_) publish_status(now_ns);
 }
@@ -576,6 +622,13 @@ void Daemon::publish_status(int64_t now_ns) {
   r.source_late = source.frames_late;
   r.source_errors = source.errors;
   r.source_finished = source.finished;
+  r.source_units = source_->info().units;
+  if (const auto& verdict = units_check_ ? units_check_->verdict() : std::nullopt) {
+    r.source_units_check = verdict->plausible ? "plausible" : "implausible";
+    r.source_size_ratio = verdict->size_ratio;
+    r.source_units_look_like = verdict->looks_like.value_or("");
+    r.source_units_problem = units_problem_;
+  }
   r.rig_name = rig_->name;
   r.rig_hash = rig_->content_hash();
   r.rig_vertices = rig_->vertex_count();

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <future>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,7 @@
 #include "outputs/api/sink.hpp"
 #include "outputs/recording/take_recorder.hpp"
 #include "pipeline/calibration.hpp"
+#include "pipeline/source_units.hpp"
 
 namespace facecap::daemon {
 
@@ -127,6 +129,12 @@ class Daemon {
   void start_io_thread(const config::DaemonConfig& c);
   void log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::Calibration& calibration,
                     double build_seconds) const;
+  // The source's units against the calibration's face (docs/daemon.md "Units"): a replay's
+  // take is checked whole before the loop starts and refused (throws Error) when its size is
+  // implausible; a live source is judged from its first seconds of frames, sampled off the
+  // solve thread (SolveLoop::sampled_markers), and judged afresh after each pipeline swap.
+  void require_plausible_recorded_units(const pipeline::Calibration& calibration) const;
+  void watch_source_units();
   static std::string flagged_text(const Figures& window);
   static std::string latency_chain_text(const Figures& window);
 
@@ -150,6 +158,9 @@ class Daemon {
   Figures status_window_;  // the last STATUS window's figures
   QualityAssessment status_quality_;
   std::array<uint64_t, 3> quality_windows_{};  // status windows in each quality state
+  std::optional<pipeline::LiveUnitsCheck> units_check_;
+  uint64_t units_check_swaps_ = 0;  // the loop's pipeline swaps when units_check_ began
+  std::string units_problem_;       // the verdict when implausible: what is wrong, for STATUS, /status and the log
 
   std::atomic<bool> stop_requested_{false};
   std::atomic<bool> reload_requested_{false};

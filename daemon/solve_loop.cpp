@@ -19,6 +19,9 @@ constexpr int64_t kMaxPhaseStepDivisor = 16;
 constexpr double kPhaseLockRateTolerance = 0.01;
 // Lockstep with nothing to do (replay ended, recorder queue full): re-check this often.
 constexpr int64_t kLockstepIdleNs = 200 * kNsPerUs;
+// Marker frames the supervisor's checks may have waiting: it drains them every 20 ms
+// (kSuperviseSliceNs), 5 frames of a 240 Hz source; a frame with no free slot is skipped.
+constexpr std::size_t kSampledMarkerSlots = 16;
 // Pre-faulted so that the solve thread's stack never page-faults in the loop.
 constexpr std::size_t kStackPrefaultBytes = 256 * 1024;
 
@@ -74,7 +77,8 @@ SolveLoop::SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::un
       sink_timing_(sinks_.size()),
       period_ns_(int64_t(std::llround(double(kNsPerSecond) / options_.rate_hz))),
       marker_frame_(make_marker_frame(source.info().labels)),
-      solved_frame_(pipeline_->make_solved_frame(any_wants_vertices(sinks_))) {
+      solved_frame_(pipeline_->make_solved_frame(any_wants_vertices(sinks_))),
+      sampled_markers_(kSampledMarkerSlots, marker_frame_) {
   const double source_rate = source.info().nominal_rate_hz;
   phase_lock_ = !options_.lockstep && options_.phase_margin_ns > 0 && source.info().own_clock && source_rate > 0.0 &&
                 std::abs(source_rate - options_.rate_hz) <= kPhaseLockRateTolerance * options_.rate_hz;
@@ -147,6 +151,11 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
     return false;
   }
 
+  if (sampling_markers_.load(std::memory_order_relaxed))
+    if (MarkerFrame* slot = sampled_markers_.begin_push(); slot && slot->markers.capacity() >= marker_frame_.markers.size()) {
+      *slot = marker_frame_;  // fits its storage: no allocation
+      sampled_markers_.commit_push();
+    }
   pipeline_->process(marker_frame_, solved_frame_);
   const int64_t solved_ns = monotonic_now_ns();
   record_stage(LoopStage::kSolve, solved_ns - taken_ns);

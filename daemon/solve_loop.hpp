@@ -15,6 +15,7 @@
 #include "core/frame.hpp"
 #include "core/realtime.hpp"
 #include "core/rt/handoff.hpp"
+#include "core/rt/spsc_slots.hpp"
 #include "core/latency_histogram.hpp"
 #include "drivers/api/marker_source.hpp"
 #include "outputs/api/sink.hpp"
@@ -123,6 +124,13 @@ class SolveLoop {
   const LoopOptions& options() const noexcept { return options_; }
   int64_t period_ns() const noexcept { return period_ns_; }
 
+  // Marker frames copied for the supervisor's checks (the source's units), while asked:
+  // the solve thread copies each frame it takes into a free slot, or skips it when none is
+  // free. sample_markers(): any thread, RT-safe; sampled_markers(): the supervisor only,
+  // front() and pop() as rt::SpscSlots has them.
+  void sample_markers(bool on) noexcept { sampling_markers_.store(on, std::memory_order_relaxed); }
+  rt::SpscSlots<MarkerFrame>& sampled_markers() noexcept { return sampled_markers_; }
+
   // One tick's work at time now_ns; public so tests can drive the loop by hand. RT-safe.
   // Returns true when a frame was solved.
   bool tick(int64_t now_ns) noexcept;
@@ -153,6 +161,8 @@ class SolveLoop {
 
   MarkerFrame marker_frame_;
   SolvedFrame solved_frame_;
+  std::atomic<bool> sampling_markers_{false};
+  rt::SpscSlots<MarkerFrame> sampled_markers_;
 
   rt::Handoff<pipeline::SolvePipeline> pipeline_handoff_;
 

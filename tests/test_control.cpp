@@ -13,6 +13,8 @@
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include "config/config_file.hpp"
 #include "control/api.hpp"
@@ -22,7 +24,9 @@
 #include "core/time.hpp"
 #include "daemon/daemon.hpp"
 #include "formats/recording.hpp"
+#include "pipeline/calibration.hpp"
 #include "pipeline/recording_header.hpp"
+#include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/test_support.hpp"
 
@@ -575,6 +579,71 @@ TEST_CASE("with 90% of markers missing, the capture reads bad and STATUS says wh
     }
     CHECK(d.stop() == 0);
   }
+}
+
+TEST_CASE("a live source 10 times off its calibration's units: /status, STATUS and the log say which units it looks like; "
+          "a right one says nothing") {
+  // The sim streams the built-in face in cm. A profile of the same face whose positions are
+  // stated in mm is a face 10 times smaller: the sim's values look like mm against it.
+  const fs::path dir = test::scratch_dir("control-units");
+  const Rig& rig = BuiltinFace::instance().rig();
+  pipeline::Calibration calibration = pipeline::default_calibration(rig, 48, 4);
+  REQUIRE(calibration.take_mm_per_unit == 10.0);
+  calibration.take_mm_per_unit = 1.0;
+  align::save_calibration_profile(dir / "mm.toml", calibration);
+
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
+  for (const bool wrong : {true, false}) {
+    std::vector<std::string> overrides{"outputs.shm.name=" + unique_shm(fmt::format("units{}", wrong)), "control.http.enabled=true",
+                                       "control.http.port=0", "control.status_interval_s=0.25"};
+    if (wrong) overrides.push_back("calibration.file=" + (dir / "mm.toml").string());
+    log.str("");
+    RunningDaemon d(overrides);
+    control::HttpClient client("127.0.0.1", d->control_port());
+    json status = get_json(client, "/status");
+    CHECK(status["source"]["units"]["stated"] == "cm");
+    // Decided after 2 s of frames with 3 calibrated markers, published every 100 ms.
+    for (int i = 0; i < 100 && status["source"]["units"]["check"] == "checking"; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      status = get_json(client, "/status");
+    }
+    INFO(status.dump(2));
+    std::this_thread::sleep_for(std::chrono::milliseconds(600));  // a STATUS window after the verdict
+    status = get_json(client, "/status");
+    const std::string status_line = d->status_line(d->figures_since_start());
+    INFO(status_line);
+    const json& units = status["source"]["units"];
+    if (wrong) {
+      CHECK(units["check"] == "implausible");
+      CHECK(units["look_like"] == "mm");
+      CHECK(units["size_ratio"].get<double>() == Approx(10.0).epsilon(0.05));
+      CHECK_THAT(units["problem"].get<std::string>(),
+                 Contains("read in cm as it states, its face is 10") && Contains("times the size of the calibrated one: its values look like mm"));
+      CHECK(status["window"]["quality"] == "bad");
+      REQUIRE(!status["window"]["quality_reasons"].empty());
+      CHECK_THAT(status["window"]["quality_reasons"][0].get<std::string>(), Catch::StartsWith("source units: ") && Contains("look like mm"));
+      CHECK_THAT(status_line, Contains("capture bad: source units: read in cm") && Contains("look like mm"));
+    } else {
+      CHECK(units["check"] == "plausible");
+      CHECK(units["size_ratio"].get<double>() == Approx(1.0).epsilon(0.1));
+      CHECK(units["problem"] == "");
+      CHECK_THAT(status_line, !Contains("source units"));
+    }
+    CHECK(d.stop() == 0);
+    const std::string logged = log.str();
+    INFO(logged);
+    std::size_t warnings = 0;
+    for (std::size_t at = logged.find("source units implausible"); at != std::string::npos;
+         at = logged.find("source units implausible", at + 1))
+      ++warnings;
+    CHECK(warnings == (wrong ? 1u : 0u));
+    if (wrong) CHECK_THAT(logged, Contains("source units implausible: read in cm as it states") && Contains("look like mm"));
+    else CHECK_THAT(logged, Contains("source units cm: its face is ") && Contains(" times the size of the calibrated one"));
+  }
+  auto& sinks = spdlog::default_logger()->sinks();
+  sinks.erase(std::find(sinks.begin(), sinks.end(), sink));
 }
 
 TEST_CASE("facecapd --version and facecap --version give the version and, in a checkout, the commit") {

@@ -10,12 +10,15 @@
 #include <unistd.h>
 
 #include "client/facecap_client.hpp"
+#include "config/schema.hpp"
 #include "core/time.hpp"
 #include "formats/recording.hpp"
 #include "outputs/shm/shm_writer.hpp"
 #include "pipeline/calibration.hpp"
+#include "pipeline/settings.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
+#include "tests/daemon_test_support.hpp"
 #include "tests/process_test_support.hpp"
 
 using namespace facecap;
@@ -172,6 +175,31 @@ TEST_CASE("facecapd refuses to start with a rig file that does not exist and cre
                       Contains("--set [rig.path]: \"" + (dir / "no-such-rig").string() + "\" does not exist"));
   facecap_client* c = nullptr;
   CHECK(facecap_client_open(shm.c_str(), &c) == FACECAP_ERR_NOT_FOUND);
+}
+
+TEST_CASE("facecapd refuses a replay whose values are 10 times off its stated units, names the units they look like and "
+          "how to say so; said so, it plays the take") {
+  // The sim's built-in face is in cm; the take says mm.
+  const fs::path dir = test::scratch_dir("facecapd-replay-units");
+  const config::DaemonConfig defaults = config::default_config();
+  const std::shared_ptr<const Rig> rig(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(defaults), *rig);
+  test::write_sim_take(dir / "says-mm.fcrec", defaults.source.sim, rig, pipeline::rest_marker_set(calibration), 60, "mm");
+  const std::vector<std::string> replay{"--set", "outputs.shm.name=" + unique_shm("replay-units"), "--set", "source.driver=replay",
+                                        "--set", "source.replay.file=" + (dir / "says-mm.fcrec").string(), "--set",
+                                        "loop.mode=lockstep"};
+  DaemonProcess refused(replay, {}, dir / "refused.log");
+  CHECK(refused.wait_exit(60 * kNsPerSecond) == 1);
+  CHECK_THAT(refused.log(), Contains((dir / "says-mm.fcrec").string() + ": read in mm as it states, its face is 0.1") &&
+                                Contains("times the size of the calibrated one: its values look like cm; set "
+                                         "source.replay.units = \"cm\" if they are"));
+  CHECK_THAT(refused.log(), !Contains("solve loop"));
+
+  std::vector<std::string> said_cm = replay;
+  said_cm.insert(said_cm.end(), {"--set", "source.replay.units=cm"});
+  DaemonProcess played(said_cm, {}, dir / "played.log");
+  CHECK(played.wait_exit(60 * kNsPerSecond) == 0);
+  CHECK_THAT(played.log(), Contains("the source ended") && Contains("60 frames solved") && !Contains("units implausible"));
 }
 
 TEST_CASE("a second facecapd on the same shared memory name fails and the first keeps running") {

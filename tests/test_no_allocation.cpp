@@ -79,7 +79,8 @@ TEST_CASE("the counter sees allocations by new and by malloc") {
   std::free(q);
 }
 
-TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, temporal filters, label check, every output and solver swap") {
+TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, temporal filters, label check, every output, solver "
+          "swap and the units check's marker samples") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
   const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig);
@@ -126,10 +127,15 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, temporal filte
   SolveLoop loop(options, sim, std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, settings),
                  {&shm, &recorder, &udp, &vmc, &livelink});
   sim.start({.epoch_ns = monotonic_now_ns()});
+  loop.sample_markers(true);  // marker frames copied for the supervisor's units check
 
   const Counted first = run_ticks(loop, 120, loop.period_ns());
   CHECK(first.frames == 120);
   CHECK(first.allocations == 0);
+  const MarkerFrame* sampled = loop.sampled_markers().front();  // nobody drains them here: the first is frame 0's
+  REQUIRE(sampled != nullptr);
+  CHECK(sampled->markers.size() == sim.info().labels.size());
+  CHECK(sampled->present_count() > 40);
 
   // Swapping in a rebuilt solver happens inside a tick too; this one checks labels.
   pipeline::SolveSettings linear = settings;

@@ -546,6 +546,31 @@ TEST_CASE("a take converted to mm solves as the cm take with a cm calibration, a
                     Contains("in no unit") && !Contains("--units"));
 }
 
+TEST_CASE("a live source's units are judged after 2 s of frames with the take check's size: 10 times off names the unit") {
+  const GlitchScene scene;  // cm
+  for (const double scale : {1.0, 10.0}) {  // the same frames in cm, and mm values stated as cm
+    const formats::MarkerTake take = scene_take(scene, 360, "cm", scale);
+    pipeline::LiveUnitsCheck live(take.labels, take.units, scene.calibration);
+    int decided_at = -1;
+    for (int i = 0; i < 360 && decided_at < 0; ++i) {
+      MarkerFrame frame = take.frames[std::size_t(i)];
+      frame.receive_time_ns = int64_t(i) * kNsPerSecond / 120;  // arriving at 120 Hz
+      if (live.add(frame)) decided_at = i;
+    }
+    INFO("scale " << scale);
+    CHECK(decided_at == 240);  // the first frame 2 s after the first
+    REQUIRE(live.verdict());
+    const pipeline::UnitsCheck whole = pipeline::check_take_units(take, "", scene.calibration);
+    CHECK(live.verdict()->size_ratio == Approx(whole.size_ratio).epsilon(0.05));
+    CHECK(live.verdict()->plausible == (scale == 1.0));
+    CHECK(live.verdict()->looks_like == (scale == 1.0 ? std::nullopt : std::optional<std::string>("mm")));
+    if (scale != 1.0)
+      CHECK(pipeline::describe_units(*live.verdict(), "", "cm", "") ==
+            fmt::format("read in cm as it states, its face is {:.3g} times the size of the calibrated one: its values look like mm",
+                        live.verdict()->size_ratio));
+  }
+}
+
 // ---- Labelling that recovers ----
 
 TEST_CASE("labelling recovers within a few frames of a label swap, an occlusion while the head moves 3 cm and a ghost") {
