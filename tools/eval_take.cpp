@@ -95,6 +95,12 @@ struct SolverRun {
   Eigen::Matrix3Xd previous, previous2;                // the two previous frames' meshes
   int frames_solved = 0;
   Summary heldout_mm, fit_mm, jitter_mm, solve_ms;
+  // The weights sent out (filtered with [filter] weights), their jitter, and for the
+  // weight filter's lag the weights as solved and as sent, per frame.
+  std::optional<pipeline::OneEuroFilter> weight_filter;
+  Eigen::VectorXd weights, previous_weights, previous2_weights;
+  Summary weight_jitter;
+  std::vector<Eigen::VectorXd> solved_weights_history, sent_weights_history;
   std::vector<Summary> heldout_by_marker;              // one per held-out marker
   // The held-out error scaled by `scale`: in the actor's millimetres.
   nlohmann::json scaled(Summary& s, double scale) {
@@ -107,11 +113,13 @@ struct SolverRun {
   int held = 0;
 };
 
-// The delay d (seconds) that best explains the filtered targets as the unfiltered ones d
-// earlier: argmin_d of the mean squared distance |filtered(t) - raw(t - d)| over the
-// markers present, with raw(t - d) interpolated linearly between frames; searched in steps
-// of a tenth of a frame up to 20 frames.
-double filter_lag_s(const std::vector<Eigen::Matrix3Xd>& raw, const std::vector<Eigen::Matrix3Xd>& filtered, double rate_hz) {
+// The delay d (seconds) that best explains the filtered values (targets: one column per
+// marker; weights: one column) as the unfiltered ones d earlier: argmin_d of the mean
+// squared distance |filtered(t) - raw(t - d)| over the columns present, with raw(t - d)
+// interpolated linearly between frames; searched in steps of a tenth of a frame up to 20
+// frames.
+template <typename Matrix>
+double filter_lag_s(const std::vector<Matrix>& raw, const std::vector<Matrix>& filtered, double rate_hz) {
   constexpr int kMaxFrames = 20, kSteps = 10;
   double best_cost = std::numeric_limits<double>::infinity(), best_shift = 0.0;
   for (int step = 0; step <= kMaxFrames * kSteps; ++step) {
@@ -121,7 +129,7 @@ double filter_lag_s(const std::vector<Eigen::Matrix3Xd>& raw, const std::vector<
     double cost = 0.0;
     std::size_t n = 0;
     for (std::size_t f = whole + 1; f < raw.size(); ++f) {
-      const Eigen::Matrix3Xd earlier = (1.0 - frac) * raw[f - whole] + frac * raw[f - whole - 1];
+      const Matrix earlier = (1.0 - frac) * raw[f - whole] + frac * raw[f - whole - 1];
       for (Eigen::Index k = 0; k < earlier.cols(); ++k) {
         const double d2 = (filtered[f].col(k) - earlier.col(k)).squaredNorm();
         if (std::isfinite(d2)) cost += d2, ++n;
@@ -167,6 +175,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(method, model));
     run.heldout_by_marker.resize(face_markers.size());
     run.held_result = run.full->make_result();
+    if (o.settings.filter.weights) run.weight_filter.emplace(1, run.result.weights.size(), o.settings.filter.weight_params);
     runs.push_back(std::move(run));
   }
 
@@ -220,12 +229,22 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       for (Eigen::Index k = 0; k < K; ++k)
         if (mapped.present[std::size_t(k)])
           run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - raw_targets.col(k)).norm() * rig_mm);
+      run.weights = run.result.weights;
+      if (run.weight_filter) {
+        run.weight_filter->filter(Eigen::Map<Eigen::MatrixXd>(run.weights.data(), 1, run.weights.size()), {},
+                                  take.frames[f].source_time_ns);
+        run.solved_weights_history.push_back(run.result.weights);
+        run.sent_weights_history.push_back(run.weights);
+      }
       if (run.frames_solved >= 2 && !run.offline) {
-        // Second difference: how much the mesh shakes beyond steady motion.
+        // Second difference: how much the mesh (the weights) shake beyond steady motion.
         run.jitter_mm.add(((run.result.vertices - 2.0 * run.previous + run.previous2).colwise().norm().mean()) * rig_mm);
+        run.weight_jitter.add((run.weights - 2.0 * run.previous_weights + run.previous2_weights).cwiseAbs().mean());
       }
       run.previous2 = run.frames_solved >= 1 ? run.previous : run.result.vertices;
       run.previous = run.result.vertices;
+      run.previous2_weights = run.frames_solved >= 1 ? run.previous_weights : run.weights;
+      run.previous_weights = run.weights;
       ++run.frames_solved;
       if (!run_sample) continue;
       const std::vector<TrianglePair> hits = new_intersections(run.result.vertices);
@@ -282,12 +301,17 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
                             "flips on frames 0, every, 2*every, ...; held-out solvers see only those frames. Offline solvers "
                             "(meshik) are solved on frames 0, offline_every, ... only, and report no jitter"}};
   j["stable_residual_mm"] = stable_mm.json();
+  const double rate_hz = take.rate_hz > 0 ? take.rate_hz : 60.0;
   if (filter) {
     const pipeline::OneEuroParams& p = o.settings.filter.target_params;
     j["filter"] = {{"min_cutoff_hz", p.min_cutoff_hz},
                    {"beta", p.beta},
                    {"d_cutoff_hz", p.d_cutoff_hz},
-                   {"lag_ms", filter_lag_s(raw_history, filtered_history, take.rate_hz > 0 ? take.rate_hz : 60.0) * 1e3}};
+                   {"lag_ms", filter_lag_s(raw_history, filtered_history, rate_hz) * 1e3}};
+    if (o.settings.filter.weights)
+      j["filter"]["weights"] = {{"min_cutoff_hz", o.settings.filter.weight_params.min_cutoff_hz},
+                                {"beta", o.settings.filter.weight_params.beta},
+                                {"d_cutoff_hz", o.settings.filter.weight_params.d_cutoff_hz}};
   }
   j["head_pose_held_frames"] = head_held;
   j["rest_intersections"] = neutral_intersections;
@@ -304,6 +328,10 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
                      {"heldout_actor_mm_by_marker", by_marker},
                      {"fit_mm", run.fit_mm.json()},
                      {"jitter_mm", run.offline ? nlohmann::json(nullptr) : run.jitter_mm.json()},
+                     {"weight_jitter", run.offline ? nlohmann::json(nullptr) : run.weight_jitter.json()},
+                     {"weight_filter_lag_ms", run.weight_filter ? nlohmann::json(filter_lag_s(run.solved_weights_history,
+                                                                                              run.sent_weights_history, rate_hz) * 1e3)
+                                                                : nlohmann::json(nullptr)},
                      {"intersections", {{"new_pairs_per_checked_frame", run.checked_frames ? double(run.intersections) / double(run.checked_frames) : 0.0},
                                         {"frames_with_new", run.intersection_frames},
                                         {"added_by_solve_per_checked_frame", double(run.intersections_by_region.added()) / double(std::max<int64_t>(run.checked_frames, 1))},
@@ -344,6 +372,11 @@ void print_take_evaluation(const nlohmann::json& j) {
                s["fit_mm"]["p95"].get<double>(), jitter,
                s["intersections"]["new_pairs_per_checked_frame"].get<double>(), s["flipped"]["triangles_per_checked_frame"].get<double>(),
                s["solve_ms"]["mean"].get<double>());
+  }
+  for (const auto& [name, s] : j["solvers"].items()) {
+    if (s["weight_jitter"].is_null()) continue;
+    fmt::print("{:<10} weights sent out: jitter {:.5f} (mean |second difference|){}\n", name, s["weight_jitter"]["mean"].get<double>(),
+               s["weight_filter_lag_ms"].is_null() ? "" : fmt::format(", the weight filter's lag {:.0f} ms", s["weight_filter_lag_ms"].get<double>()));
   }
   fmt::print("\nper checked frame, added by the solve (already in the rig's linear blend of the same weights):\n");
   for (const auto& [name, s] : j["solvers"].items()) {
