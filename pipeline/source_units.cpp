@@ -19,6 +19,23 @@ double spread(const Eigen::Matrix3Xd& points) {
   return std::sqrt((points.colwise() - points.rowwise().mean()).colwise().squaredNorm().mean());
 }
 
+// The median of values (reordered); values is not empty.
+double median(std::span<double> values) {
+  std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
+  return values[values.size() / 2];
+}
+
+// Median distance of points (3 x n) from their coordinate-wise median; scratch holds n.
+double median_spread(const Eigen::Ref<const Eigen::Matrix3Xd>& points, std::span<double> scratch) {
+  Eigen::Vector3d centre;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (Eigen::Index i = 0; i < points.cols(); ++i) scratch[std::size_t(i)] = points(axis, i);
+    centre[axis] = median(scratch);
+  }
+  for (Eigen::Index i = 0; i < points.cols(); ++i) scratch[std::size_t(i)] = (points.col(i) - centre).norm();
+  return median(scratch);
+}
+
 }  // namespace
 
 FaceSizeGauge::FaceSizeGauge(const std::vector<std::string>& labels, std::string_view units,
@@ -28,10 +45,33 @@ FaceSizeGauge::FaceSizeGauge(const std::vector<std::string>& labels, std::string
       neutral_(labels.size(), nullptr),
       now_(3, Eigen::Index(labels.size())),
       then_(3, Eigen::Index(labels.size())) {
-  for (std::size_t s = 0; s < labels.size(); ++s) neutral_[s] = calibration.neutral_of(labels[s]);
+  for (std::size_t s = 0; s < labels.size(); ++s) {
+    neutral_[s] = calibration.neutral_of(labels[s]);
+    by_label_ = by_label_ || neutral_[s] != nullptr;
+  }
+  if (by_label_) return;
+  Eigen::Matrix3Xd calibrated(3, Eigen::Index(calibration.markers.size() + calibration.head_markers.size()));
+  Eigen::Index n = 0;
+  for (const auto& m : calibration.markers) calibrated.col(n++) = m.neutral;
+  for (const auto& h : calibration.head_markers) calibrated.col(n++) = h.neutral;
+  if (n < 3) return;
+  std::vector<double> scratch(static_cast<std::size_t>(n));
+  calibrated_cloud_mm_ = median_spread(calibrated, scratch) * calibration_mm_per_unit_;
+  min_cloud_points_ = std::max<std::size_t>(3, std::size_t(n) / 2);
+  scratch_.resize(labels.size());
+}
+
+std::optional<double> FaceSizeGauge::cloud_size_ratio(const MarkerFrame& frame) {
+  Eigen::Index n = 0;
+  for (std::size_t s = 0; s < scratch_.size() && s < frame.markers.size(); ++s)
+    if (frame.markers[s].present() && frame.markers[s].position.allFinite()) now_.col(n++) = frame.markers[s].position;
+  if (std::size_t(n) < min_cloud_points_ || !(calibrated_cloud_mm_ > 0.0)) return std::nullopt;
+  return median_spread(now_.leftCols(n), std::span<double>(scratch_).first(std::size_t(n))) * stated_mm_per_unit_ /
+         calibrated_cloud_mm_;
 }
 
 std::optional<double> FaceSizeGauge::size_ratio(const MarkerFrame& frame) {
+  if (!by_label_) return cloud_size_ratio(frame);
   Eigen::Index n = 0;
   for (std::size_t s = 0; s < neutral_.size() && s < frame.markers.size(); ++s) {
     if (!neutral_[s] || !frame.markers[s].present() || !frame.markers[s].position.allFinite()) continue;
@@ -49,8 +89,7 @@ UnitsCheck units_verdict(std::vector<double>& ratios, double stated_mm_per_unit)
   UnitsCheck out;
   out.stated_mm_per_unit = stated_mm_per_unit;
   if (ratios.empty()) return out;
-  std::nth_element(ratios.begin(), ratios.begin() + std::ptrdiff_t(ratios.size() / 2), ratios.end());
-  out.size_ratio = ratios[ratios.size() / 2];
+  out.size_ratio = median(ratios);
   out.plausible = out.size_ratio >= 1.0 / kMaxSizeRatio && out.size_ratio <= kMaxSizeRatio;
   if (!out.plausible)
     for (const double mm : kUnitsTried) {

@@ -43,17 +43,29 @@ inline constexpr double kMaxSizeRatio = 2.0;
 class FaceSizeGauge {
  public:
   FaceSizeGauge(const std::vector<std::string>& labels, std::string_view units, const align::Calibration& calibration);
-  // The RMS distance from their centre of the frame's markers that the calibration has,
-  // over the same of the calibration's neutral positions, both in mm; nullopt when fewer
-  // than 3 are present. Allocates nothing.
+  // The frame's face size over the calibration's, both in mm; nullopt when the frame has
+  // too few markers to say. Labelled slots: the RMS distance from their centre of the
+  // frame's markers that the calibration has, over the same of its neutral positions (3 at
+  // least). When no slot carries a calibrated label (an unlabelled point cloud: cameras,
+  // calibration.label_markers): the median distance of the present points from their
+  // coordinate-wise median, over the same of every calibrated marker (face and head), with
+  // at least half as many points as those markers; the medians let a few ghosts or another
+  // actor's stray markers pass. Allocates nothing.
   std::optional<double> size_ratio(const MarkerFrame& frame);
   double stated_mm_per_unit() const noexcept { return stated_mm_per_unit_; }
+  bool by_label() const noexcept { return by_label_; }
 
  private:
+  std::optional<double> cloud_size_ratio(const MarkerFrame& frame);
+
   double stated_mm_per_unit_;
   double calibration_mm_per_unit_;
   std::vector<const Eigen::Vector3d*> neutral_;  // per slot, the calibration's position (its units) or nullptr
+  bool by_label_ = false;                        // some slot has a calibrated label
   Eigen::Matrix3Xd now_, then_;                  // 3 x slots, scratch
+  double calibrated_cloud_mm_ = 0.0;             // unlabelled: the calibrated markers' median distance, mm
+  std::size_t min_cloud_points_ = 3;
+  std::vector<double> scratch_;                  // slots: distances for the medians
 };
 
 // The verdict on frames' size ratios (FaceSizeGauge), their median against kMaxSizeRatio;

@@ -551,6 +551,7 @@ TEST_CASE("a live source's units are judged after 2 s of frames with the take ch
   for (const double scale : {1.0, 10.0}) {  // the same frames in cm, and mm values stated as cm
     const formats::MarkerTake take = scene_take(scene, 360, "cm", scale);
     pipeline::LiveUnitsCheck live(take.labels, take.units, scene.calibration);
+    REQUIRE(pipeline::FaceSizeGauge(take.labels, take.units, scene.calibration).by_label());
     int decided_at = -1;
     for (int i = 0; i < 360 && decided_at < 0; ++i) {
       MarkerFrame frame = take.frames[std::size_t(i)];
@@ -568,6 +569,33 @@ TEST_CASE("a live source's units are judged after 2 s of frames with the take ch
       CHECK(pipeline::describe_units(*live.verdict(), "", "cm", "") ==
             fmt::format("read in cm as it states, its face is {:.3g} times the size of the calibrated one: its values look like mm",
                         live.verdict()->size_ratio));
+  }
+}
+
+TEST_CASE("an unlabelled point cloud's units are judged by its size against every calibrated marker's, ghosts and all") {
+  const GlitchScene scene;  // cm
+  for (const double scale : {1.0, 10.0}) {
+    formats::MarkerTake take = scene_take(scene, 360, "cm", scale);
+    for (std::size_t s = 0; s < take.labels.size(); ++s) take.labels[s] = fmt::format("P{}", s);  // as cameras name points
+    REQUIRE_FALSE(pipeline::FaceSizeGauge(take.labels, take.units, scene.calibration).by_label());
+    // Three ghosts a metre away in every frame, in the slots of three markers.
+    for (MarkerFrame& f : take.frames)
+      for (std::size_t s = 0; s < 3; ++s) {
+        f.markers[s].position = Eigen::Vector3d(100.0 * double(s + 1), 0.0, 0.0) * scale;
+        f.markers[s].flags = 0;  // present
+      }
+    pipeline::LiveUnitsCheck live(take.labels, take.units, scene.calibration);
+    for (MarkerFrame frame : take.frames) {
+      frame.receive_time_ns = frame.frame_no * kNsPerSecond / 120;
+      if (live.add(frame)) break;
+    }
+    INFO("scale " << scale);
+    REQUIRE(live.verdict());
+    CHECK(live.verdict()->size_ratio == Approx(scale).epsilon(0.25));
+    CHECK(live.verdict()->plausible == (scale == 1.0));
+    if (scale != 1.0) CHECK(live.verdict()->looks_like == "mm");
+    // The whole-take check measures the same way.
+    CHECK(pipeline::check_take_units(take, "", scene.calibration).plausible == (scale == 1.0));
   }
 }
 
