@@ -334,7 +334,8 @@ void Daemon::watch_source_units() {
       spdlog::info("source units {}: its face is {:.2f} times the size of the calibrated one", source_->info().units.empty()
                    ? "unstated (the calibration's)" : source_->info().units, verdict.size_ratio);
     } else {
-      units_problem_ = pipeline::describe_units(verdict, "", source_->info().units, "");
+      units_problem_ = pipeline::describe_units(verdict, "", source_->info().units,
+                                                "check the units the capture system sends, and that the profile is this actor's");
       spdlog::warn("source units implausible: {}; the face is solved as it comes (docs/daemon.md, \"Units\")", units_problem_);
     }
   }
