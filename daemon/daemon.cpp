@@ -309,7 +309,9 @@ void Daemon::require_plausible_recorded_units(const pipeline::Calibration& calib
   const drivers::SourceInfo& info = source_->info();
   const drivers::TakeUnits units = config_.values.source.replay.units;  // the one source with recorded frames
   const pipeline::UnitsCheck check = pipeline::check_frames_units(frames, info.labels, info.units, calibration);
-  if (!check.plausible)
+  // A face that fits no unit (another actor's profile, a calibration that is no face's) is
+  // not a units mistake: the live check reports it once the loop runs, as for any source.
+  if (!check.plausible && check.looks_like)
     throw file_error(config_.values.source.replay.file,
                      pipeline::describe_units(check, units == drivers::TakeUnits::kStated ? "" : info.units, info.units,
                                               "set source.replay.units = \"{}\" if they are"));

@@ -130,8 +130,8 @@ class Daemon {
   void log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::Calibration& calibration,
                     double build_seconds) const;
   // The source's units against the calibration's face (docs/daemon.md "Units"): a replay's
-  // take is checked whole before the loop starts and refused (throws Error) when its size is
-  // implausible; a live source is judged from its first seconds of frames, sampled off the
+  // take is checked whole before the loop starts and refused (throws Error) when its values
+  // look like other units than it is read in; any source is judged from its first seconds of frames, sampled off the
   // solve thread (SolveLoop::sampled_markers), and judged afresh after each pipeline swap.
   void require_plausible_recorded_units(const pipeline::Calibration& calibration) const;
   void watch_source_units();

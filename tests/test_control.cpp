@@ -581,8 +581,8 @@ TEST_CASE("with 90% of markers missing, the capture reads bad and STATUS says wh
   }
 }
 
-TEST_CASE("a live source 10 times off its calibration's units: /status, STATUS and the log say which units it looks like; "
-          "a right one says nothing") {
+TEST_CASE("a live source 10 times off its calibration's units: /status, STATUS and the log say which units it looks like, "
+          "and of a right one nothing") {
   // The sim streams the built-in face in cm. A profile of the same face whose positions are
   // stated in mm is a face 10 times smaller: the sim's values look like mm against it.
   const fs::path dir = test::scratch_dir("control-units");

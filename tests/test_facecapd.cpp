@@ -178,7 +178,7 @@ TEST_CASE("facecapd refuses to start with a rig file that does not exist and cre
 }
 
 TEST_CASE("facecapd refuses a replay whose values are 10 times off its stated units, names the units they look like and "
-          "how to say so; said so, it plays the take") {
+          "how to say so, and told so plays the take") {
   // The sim's built-in face is in cm; the take says mm.
   const fs::path dir = test::scratch_dir("facecapd-replay-units");
   const config::DaemonConfig defaults = config::default_config();
