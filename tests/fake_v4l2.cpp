@@ -210,6 +210,7 @@ int handle_ioctl(Fake& f, int fd, OpenDevice& o, unsigned long request, void* ar
       buf->flags = V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE | V4L2_BUF_FLAG_DONE;
       buf->timestamp.tv_sec = stamp / 1'000'000'000;
       buf->timestamp.tv_usec = (stamp % 1'000'000'000) / 1000;
+      if (d.dequeued) d.dequeued(o.next_sequence, buf->timestamp.tv_sec * 1'000'000'000 + buf->timestamp.tv_usec * 1000);
       ++o.next_sequence;
       ++f.dequeued;
       return 0;
