@@ -1,8 +1,8 @@
 // The v4l2 driver's camera pipeline without cameras: its calibration file, blob detection,
 // triangulation (against OpenCV's and against the truth the images were rendered from),
 // frame sets matched by time, and the driver itself fed rendered images below V4L2, its
-// unlabelled points labelled and solved as the pipeline will. And its errors with no
-// camera there.
+// unlabelled points labelled and solved by the pipeline. And its errors with no camera
+// there.
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -24,7 +24,6 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
-#include "solver/align/label.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/synthetic_cameras.hpp"
 #include "tests/test_support.hpp"
@@ -307,24 +306,15 @@ TEST_CASE("the v4l2 driver fed rendered images below V4L2: sets by time, unlabel
   CHECK(source.info().labels[0] == "unlabelled_1");
   CHECK(source.info().units == "mm");
 
-  // What the pipeline does with unlabelled points (being added there): the labeller
-  // names them from the calibration's markers, then the solve. Here by hand.
-  const std::vector<std::string> labels = scene.sim.info().labels;
-  MarkerFrame rest = make_marker_frame(labels);
-  scene.sim.render_frame(0, rest);
-  Eigen::Matrix3Xd reference(3, Eigen::Index(labels.size()));
-  for (std::size_t k = 0; k < labels.size(); ++k) reference.col(Eigen::Index(k)) = rest.markers[k].position * renderer.sim_to_mm();
-  align::LabellerParams lp;
-  lp.gate = 6.0;
-  lp.gate_growth = 1.0;
-  lp.max_gate = 20.0;
-  lp.label_margin = 1.0;
-  align::MarkerLabeller labeller(labels, reference, lp);
-  pipeline::SolvePipeline solve(*scene.rig, scene.calibration, {labels, "mm"}, pipeline::solve_settings(scene.config, pipeline::SolveContext::kLive));
+  // The pipeline labels the unlabelled points from the calibration's markers, as facecapd
+  // does with calibration.label_markers (test_v4l2_device runs facecapd itself).
+  pipeline::SolveSettings settings = pipeline::solve_settings(scene.config, pipeline::SolveContext::kLive);
+  settings.label_markers = true;
+  pipeline::SolvePipeline solve(*scene.rig, scene.calibration, {source.info().labels, source.info().units}, settings);
   SolvedFrame solved = solve.make_solved_frame(false);
 
   source.start({.epoch_ns = monotonic_now_ns()});
-  MarkerFrame frame = make_marker_frame(source.info().labels), labelled = make_marker_frame(labels);
+  MarkerFrame frame = make_marker_frame(source.info().labels);
   std::vector<Eigen::Vector3d> points;
   double weight_error = 0, jaw_error = 0, worst_point_mm = 0;
   int solved_frames = 0, ghosts = 0;
@@ -350,8 +340,7 @@ TEST_CASE("the v4l2 driver fed rendered images below V4L2: sets by time, unlabel
       if (d < 2.0) worst_point_mm = std::max(worst_point_mm, d);
       else ++ghosts;
     }
-    labeller.label(points, labelled);
-    solve.process(labelled, solved);
+    solve.process(frame, solved);
     if (rendered < 30) continue;  // the temporal prior settles
     const Eigen::VectorXd truth = scene.sim.weights_at(rendered);
     weight_error += (solved.weights.cast<double>() - truth).cwiseAbs().mean();
