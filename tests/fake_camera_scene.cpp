@@ -63,7 +63,7 @@ CameraScene read_camera_scene(const std::filesystem::path& file) {
       SceneDevice& d = scene.devices.emplace_back();
       if (!(fields >> d.path >> d.format >> d.width >> d.height >> d.period_ns >> d.offset_ns))
         fail("wants \"device <path> <format> <width> <height> <period_ns> <offset_ns>\"");
-      if (d.format != "GREY" && d.format != "YUYV") fail("format " + d.format + " is not GREY or YUYV");
+      if (d.format != "GREY" && d.format != "YUYV" && d.format != "MJPG") fail("format " + d.format + " is not GREY, YUYV or MJPG");
       if (d.width < 1 || d.width > kMaxSide || d.height < 1 || d.height > kMaxSide)
         fail("size outside 1x1 to 4096x4096");
       if (d.period_ns <= 0 || d.offset_ns < 0) fail("wants a period > 0 and an offset >= 0");

@@ -6,7 +6,7 @@
 //
 //   facecap fake v4l2 scene 1
 //   background <grey> noise <standard deviation, grey levels>
-//   device <path> <GREY|YUYV> <width> <height> <period_ns> <offset_ns>    (one per camera)
+//   device <path> <GREY|YUYV|MJPG> <width> <height> <period_ns> <offset_ns>    (one per camera)
 //   image <frame> <camera> <noise_seed> <spot count>                         (frames 0, 1, ... in order)
 //   <u> <v> <sigma_x> <sigma_y> <angle> <peak>                               (that many spot lines)
 #include <cstdint>
@@ -20,7 +20,7 @@ namespace facecap::test {
 
 struct SceneDevice {
   std::string path;
-  std::string format = "GREY";  // GREY or YUYV
+  std::string format = "GREY";  // GREY, YUYV or MJPG
   int width = 640, height = 480;
   int64_t period_ns = 0;
   int64_t offset_ns = 0;        // after the grid of frame times (fake_v4l2::Device::offset_ns)

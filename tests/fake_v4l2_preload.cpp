@@ -5,8 +5,8 @@
 // camera is the scene's frame `sequence` modulo the scene's length. With
 // FACECAP_FAKE_V4L2_LOG, one line per frame handed out, "<camera> <sequence>
 // <timestamp_ns>", so that the test maps the frames the process saw to the scene's. Links
-// the C++ library only: no OpenCV, no facecap library. A scene that does not read ends the
-// process at load, saying why.
+// the C++ library and libjpeg (MJPEG) only: no OpenCV, no facecap library. A scene that
+// does not read ends the process at load, saying why.
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -42,7 +42,11 @@ Preloaded& preloaded() {
   return instance;
 }
 
-uint32_t fourcc_of(const std::string& format) { return format == "YUYV" ? V4L2_PIX_FMT_YUYV : V4L2_PIX_FMT_GREY; }
+uint32_t fourcc_of(const std::string& format) {
+  if (format == "YUYV") return V4L2_PIX_FMT_YUYV;
+  if (format == "MJPG") return V4L2_PIX_FMT_MJPEG;
+  return V4L2_PIX_FMT_GREY;
+}
 
 // Draws camera `camera`'s image of frame `sequence`. Called by the fake under its lock.
 void draw(std::size_t camera, int64_t sequence, uint8_t* grey, int stride) {

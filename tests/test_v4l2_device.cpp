@@ -1,8 +1,9 @@
 // The v4l2 driver's own V4L2 streaming (V4l2Feed: capabilities, formats, frame rate,
 // memory-mapped buffers, QBUF/DQBUF, poll, STREAMON/OFF) against two V4L2 capture devices
 // faked in this process (fake_v4l2.hpp), rendering the sim's markers as the cameras of
-// test_cameras see them: the points that come out, and a camera unplugged and plugged
-// back while the driver streams.
+// test_cameras see them in GREY, YUYV and MJPEG: the points that come out, and a camera
+// unplugged and plugged back while the driver streams. Then facecapd itself streaming such
+// devices preloaded into it (fake_v4l2_preload.cpp), its recording against the truth.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -112,7 +113,8 @@ bool wait_for(Done done, double seconds) {
 
 TEST_CASE("two V4L2 devices stream memory-mapped buffers into the v4l2 driver: points within 0.5 mm of the truth") {
   const auto [fourcc, name] = GENERATE(std::pair<uint32_t, const char*>{V4L2_PIX_FMT_GREY, "GREY"},
-                                       std::pair<uint32_t, const char*>{V4L2_PIX_FMT_YUYV, "YUYV"});
+                                       std::pair<uint32_t, const char*>{V4L2_PIX_FMT_YUYV, "YUYV"},
+                                       std::pair<uint32_t, const char*>{V4L2_PIX_FMT_MJPEG, "MJPG"});
   SECTION(name) {
     SimScene scene;
     const fs::path dir = test::scratch_dir(fmt::format("v4l2-device-{}", name));
