@@ -354,3 +354,32 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
   CHECK(stats["source"]["errors"] == 0);
 #endif
 }
+
+TEST_CASE("a camera scene that does not read is refused naming the file and line, and ends a preloaded process") {
+  const fs::path dir = test::scratch_dir("v4l2-bad-scene");
+  const std::string head = "facecap fake v4l2 scene 1\nbackground 12 noise 2\n";
+  const std::string device = "device " + (dir / "video0").string() + " GREY 640 480 16666666 0\n";
+  auto read = [&](const std::string& text) {
+    test::write_text(dir / "scene.txt", text);
+    return test::read_camera_scene(dir / "scene.txt");
+  };
+  const std::string file = (dir / "scene.txt").string();
+  CHECK_THROWS_WITH(read("a scene\n"), Contains(file + ":1: is not a camera scene"));
+  CHECK_THROWS_WITH(read(head + "device v0 BGR3 640 480 16666666 0\n"), Contains(file + ":3: format BGR3 is not GREY"));
+  CHECK_THROWS_WITH(read(head + "device v0 GREY 64000 480 16666666 0\n"), Contains(":3: size outside"));
+  CHECK_THROWS_WITH(read(head + device + "image 0 0 7 100000\n"), Contains(":4: 100000 spots: at most 4096"));
+  CHECK_THROWS_WITH(read(head + device + "image 1 0 7 0\n"), Contains(":4: images out of order: frame 0 camera 0"));
+  CHECK_THROWS_WITH(read(head + device + "image 0 0 7 2\n10 20 1.2 1.2 0 200\n"), Contains(":5: ends where a spot"));
+  CHECK_THROWS_WITH(read(head + device + "image 0 0 7 1\n10 20 0 1.2 0 200\n"), Contains(":5: sigma outside"));
+  CHECK_THROWS_WITH(read(head + device), Contains("wants every camera's image of at least one frame"));
+  CHECK(read(head + device + "image 0 0 7 1\n10 20 1.2 1.2 0 200\n").frames.size() == 1);
+
+#ifdef FACECAP_FAKE_V4L2_PRELOAD
+  // Before facecapd's own code runs: the preload's message and exit status 3.
+  test::write_text(dir / "scene.txt", head + device + "image 0 0 7 1\n10 20 1.2 1.2 0 bright\n");
+  test::DaemonProcess d({"--set", "source.driver=v4l2"},
+                        {"LD_PRELOAD=" FACECAP_FAKE_V4L2_PRELOAD, "FACECAP_FAKE_V4L2_SCENE=" + file}, dir / "facecapd.log");
+  CHECK(d.wait_exit(30 * kNsPerSecond) == 3);
+  CHECK_THAT(d.log(), Contains("facecap fake v4l2: " + file + ":5: wants \"<u> <v> <sigma_x> <sigma_y> <angle> <peak>\""));
+#endif
+}
