@@ -348,8 +348,9 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
   CHECK(ghosts == 0);
   CHECK(markers_used <= calibrated_seen);
   CHECK(double(markers_used) >= 0.99 * double(calibrated_seen));
-  CHECK(weight_error < 0.06);
-  CHECK(jaw_error < 0.03);
+  // Measured 0.042 and 0.009; the truth 0.1 s off gives jawOpen 0.040.
+  CHECK(weight_error < 0.05);
+  CHECK(jaw_error < 0.02);
   CHECK(missed <= stats["ticks"].get<uint64_t>() / 100);  // none on a quiet machine
   CHECK(stats["source"]["errors"] == 0);
 #endif
