@@ -280,7 +280,7 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
   formats::RecordingReader reader(recording);
 
   // The points as they came, against the truth of the frame they were drawn from.
-  std::size_t point_sets = 0, points = 0, seen_by_both = 0, ghosts = 0;
+  std::size_t point_sets = 0, seen_by_both = 0, ghosts = 0;
   std::vector<double> errors_mm;
   MarkerFrame received;
   for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) {
@@ -293,7 +293,6 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
       for (std::size_t m = 0; m < set.truth.size(); ++m) seen_by_both += set.visible[0][m] && set.visible[1][m];
     for (const Marker& m : received.markers) {
       if (!m.present()) continue;
-      ++points;
       double nearest = INFINITY;
       for (const Eigen::Vector3d& t : set.truth) nearest = std::min(nearest, (m.position - t).norm());
       if (nearest < 2.0) errors_mm.push_back(nearest);
