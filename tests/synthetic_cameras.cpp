@@ -135,6 +135,32 @@ std::vector<cv::Mat> MarkerRenderer::draw(const ProjectedSet& set) const {
   return images;
 }
 
+void PointErrors::add(std::span<const Eigen::Vector3d> points, std::span<const Eigen::Vector3d> truth) {
+  for (const Eigen::Vector3d& p : points) {
+    double nearest = INFINITY;
+    for (const Eigen::Vector3d& t : truth)
+      if (t.allFinite()) nearest = std::min(nearest, (p - t).norm());
+    if (nearest < 2.0) errors_mm_.push_back(nearest);
+    else ++ghosts_;
+  }
+}
+
+void PointErrors::add(const MarkerFrame& frame, std::span<const Eigen::Vector3d> truth) {
+  for (const Marker& m : frame.markers)
+    if (m.present()) add(std::span(&m.position, 1), truth);
+}
+
+double PointErrors::median_mm() const {
+  if (errors_mm_.empty()) return INFINITY;
+  std::vector<double> sorted = errors_mm_;
+  std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2), sorted.end());
+  return sorted[sorted.size() / 2];
+}
+
+double PointErrors::worst_mm() const {
+  return errors_mm_.empty() ? INFINITY : *std::max_element(errors_mm_.begin(), errors_mm_.end());
+}
+
 SyntheticFeed::SyntheticFeed(MarkerRenderer& renderer, int64_t frames, int64_t period_ns, int64_t skew_ns,
                              std::vector<std::pair<int64_t, std::size_t>> dropped)
     : renderer_(renderer), frames_(frames), period_ns_(period_ns), skew_ns_(skew_ns), dropped_(std::move(dropped)) {}

@@ -77,6 +77,24 @@ class MarkerRenderer {
 // The sim's centre of its markers at rest (frame 0), in mm: where the cameras look.
 Eigen::Vector3d sim_marker_centre_mm(const drivers::SimSource& sim);
 
+// The points that came out of the cameras against the truth they were drawn from: a point
+// within 2 mm of a truth marker is that marker, off by its distance to it; any other is a
+// ghost.
+class PointErrors {
+ public:
+  void add(std::span<const Eigen::Vector3d> points, std::span<const Eigen::Vector3d> truth);
+  // The present markers of a frame from the driver.
+  void add(const MarkerFrame& frame, std::span<const Eigen::Vector3d> truth);
+  std::size_t count() const noexcept { return errors_mm_.size(); }
+  std::size_t ghosts() const noexcept { return ghosts_; }
+  double median_mm() const;  // infinity with no point
+  double worst_mm() const;   // infinity with no point
+
+ private:
+  std::vector<double> errors_mm_;
+  std::size_t ghosts_ = 0;
+};
+
 // Renders sets of the sim's frames for the driver, one camera image per next() call,
 // stamped `period_ns` apart, camera k's image `k * skew_ns` after camera 0's. Frames listed
 // in `dropped` (frame number, camera) never arrive, as a camera may drop one. Keeps the

@@ -127,8 +127,8 @@ TEST_CASE("two V4L2 devices stream memory-mapped buffers into the v4l2 driver: p
     source.start({.epoch_ns = monotonic_now_ns()});
 
     MarkerFrame frame = make_marker_frame(source.info().labels);
-    std::size_t sets_checked = 0, ghosts = 0;
-    std::vector<double> errors_mm;
+    std::size_t sets_checked = 0;
+    test::PointErrors points;
     const int64_t stop_at = monotonic_now_ns() + 3 * kNsPerSecond;
     while (monotonic_now_ns() < stop_at) {
       if (!source.take_frame(monotonic_now_ns(), frame)) {
@@ -140,34 +140,25 @@ TEST_CASE("two V4L2 devices stream memory-mapped buffers into the v4l2 driver: p
       const std::vector<Eigen::Vector3d> truth = renderer.truth(sequence);
       REQUIRE_FALSE(truth.empty());
       ++sets_checked;
-      for (const Marker& m : frame.markers) {
-        if (!m.present()) continue;
-        double nearest = INFINITY;
-        for (const Eigen::Vector3d& t : truth) nearest = std::min(nearest, (m.position - t).norm());
-        if (nearest < 2.0) errors_mm.push_back(nearest);
-        else ++ghosts;
-      }
+      points.add(frame, truth);
     }
     source.stop();
     const drivers::SourceHealth health = source.health();
-    std::sort(errors_mm.begin(), errors_mm.end());
-    const double median_mm = errors_mm.empty() ? INFINITY : errors_mm[errors_mm.size() / 2];
-    const double worst_mm = errors_mm.empty() ? INFINITY : errors_mm.back();
     WARN(fmt::format("{}: {} sets in 3 s at 30 Hz ({} checked, {} points), error median {:.3f} max {:.3f} mm, {} "
                      "ghosts; fake: {} frames dequeued, {} dropped; {} images unmatched, {} errors",
-                     name, source.frame_sets(), sets_checked, errors_mm.size(), median_mm, worst_mm, ghosts,
+                     name, source.frame_sets(), sets_checked, points.count(), points.median_mm(), points.worst_mm(), points.ghosts(),
                      test::fake_v4l2::frames_dequeued(), test::fake_v4l2::frames_dropped(), source.images_unmatched(),
                      health.errors));
     test::fake_v4l2::clear();
     // 90 sets are due; a busy machine may drop some (the fake drops frames not taken in time).
     CHECK(source.frame_sets() >= 45);
     CHECK(sets_checked >= 20);
-    CHECK(errors_mm.size() >= sets_checked * 40);  // 48 markers, 2 hidden per camera
+    CHECK(points.count() >= sets_checked * 40);  // 48 markers, 2 hidden per camera
     // test_cameras holds the 0.5 mm bound on its renders; with this seed one marker grazing
     // another in one view comes out at 0.65 mm, the same through GREY and YUYV buffers.
-    CHECK(median_mm < 0.1);
-    CHECK(worst_mm < 1.0);
-    CHECK(ghosts == 0);
+    CHECK(points.median_mm() < 0.1);
+    CHECK(points.worst_mm() < 1.0);
+    CHECK(points.ghosts() == 0);
     CHECK(health.errors == 0);
   }
 }
@@ -280,8 +271,8 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
   formats::RecordingReader reader(recording);
 
   // The points as they came, against the truth of the frame they were drawn from.
-  std::size_t point_sets = 0, seen_by_both = 0, ghosts = 0;
-  std::vector<double> errors_mm;
+  std::size_t point_sets = 0, seen_by_both = 0;
+  test::PointErrors points;
   MarkerFrame received;
   for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) {
     reader.read_marker_frame(i, received);
@@ -291,13 +282,7 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
     ++point_sets;
     if (point_sets > 1)  // the first set holds its new two-view points back
       for (std::size_t m = 0; m < set.truth.size(); ++m) seen_by_both += set.visible[0][m] && set.visible[1][m];
-    for (const Marker& m : received.markers) {
-      if (!m.present()) continue;
-      double nearest = INFINITY;
-      for (const Eigen::Vector3d& t : set.truth) nearest = std::min(nearest, (m.position - t).norm());
-      if (nearest < 2.0) errors_mm.push_back(nearest);
-      else ++ghosts;
-    }
+    points.add(received, set.truth);
   }
 
   // The solved weights against the sim's, frame by frame, once the solve has settled; the
@@ -326,9 +311,6 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
   REQUIRE(compared > 0);
   weight_error /= double(compared);
   jaw_error /= double(compared);
-  std::sort(errors_mm.begin(), errors_mm.end());
-  const double median_mm = errors_mm.empty() ? INFINITY : errors_mm[errors_mm.size() / 2];
-  const double worst_mm = errors_mm.empty() ? INFINITY : errors_mm.back();
   const nlohmann::json stats = nlohmann::json::parse(test::slurp(stats_file));
   const uint64_t missed = stats["missed_deadlines"].get<uint64_t>();
   WARN(fmt::format("facecapd, 2 preloaded fake cameras at 60 Hz for {} s: {} frames rendered ({} images dropped), {} sets "
@@ -336,15 +318,15 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
                    "{:.3f} max {:.3f} mm, {} ghosts; solved with {} of the {} calibrated markers both cameras saw, mean |w - "
                    "w_true| {:.4f}, jawOpen {:.4f}; {} missed deadlines",
                    run_seconds, frames_rendered[0], dropped, point_sets, reader.solved_frame_count(), compared,
-                   errors_mm.size(), seen_by_both, median_mm, worst_mm, ghosts, markers_used, calibrated_seen,
+                   points.count(), seen_by_both, points.median_mm(), points.worst_mm(), points.ghosts(), markers_used, calibrated_seen,
                    weight_error, jaw_error, missed));
   // A set per frame rendered, but for frames a loaded machine made the fake drop.
   CHECK(double(point_sets) >= 0.95 * double(frames_rendered[0]));
   CHECK(reader.solved_frame_count() == stats["frames_solved"].get<std::size_t>());
-  CHECK(double(errors_mm.size()) >= 0.99 * double(seen_by_both));
-  CHECK(median_mm < 0.1);
-  CHECK(worst_mm < 1.0);
-  CHECK(ghosts == 0);
+  CHECK(double(points.count()) >= 0.99 * double(seen_by_both));
+  CHECK(points.median_mm() < 0.1);
+  CHECK(points.worst_mm() < 1.0);
+  CHECK(points.ghosts() == 0);
   CHECK(markers_used <= calibrated_seen);
   CHECK(double(markers_used) >= 0.99 * double(calibrated_seen));
   // Measured 0.042 and 0.009; the truth 0.1 s off gives jawOpen 0.040.
