@@ -228,7 +228,6 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
                          "--set", "source.v4l2.calibration=" + (dir / "cameras.yaml").string(),
                          "--set", fmt::format("source.v4l2.devices={},{}", cameras.devices[0].path, cameras.devices[1].path),
                          "--set", "source.v4l2.frame_rate_hz=60",
-                         "--set", "calibration.label_markers=true",
                          "--set", fmt::format("outputs.shm.name=facecap-v4l2-{}", ::getpid()),
                          "--set", "outputs.recording.enabled=true",
                          "--set", "outputs.recording.directory=" + recordings.string(),
@@ -246,6 +245,7 @@ TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points
   }
   REQUIRE(status == 0);
   CHECK_THAT(d.log(), Contains("640x480 GREY at 60 Hz"));
+  CHECK_THAT(d.log(), Contains("calibration.label_markers turned on"));  // cameras' points are unlabelled
 
   // The fake's log: camera 0's frames by timestamp (a set's time is camera 0's).
   std::map<int64_t, int64_t> sequence_at;  // camera 0 timestamp -> sequence
