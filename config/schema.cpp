@@ -156,8 +156,9 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(source.natnet.unlabelled_markers), .default_value = int64_t{0}, .unit = "markers", .min = 0,
        .max = 1024,
        .description = "Slots for unlabelled points after the marker set's (points Motive has not labelled; without a "
-                      "marker set, every point seen); more in a frame are dropped and counted. Give them to the "
-                      "labeller with calibration.label_markers. Also applies to replayed captures."},
+                      "marker set, every point seen); more in a frame are dropped and counted. Without a marker set "
+                      "the points go to the labeller (calibration.label_markers is turned on). Also applies to "
+                      "replayed captures."},
       {FACECAP_CHOICE_KEY(source.natnet.bitstream, drivers::kNatNetBitstreams), .default_value = std::string("server"),
        .description = "The frame layout: the server's NatNet version, or one asked for (a 4.x server streaming "
                       "unicast is asked to send it; otherwise frames are only read as it)."},
@@ -208,7 +209,8 @@ const std::vector<KeySpec>& schema_rows() {
        .description = "Label every frame afresh: its points go to the labeller, which matches them to the "
                       "calibration's markers (tracking them from frame to frame, re-acquiring the set from the "
                       "calibration's neutral shape when it loses it), so that a face is solved from an unlabelled "
-                      "point cloud (source.natnet.unlabelled_markers). The labels a source gives are ignored."},
+                      "point cloud. The labels a source gives are ignored. Turned on by itself for a source that "
+                      "delivers only unlabelled points (v4l2, natnet without a marker_set)."},
 
       {FACECAP_CHOICE_KEY(solver.method, kSolverMethods), .default_value = std::string("nonlinear"),
        .reload = Reload::kRebuild,

@@ -74,6 +74,14 @@ std::string default_dashboard_dir() {
   return FACECAP_INSTALLED_DASHBOARD_DIR;
 }
 
+// A source of unnamed points cannot be solved without the labeller: it is turned on rather
+// than left for the marker mapper to refuse (none of the calibration's names would match).
+void label_unlabelled_source(config::DaemonConfig& c, const drivers::SourceInfo& source) {
+  if (!source.unlabelled || c.calibration.label_markers) return;
+  c.calibration.label_markers = true;
+  spdlog::info("the source delivers unlabelled points: calibration.label_markers turned on to label them");
+}
+
 }  // namespace
 
 std::string check_rig_and_calibration(const config::DaemonConfig& config) {
@@ -121,6 +129,7 @@ void Daemon::start() {
   source_->open();
   spdlog::info("source {}", source_->description());
   const drivers::SourceInfo& info = source_->info();
+  label_unlabelled_source(config_.values, info);
   const pipeline::SourceDescription source{info.labels, info.units};
   require_plausible_recorded_units(calibration);
 
@@ -419,6 +428,7 @@ bool Daemon::reload() {
     reloads_rejected_.fetch_add(1, std::memory_order_release);
     return false;
   }
+  label_unlabelled_source(fresh.values, source_->info());
   bool rebuild = false, calibration_changed = false;
   for (const config::KeySpec* key : config::changed_keys(config_.values, fresh.values)) {
     const config::Value value = config::get_value(*key, fresh.values);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstdarg>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <filesystem>
@@ -18,6 +20,8 @@
 #include <sys/mman.h>
 #include <time.h>
 #include <unistd.h>
+// After <cstdio>: jpeglib.h wants FILE and size_t declared.
+#include <jpeglib.h>
 
 namespace facecap::test::fake_v4l2 {
 namespace {
@@ -66,8 +70,42 @@ F real(const char* name) {
 }
 
 uint32_t fourcc_of(const Device& d) { return d.fourcc ? d.fourcc : V4L2_PIX_FMT_GREY; }
-uint32_t bytes_per_line(const Device& d) { return uint32_t(d.width) * (fourcc_of(d) == V4L2_PIX_FMT_YUYV ? 2 : 1); }
-uint32_t image_bytes(const Device& d) { return bytes_per_line(d) * uint32_t(d.height); }
+// MJPEG has no lines (0, as drivers say); its buffers hold up to 2 bytes a pixel.
+uint32_t bytes_per_line(const Device& d) {
+  return fourcc_of(d) == V4L2_PIX_FMT_MJPEG ? 0 : uint32_t(d.width) * (fourcc_of(d) == V4L2_PIX_FMT_YUYV ? 2 : 1);
+}
+uint32_t image_bytes(const Device& d) {
+  return uint32_t(d.width) * uint32_t(d.height) * (fourcc_of(d) == V4L2_PIX_FMT_GREY ? 1 : 2);
+}
+
+// `grey` as a baseline JPEG of one component (quality 95) into `out`: its size, or 0 when
+// it is larger than `capacity`.
+uint32_t encode_jpeg(const uint8_t* grey, int width, int height, uint8_t* out, uint32_t capacity) {
+  jpeg_compress_struct c{};
+  jpeg_error_mgr errors{};
+  c.err = jpeg_std_error(&errors);
+  jpeg_create_compress(&c);
+  unsigned char* encoded = nullptr;
+  unsigned long size = 0;
+  jpeg_mem_dest(&c, &encoded, &size);
+  c.image_width = JDIMENSION(width);
+  c.image_height = JDIMENSION(height);
+  c.input_components = 1;
+  c.in_color_space = JCS_GRAYSCALE;
+  jpeg_set_defaults(&c);
+  jpeg_set_quality(&c, 95, TRUE);
+  jpeg_start_compress(&c, TRUE);
+  while (c.next_scanline < c.image_height) {
+    JSAMPROW row = const_cast<uint8_t*>(grey + std::size_t(c.next_scanline) * std::size_t(width));
+    jpeg_write_scanlines(&c, &row, 1);
+  }
+  jpeg_finish_compress(&c);
+  jpeg_destroy_compress(&c);
+  const uint32_t written = size <= capacity ? uint32_t(size) : 0;
+  if (written > 0) std::memcpy(out, encoded, written);
+  std::free(encoded);
+  return written;
+}
 
 int64_t due_ns(const Fake& f, const OpenDevice& o) {
   const Device& d = o.registered->device;
@@ -188,28 +226,35 @@ int handle_ioctl(Fake& f, int fd, OpenDevice& o, unsigned long request, void* ar
       const unsigned index = o.queued.front();
       o.queued.pop_front();
       uint8_t* image = o.mapped + index * o.buffer_stride;
-      if (fourcc_of(d) == V4L2_PIX_FMT_YUYV) {
+      uint32_t bytes = image_bytes(d);
+      if (fourcc_of(d) == V4L2_PIX_FMT_GREY) {
+        d.render(o.next_sequence, image, d.width);
+      } else {
         std::vector<uint8_t> grey(std::size_t(d.width) * std::size_t(d.height));
         d.render(o.next_sequence, grey.data(), d.width);
-        for (std::size_t i = 0; i < grey.size(); ++i) {
-          image[2 * i] = grey[i];
-          image[2 * i + 1] = 128;  // U and V alternate: no colour
+        if (fourcc_of(d) == V4L2_PIX_FMT_MJPEG) {
+          bytes = encode_jpeg(grey.data(), d.width, d.height, image, image_bytes(d));
+          if (bytes == 0) return fail(EIO);
+        } else {
+          for (std::size_t i = 0; i < grey.size(); ++i) {
+            image[2 * i] = grey[i];
+            image[2 * i + 1] = 128;  // U and V alternate: no colour
+          }
         }
-      } else {
-        d.render(o.next_sequence, image, d.width);
       }
       const int64_t stamp = due_ns(f, o);
       *buf = {};
       buf->type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
       buf->memory = V4L2_MEMORY_MMAP;
       buf->index = index;
-      buf->bytesused = image_bytes(d);
+      buf->bytesused = bytes;
       buf->length = image_bytes(d);
       buf->field = V4L2_FIELD_NONE;
       buf->sequence = uint32_t(o.next_sequence);
       buf->flags = V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE | V4L2_BUF_FLAG_DONE;
       buf->timestamp.tv_sec = stamp / 1'000'000'000;
       buf->timestamp.tv_usec = (stamp % 1'000'000'000) / 1000;
+      if (d.dequeued) d.dequeued(o.next_sequence, buf->timestamp.tv_sec * 1'000'000'000 + buf->timestamp.tv_usec * 1000);
       ++o.next_sequence;
       ++f.dequeued;
       return 0;

@@ -7,7 +7,8 @@
 // every other path and descriptor goes to libc. Frames come due at the device's rate on
 // CLOCK_MONOTONIC, as a camera's would, and a frame not taken in time is dropped (its
 // sequence number skipped), as V4L2 drivers do. Not thread-safe across devices' owners:
-// one driver thread uses them, the test thread registers and plugs.
+// one driver thread uses them, the test thread registers and plugs. Built also as a module
+// that another process (facecapd) loads with LD_PRELOAD (fake_v4l2_preload.cpp).
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -17,13 +18,16 @@ namespace facecap::test::fake_v4l2 {
 struct Device {
   std::string path;                  // created as an empty file, so that it exists
   std::string card = "facecap fake IR camera";
-  uint32_t fourcc = 0;               // V4L2_PIX_FMT_GREY or V4L2_PIX_FMT_YUYV (0: GREY)
+  uint32_t fourcc = 0;               // V4L2_PIX_FMT_GREY, _YUYV or _MJPEG (0: GREY)
   int width = 640, height = 480;
   int64_t period_ns = 0;             // frame interval; VIDIOC_S_PARM may change it
   int64_t offset_ns = 0;             // this camera's frames come this long after the grid
   // Draws frame `sequence` as 8-bit grey, `stride` bytes a row (the fake expands it to
-  // YUYV when that is the format).
+  // YUYV, or encodes it as a one-component JPEG, when that is the format).
   std::function<void(int64_t sequence, uint8_t* grey, int stride)> render;
+  // Told of each frame handed out, with its V4L2 sequence number and timestamp (as the
+  // buffer carries it: whole microseconds). Optional.
+  std::function<void(int64_t sequence, int64_t timestamp_ns)> dequeued;
 };
 
 // Registers a device at d.path. The grid of frame times starts at the first STREAMON of any

@@ -32,21 +32,6 @@ void look_at(CameraModel& camera, const Eigen::Vector3d& centre, const Eigen::Ve
   camera.translation = -camera.rotation * centre;
 }
 
-// Adds a Gaussian of `sigma` px (sigma_x, sigma_y along the angle for a streak) at `at`.
-void add_gaussian(cv::Mat& image, cv::Point2d at, double sigma_x, double sigma_y, double angle, double peak) {
-  const int reach = int(std::ceil(4 * std::max(sigma_x, sigma_y)));
-  const double c = std::cos(angle), s = std::sin(angle);
-  for (int y = int(std::floor(at.y)) - reach; y <= int(std::ceil(at.y)) + reach; ++y) {
-    if (y < 0 || y >= image.rows) continue;
-    float* row = image.ptr<float>(y);
-    for (int x = int(std::floor(at.x)) - reach; x <= int(std::ceil(at.x)) + reach; ++x) {
-      if (x < 0 || x >= image.cols) continue;
-      const double u = c * (x - at.x) + s * (y - at.y), v = -s * (x - at.x) + c * (y - at.y);
-      row[x] += float(peak * std::exp(-0.5 * (u * u / (sigma_x * sigma_x) + v * v / (sigma_y * sigma_y))));
-    }
-  }
-}
-
 }  // namespace
 
 CameraCalibration face_cameras(const Eigen::Vector3d& target, int count) {
@@ -91,13 +76,18 @@ MarkerRenderer::MarkerRenderer(CameraCalibration cameras, const drivers::SimSour
 }
 
 RenderedSet MarkerRenderer::render(int64_t frame_no) {
+  ProjectedSet projected = project(frame_no);
+  return {draw(projected), std::move(projected.truth), std::move(projected.visible)};
+}
+
+ProjectedSet MarkerRenderer::project(int64_t frame_no) {
   sim_.render_frame(frame_no, frame_);
-  RenderedSet set;
+  ProjectedSet set;
   for (const Marker& m : frame_.markers) set.truth.push_back(m.position * sim_to_mm_);
   const std::size_t markers = set.truth.size();
   std::vector<cv::Point3d> object;
   for (const Eigen::Vector3d& p : set.truth) object.emplace_back(p.x(), p.y(), p.z());
-  cv::RNG noise(rng_());
+  set.noise_seed = rng_();
   for (std::size_t c = 0; c < cameras_.cameras.size(); ++c) {
     const CameraModel& camera = cameras_.cameras[c];
     cv::Mat k, r, rvec, tvec;
@@ -115,21 +105,60 @@ RenderedSet MarkerRenderer::render(int64_t frame_no) {
     std::shuffle(order.begin(), order.end(), rng_);
     for (int h = 0; h < options_.hidden_per_camera && h < int(markers); ++h) visible[order[std::size_t(h)]] = 0;
 
-    cv::Mat image(camera.height, camera.width, CV_32FC1, cv::Scalar(options_.background));
+    const double sigma = options_.sigma_px;
+    std::vector<Spot>& spots = set.spots.emplace_back();
     for (std::size_t m = 0; m < markers; ++m)
-      if (visible[m]) add_gaussian(image, pixels[m], options_.sigma_px, options_.sigma_px, 0, options_.peak);
+      if (visible[m]) spots.push_back({pixels[m].x, pixels[m].y, sigma, sigma, 0, options_.peak});
     if (options_.reflections && c == 0) {  // a streak: too long to be a marker
-      add_gaussian(image, {120.5, 400.25}, 7.0, 1.0, 0.4, 230);
+      spots.push_back({120.5, 400.25, 7.0, 1.0, 0.4, 230});
     } else if (options_.reflections && c == 1) {  // a round stray spot no other camera sees
       std::uniform_real_distribution<double> x(250, 390), y(150, 330);
-      add_gaussian(image, {x(rng_), y(rng_)}, options_.sigma_px, options_.sigma_px, 0, options_.peak);
+      const double u = x(rng_), v = y(rng_);
+      spots.push_back({u, v, sigma, sigma, 0, options_.peak});
     }
-    cv::Mat grain(image.size(), CV_32FC1);
-    noise.fill(grain, cv::RNG::NORMAL, 0.0, options_.noise);
-    image += grain;
-    image.convertTo(set.images.emplace_back(), CV_8UC1);  // saturating
   }
   return set;
+}
+
+std::vector<cv::Mat> MarkerRenderer::draw(const ProjectedSet& set) const {
+  cv::RNG noise(set.noise_seed);
+  std::vector<cv::Mat> images;
+  for (std::size_t c = 0; c < set.spots.size(); ++c) {
+    const CameraModel& camera = cameras_.cameras[c];
+    cv::Mat image(camera.height, camera.width, CV_32FC1), grain(camera.height, camera.width, CV_32FC1);
+    draw_spots(set.spots[c], float(options_.background), image.cols, image.rows, image.ptr<float>());
+    noise.fill(grain, cv::RNG::NORMAL, 0.0, options_.noise);
+    cv::Mat& grey = images.emplace_back(camera.height, camera.width, CV_8UC1);
+    to_grey(image.ptr<float>(), {grain.ptr<float>(), grain.total()}, image.cols, image.rows, grey.ptr<uint8_t>(),
+            int(grey.step));
+  }
+  return images;
+}
+
+void PointErrors::add(std::span<const Eigen::Vector3d> points, std::span<const Eigen::Vector3d> truth) {
+  for (const Eigen::Vector3d& p : points) {
+    double nearest = INFINITY;
+    for (const Eigen::Vector3d& t : truth)
+      if (t.allFinite()) nearest = std::min(nearest, (p - t).norm());
+    if (nearest < 2.0) errors_mm_.push_back(nearest);
+    else ++ghosts_;
+  }
+}
+
+void PointErrors::add(const MarkerFrame& frame, std::span<const Eigen::Vector3d> truth) {
+  for (const Marker& m : frame.markers)
+    if (m.present()) add(std::span(&m.position, 1), truth);
+}
+
+double PointErrors::median_mm() const {
+  if (errors_mm_.empty()) return INFINITY;
+  std::vector<double> sorted = errors_mm_;
+  std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2), sorted.end());
+  return sorted[sorted.size() / 2];
+}
+
+double PointErrors::worst_mm() const {
+  return errors_mm_.empty() ? INFINITY : *std::max_element(errors_mm_.begin(), errors_mm_.end());
 }
 
 SyntheticFeed::SyntheticFeed(MarkerRenderer& renderer, int64_t frames, int64_t period_ns, int64_t skew_ns,

@@ -3,7 +3,9 @@
 // around a face, and the sim's markers rendered into them as Gaussian dots through each
 // camera's own distortion (cv::projectPoints), with sensor noise, markers hidden from one
 // camera, a reflection's streak in one image and a stray round reflection in another.
-// SyntheticFeed hands such images to the driver below V4L2, stamped as a camera would.
+// SyntheticFeed hands such images to the driver below V4L2, stamped as a camera would. The
+// drawing (marker_drawing.hpp) is apart from the projection, so that fake cameras in
+// another process draw the same images from the projected spots.
 #include <cstdint>
 #include <mutex>
 #include <random>
@@ -16,6 +18,7 @@
 #include "drivers/sim/sim_source.hpp"
 #include "drivers/v4l2/camera_calibration.hpp"
 #include "drivers/v4l2/camera_feed.hpp"
+#include "tests/marker_drawing.hpp"
 
 namespace facecap::test {
 
@@ -32,6 +35,14 @@ struct RenderOptions {
   bool reflections = true;   // a streak in camera 0, a stray round spot in camera 1
 };
 
+// One set projected: per camera the spots to draw, and the truth.
+struct ProjectedSet {
+  std::vector<std::vector<Spot>> spots;        // [camera]: visible markers' glows and the reflections
+  uint64_t noise_seed = 0;                     // the sensor noise of this set's images (cv::RNG)
+  std::vector<Eigen::Vector3d> truth;          // every marker, mm
+  std::vector<std::vector<uint8_t>> visible;   // [camera][marker]
+};
+
 // What one rendered set holds, for checking what comes back.
 struct RenderedSet {
   std::vector<cv::Mat> images;                 // one per camera, CV_8UC1
@@ -44,8 +55,14 @@ class MarkerRenderer {
  public:
   MarkerRenderer(drivers::v4l2::CameraCalibration cameras, const drivers::SimSource& sim, RenderOptions options,
                  uint32_t seed);
+  // project() then draw(): the set's images.
   RenderedSet render(int64_t frame_no);
+  // Where the markers and reflections fall in each camera, and which are hidden.
+  ProjectedSet project(int64_t frame_no);
+  // The images of a projected set, with their noise.
+  std::vector<cv::Mat> draw(const ProjectedSet& set) const;
   const drivers::v4l2::CameraCalibration& cameras() const noexcept { return cameras_; }
+  const RenderOptions& options() const noexcept { return options_; }
   double sim_to_mm() const noexcept { return sim_to_mm_; }
 
  private:
@@ -59,6 +76,24 @@ class MarkerRenderer {
 
 // The sim's centre of its markers at rest (frame 0), in mm: where the cameras look.
 Eigen::Vector3d sim_marker_centre_mm(const drivers::SimSource& sim);
+
+// The points that came out of the cameras against the truth they were drawn from: a point
+// within 2 mm of a truth marker is that marker, off by its distance to it; any other is a
+// ghost.
+class PointErrors {
+ public:
+  void add(std::span<const Eigen::Vector3d> points, std::span<const Eigen::Vector3d> truth);
+  // The present markers of a frame from the driver.
+  void add(const MarkerFrame& frame, std::span<const Eigen::Vector3d> truth);
+  std::size_t count() const noexcept { return errors_mm_.size(); }
+  std::size_t ghosts() const noexcept { return ghosts_; }
+  double median_mm() const;  // infinity with no point
+  double worst_mm() const;   // infinity with no point
+
+ private:
+  std::vector<double> errors_mm_;
+  std::size_t ghosts_ = 0;
+};
 
 // Renders sets of the sim's frames for the driver, one camera image per next() call,
 // stamped `period_ns` apart, camera k's image `k * skew_ns` after camera 0's. Frames listed

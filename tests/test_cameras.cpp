@@ -1,8 +1,8 @@
 // The v4l2 driver's camera pipeline without cameras: its calibration file, blob detection,
 // triangulation (against OpenCV's and against the truth the images were rendered from),
 // frame sets matched by time, and the driver itself fed rendered images below V4L2, its
-// unlabelled points labelled and solved as the pipeline will. And its errors with no
-// camera there.
+// unlabelled points labelled and solved by the pipeline. And its errors with no camera
+// there.
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -24,7 +24,6 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
-#include "solver/align/label.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/synthetic_cameras.hpp"
 #include "tests/test_support.hpp"
@@ -53,23 +52,6 @@ drivers::V4l2Options v4l2_options(const fs::path& calibration) {
   drivers::V4l2Options o = config::default_config().source.v4l2;
   o.calibration = calibration.string();
   return o;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
-// Each point's distance to the nearest truth marker.
-std::vector<double> nearest_truth(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& truth) {
-  std::vector<double> out;
-  for (const Eigen::Vector3d& p : points) {
-    double best = INFINITY;
-    for (const Eigen::Vector3d& t : truth)
-      if (t.allFinite()) best = std::min(best, (p - t).norm());
-    out.push_back(best);
-  }
-  return out;
 }
 
 }  // namespace
@@ -231,8 +213,8 @@ TEST_CASE("48 face markers through two 640x480 cameras: within 0.5 mm of the tru
                                               .max_area_px = int(o.max_blob_area_px), .min_roundness = o.min_roundness},
                          {.epipolar_tolerance_px = o.epipolar_tolerance_px,
                           .max_reprojection_px = 1.5 * o.epipolar_tolerance_px});
-  std::vector<double> errors;
-  int ghosts = 0, seen_by_both = 0, rejected_shape = 0;
+  test::PointErrors errors;
+  int seen_by_both = 0, rejected_shape = 0;
   std::vector<Eigen::Vector3d> points;
   for (int64_t frame = 0; frame < 240; frame += 2) {  // 2 s of the performance, head swaying
     const test::RenderedSet set = renderer.render(frame);
@@ -242,38 +224,37 @@ TEST_CASE("48 face markers through two 640x480 cameras: within 0.5 mm of the tru
       for (std::size_t m = 0; m < set.truth.size(); ++m) seen_by_both += set.visible[0][m] && set.visible[1][m];
     CHECK((frame > 0 || points.empty()));
     rejected_shape += cameras.detector(0).rejected_shape();
-    for (const double d : nearest_truth(points, set.truth)) (d < 2.0 ? errors.push_back(d) : void(++ghosts));
+    errors.add(points, set.truth);
   }
-  const double worst = *std::max_element(errors.begin(), errors.end());
   WARN(fmt::format("two cameras, 52 markers, 120 frame sets: {} points within {:.3f} mm (median {:.3f} mm) of the "
                    "truth, {} of the {} markers both cameras saw after the first set, {} ghosts",
-                   errors.size(), worst, median(errors), errors.size(), seen_by_both, ghosts));
-  CHECK(worst < 0.5);
-  CHECK(median(errors) < 0.1);
-  CHECK(ghosts == 0);
+                   errors.count(), errors.worst_mm(), errors.median_mm(), errors.count(), seen_by_both, errors.ghosts()));
+  CHECK(errors.worst_mm() < 0.5);
+  CHECK(errors.median_mm() < 0.1);
+  CHECK(errors.ghosts() == 0);
   CHECK(rejected_shape == 120);                                  // every frame's streak
   // Left out: pairs on one epipolar plane, until the head's motion or the memory tells them apart.
-  CHECK(double(errors.size()) >= 0.99 * double(seen_by_both));
+  CHECK(double(errors.count()) >= 0.99 * double(seen_by_both));
 }
 
 TEST_CASE("three cameras: markers seen by all three are triangulated from all three views") {
   SimScene scene;
   test::MarkerRenderer renderer(test::face_cameras(test::sim_marker_centre_mm(scene.sim), 3), scene.sim, {}, 23);
   CameraPipeline cameras(renderer.cameras(), {}, {});
-  std::vector<double> errors;
-  int ghosts = 0, multi = 0;
+  test::PointErrors errors;
+  int multi = 0;
   std::vector<Eigen::Vector3d> points;
   for (int64_t frame = 0; frame < 40; ++frame) {
     const test::RenderedSet set = renderer.render(frame);
     cameras.process(set.images, points);
     multi += cameras.triangulator().stats().multi_view_points;
-    for (const double d : nearest_truth(points, set.truth)) (d < 2.0 ? errors.push_back(d) : void(++ghosts));
+    errors.add(points, set.truth);
   }
-  WARN(fmt::format("three cameras: {} points, {} from three views, worst {:.3f} mm, median {:.3f} mm", errors.size(),
-                   multi, *std::max_element(errors.begin(), errors.end()), median(errors)));
-  CHECK(multi > int(errors.size()) * 3 / 4);
-  CHECK(*std::max_element(errors.begin(), errors.end()) < 0.5);
-  CHECK(ghosts == 0);
+  WARN(fmt::format("three cameras: {} points, {} from three views, worst {:.3f} mm, median {:.3f} mm", errors.count(),
+                   multi, errors.worst_mm(), errors.median_mm()));
+  CHECK(multi > int(errors.count()) * 3 / 4);
+  CHECK(errors.worst_mm() < 0.5);
+  CHECK(errors.ghosts() == 0);
 }
 
 TEST_CASE("frames of several cameras are matched into sets by their timestamps") {
@@ -307,27 +288,18 @@ TEST_CASE("the v4l2 driver fed rendered images below V4L2: sets by time, unlabel
   CHECK(source.info().labels[0] == "unlabelled_1");
   CHECK(source.info().units == "mm");
 
-  // What the pipeline does with unlabelled points (being added there): the labeller
-  // names them from the calibration's markers, then the solve. Here by hand.
-  const std::vector<std::string> labels = scene.sim.info().labels;
-  MarkerFrame rest = make_marker_frame(labels);
-  scene.sim.render_frame(0, rest);
-  Eigen::Matrix3Xd reference(3, Eigen::Index(labels.size()));
-  for (std::size_t k = 0; k < labels.size(); ++k) reference.col(Eigen::Index(k)) = rest.markers[k].position * renderer.sim_to_mm();
-  align::LabellerParams lp;
-  lp.gate = 6.0;
-  lp.gate_growth = 1.0;
-  lp.max_gate = 20.0;
-  lp.label_margin = 1.0;
-  align::MarkerLabeller labeller(labels, reference, lp);
-  pipeline::SolvePipeline solve(*scene.rig, scene.calibration, {labels, "mm"}, pipeline::solve_settings(scene.config, pipeline::SolveContext::kLive));
+  // The pipeline labels the unlabelled points from the calibration's markers, as facecapd
+  // does with calibration.label_markers (test_v4l2_device runs facecapd itself).
+  pipeline::SolveSettings settings = pipeline::solve_settings(scene.config, pipeline::SolveContext::kLive);
+  settings.label_markers = true;
+  pipeline::SolvePipeline solve(*scene.rig, scene.calibration, {source.info().labels, source.info().units}, settings);
   SolvedFrame solved = solve.make_solved_frame(false);
 
   source.start({.epoch_ns = monotonic_now_ns()});
-  MarkerFrame frame = make_marker_frame(source.info().labels), labelled = make_marker_frame(labels);
-  std::vector<Eigen::Vector3d> points;
-  double weight_error = 0, jaw_error = 0, worst_point_mm = 0;
-  int solved_frames = 0, ghosts = 0;
+  MarkerFrame frame = make_marker_frame(source.info().labels);
+  test::PointErrors points;
+  double weight_error = 0, jaw_error = 0;
+  int solved_frames = 0;
   const Eigen::Index jaw = *scene.rig->shape_index("jawOpen");
   const int64_t give_up = monotonic_now_ns() + 60 * kNsPerSecond;
   int64_t last_frame_ns = monotonic_now_ns();
@@ -340,18 +312,10 @@ TEST_CASE("the v4l2 driver fed rendered images below V4L2: sets by time, unlabel
     last_frame_ns = monotonic_now_ns();
     // Which rendered frame this set is: by its time (a set can be missing; none is renumbered).
     const int64_t rendered = (frame.source_time_ns - images.start_ns() + period_ns / 2) / period_ns;
-    points.clear();
     for (const Marker& m : frame.markers)
-      if (m.present()) {
-        CHECK(m.flags == kMarkerUnlabelled);
-        points.push_back(m.position);
-      }
-    for (const double d : nearest_truth(points, images.truth(rendered))) {
-      if (d < 2.0) worst_point_mm = std::max(worst_point_mm, d);
-      else ++ghosts;
-    }
-    labeller.label(points, labelled);
-    solve.process(labelled, solved);
+      if (m.present()) CHECK(m.flags == kMarkerUnlabelled);
+    points.add(frame, images.truth(rendered));
+    solve.process(frame, solved);
     if (rendered < 30) continue;  // the temporal prior settles
     const Eigen::VectorXd truth = scene.sim.weights_at(rendered);
     weight_error += (solved.weights.cast<double>() - truth).cwiseAbs().mean();
@@ -364,11 +328,12 @@ TEST_CASE("the v4l2 driver fed rendered images below V4L2: sets by time, unlabel
   jaw_error /= solved_frames;
   WARN(fmt::format("v4l2 driver, 2 cameras at 60 Hz: {} sets of {} frames, {} images unmatched, points within {:.3f} mm, "
                    "{} ghosts; solved from them: mean |w - w_true| {:.4f}, jawOpen {:.4f}",
-                   source.frame_sets(), frames, source.images_unmatched(), worst_point_mm, ghosts, weight_error, jaw_error));
+                   source.frame_sets(), frames, source.images_unmatched(), points.worst_mm(), points.ghosts(), weight_error,
+                   jaw_error));
   CHECK(source.frame_sets() == uint64_t(frames - 1));  // the set whose right image was lost
   CHECK(source.images_unmatched() == 1);
-  CHECK(worst_point_mm < 0.5);
-  CHECK(ghosts == 0);
+  CHECK(points.worst_mm() < 0.5);
+  CHECK(points.ghosts() == 0);
   CHECK(weight_error < 0.06);
   CHECK(jaw_error < 0.03);
 }

@@ -287,11 +287,12 @@ TEST_CASE("facecapd labels an unlabelled point cloud from natnet-serve and solve
                      {}, dir / "serve.log");
   REQUIRE(serve.wait_for_log("commands on", 10 * kSecond));
   DaemonProcess d(facecapd_args(dir, port, "cloud", jaw.profile, 2.5,
-                                {"--set", "source.natnet.unlabelled_markers=48", "--set", "calibration.label_markers=true"}),
+                                {"--set", "source.natnet.unlabelled_markers=48"}),
                   {}, dir / "cloud.log");
   INFO(d.log() << serve.log());
   CHECK(d.wait_exit(60 * kSecond) == 0);
   CHECK_THAT(d.log(), Contains("48 unlabelled slots"));
+  CHECK_THAT(d.log(), Contains("calibration.label_markers turned on"));
   // The recording holds the unlabelled points as they came; the offline solve of the
   // labelled take frames is what labelling them must give.
   const Comparison c = compare_with_take(only_recording(dir / "cloud-recordings"), jaw, dir, "cloud");

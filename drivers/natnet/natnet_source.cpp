@@ -184,6 +184,7 @@ void NatNetSource::open() {
   info_.units = std::string(nn::kPositionUnits);
   info_.nominal_rate_hz = frame_rate_ > 0.0f && std::isfinite(frame_rate_) ? double(frame_rate_) : 0.0;
   info_.own_clock = true;
+  info_.unlabelled = converter_->set_slots() == 0 && options_.unlabelled_markers > 0;  // only a cloud
   configure_mailbox(info_.labels);
 }
 

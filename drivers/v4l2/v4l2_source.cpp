@@ -86,6 +86,7 @@ void V4l2Source::open() {
   for (int64_t i = 0; i < options_.max_points; ++i) info_.labels.push_back(unlabelled_label(std::size_t(i)));
   info_.nominal_rate_hz = options_.frame_rate_hz;
   info_.own_clock = true;
+  info_.unlabelled = true;
   points_.reserve(std::size_t(options_.max_points) * 2);
   configure_mailbox(info_.labels);
 }
