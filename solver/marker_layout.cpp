@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
+#include "solver/mesh_topology.hpp"
 
 namespace facecap {
 
@@ -17,21 +18,7 @@ std::vector<MarkerBinding> spread_marker_layout(const Rig& rig, int count) {
   // where real markers never go; vertices no shape moves carry no information.
   std::vector<uint8_t> usable(std::size_t(n), 1);
   {
-    std::vector<std::pair<int, int>> edges;
-    edges.reserve(std::size_t(rig.triangle_count()) * 3);
-    for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
-      for (int k = 0; k < 3; ++k) {
-        int a = rig.triangles(k, t), b = rig.triangles((k + 1) % 3, t);
-        edges.emplace_back(std::min(a, b), std::max(a, b));
-      }
-    std::sort(edges.begin(), edges.end());
-    for (std::size_t i = 0; i < edges.size();) {
-      std::size_t j = i;
-      while (j < edges.size() && edges[j] == edges[i]) ++j;
-      if (j - i == 1) usable[std::size_t(edges[i].first)] = usable[std::size_t(edges[i].second)] = 0;
-      i = j;
-    }
-    const Eigen::Map<const Eigen::MatrixXd> d(rig.deltas.data(), 3, n * rig.shape_count());
+    for (const auto& [a, b] : boundary_edges(rig.triangles)) usable[std::size_t(a)] = usable[std::size_t(b)] = 0;
     for (Eigen::Index v = 0; v < n; ++v) {
       double motion = 0.0;
       for (Eigen::Index s = 0; s < rig.shape_count(); ++s) motion = std::max(motion, rig.deltas.col(s).segment<3>(3 * v).norm());
