@@ -236,6 +236,11 @@ const std::vector<KeySpec>& schema_rows() {
        .reload = Reload::kRebuild,
        .description = "Vertices the collision stage pins per frame at most, which bounds its cost (64 pins take "
                       "about 0.15 ms on a 6,706-vertex face); a pose that needs more keeps some crossings."},
+      {FACECAP_KEY(solver.boundary_hold), .default_value = kSolverDefaults.boundary_hold, .unit = "times beta", .min = 0, .max = 100,
+       .reload = Reload::kRebuild,
+       .description = "How strongly the mesh's outer edge is held to the rig's linear blend of the weights (the eyes' "
+                      "and mouth's openings stay free); 0 leaves it free, so that a pinned solve can carry the "
+                      "markers' motion out to it."},
       {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
 

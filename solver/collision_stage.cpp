@@ -91,9 +91,11 @@ inline void CollisionStage::pin(int v, PinUpdate& update, Result& result) noexce
   ++result.pins;
 }
 
-void CollisionStage::add_tangle_targets(Eigen::Matrix3Xd& rhs) noexcept {
-  const double weight = CollisionData::kTangleWeight * model_.params.beta;
-  for (const int v : model_.collision.tangle_vertices) rhs.col(v) += weight * reference(v);
+void CollisionStage::add_held_targets(Eigen::Matrix3Xd& rhs) noexcept {
+  const CollisionData& c = model_.collision;
+  const double beta = model_.params.beta;
+  for (std::size_t j = 0; j < c.held_vertices.size(); ++j)
+    rhs.col(c.held_vertices[j]) += c.held_weights[j] * beta * reference(c.held_vertices[j]);
 }
 
 // Triangle pairs closer than epsilon pin their vertices to the linear blend

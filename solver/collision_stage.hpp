@@ -4,8 +4,9 @@
 // closer than epsilon, and the stage pins the vertices of those in a worse state than in
 // the linear blend x0 + B w (the paper's collision-free reference) to that blend, as
 // changes of a PinUpdate (solver/pin_update.hpp). It also supplies the linear blend at
-// the tangle vertices, which Eq. 5's right-hand side holds every frame.
-// Lifecycle: construct (allocates) -> per frame begin_frame(), add_tangle_targets(),
+// the held vertices (tangles, the outer boundary), which Eq. 5's right-hand side holds
+// every frame.
+// Lifecycle: construct (allocates) -> per frame begin_frame(), add_held_targets(),
 // add_pins() (all real-time safe).
 #include <cstdint>
 #include <utility>
@@ -35,9 +36,9 @@ class CollisionStage {
   // Real-time safe.
   void begin_frame(const float* weights) noexcept;
 
-  // Adds the tangle vertices' share of the right-hand side, kTangleWeight beta
-  // (x0 + B w)_v, to rhs (3 x N). Real-time safe.
-  void add_tangle_targets(Eigen::Matrix3Xd& rhs) noexcept;
+  // Adds the held vertices' share of the right-hand side, h_v beta (x0 + B w)_v, to
+  // rhs (3 x N). Real-time safe.
+  void add_held_targets(Eigen::Matrix3Xd& rhs) noexcept;
 
   struct Result {
     uint32_t pairs = 0;             // colliding triangle pairs found
@@ -49,7 +50,7 @@ class CollisionStage {
   Result add_pins(const Eigen::Matrix3Xd& vertices, PinUpdate& update) noexcept;
 
  private:
-  // This frame's (x0 + B w)_v at a collision or tangle vertex.
+  // This frame's (x0 + B w)_v at a collision or held vertex.
   Eigen::Vector3d reference(int v) noexcept;
   // Pins vertex v to the linear blend, once per frame and while capacity lasts.
   void pin(int v, PinUpdate& update, Result& result) noexcept;

@@ -67,12 +67,12 @@ struct MeshIkSolver::State {
 
   Eigen::Index N = 0, T = 0, K = 0, M = 0;
   double sqrt_beta = 0.0;
-  // The tangle hold A0 has (CollisionData::tangle_vertices held to x0 + B w with
-  // kTangleWeight beta): its share of the right-hand side and its residual rows.
-  Eigen::Index V = 0;  // tangle vertices
-  double tangle_weight = 0.0;
-  Eigen::Matrix3Xd tangle_reference;  // 3 x V: (x0 + B w)_v at the current point
-  std::vector<uint8_t> shape_moves;   // M: the shape deforms a triangle or moves a tangle vertex
+  // The hold A0 has (CollisionData::held_vertices held to x0 + B w with h_v beta): its
+  // share of the right-hand side and its residual rows.
+  Eigen::Index V = 0;                // held vertices
+  Eigen::VectorXd hold_weight;       // V: h_v beta
+  Eigen::Matrix3Xd held_reference;   // 3 x V: (x0 + B w)_v at the current point
+  std::vector<uint8_t> shape_moves;  // M: the shape deforms a triangle or moves a held vertex
 
   // Per triangle j (column j), both 3 x 2 column-major: sqrt(area) grad^T E and
   // sqrt(area) E, with E an orthonormal basis of the rest triangle's plane, so that the
@@ -88,7 +88,7 @@ struct MeshIkSolver::State {
   Eigen::Matrix<double, 9, Eigen::Dynamic> rotation, stretch, transform;  // R_j, S_j, T_j
   Eigen::Matrix3Xd rhs, x, column_rhs;
   Eigen::Matrix4Xd work;
-  Eigen::VectorXd residual;  // 6 T triangle entries, 3 K marker entries, 3 V tangle entries
+  Eigen::VectorXd residual;  // 6 T triangle entries, 3 K marker entries, 3 V held entries
   Eigen::MatrixXd jacobian;  // residual rows x M
   std::vector<double> transform_derivative;  // 9 per triangle of the shape being differentiated
 
@@ -121,9 +121,9 @@ struct MeshIkSolver::State {
     K = m.marker_count();
     M = m.shape_count();
     sqrt_beta = std::sqrt(m.params.beta);
-    V = Eigen::Index(m.collision.tangle_vertices.size());
-    tangle_weight = CollisionData::kTangleWeight * m.params.beta;
-    tangle_reference.resize(3, V);
+    V = Eigen::Index(m.collision.held_vertices.size());
+    hold_weight = Eigen::Map<const Eigen::VectorXd>(m.collision.held_weights.data(), V) * m.params.beta;
+    held_reference.resize(3, V);
     vertex_projection.setZero(6, T);
     target_projection.setZero(6, T);
     identity_rhs.setZero(3, N);
@@ -158,7 +158,7 @@ struct MeshIkSolver::State {
     shape_moves.assign(std::size_t(M), 0);
     for (Eigen::Index i = 0; i < M; ++i) {
       bool moves = !m.blend.triangle_blocks.entries_of_shape(i).empty();
-      for (const int v : m.collision.tangle_vertices) moves = moves || !rig.deltas.block<3, 1>(3 * v, i).isZero(0.0);
+      for (const int v : m.collision.held_vertices) moves = moves || !rig.deltas.block<3, 1>(3 * v, i).isZero(0.0);
       shape_moves[std::size_t(i)] = moves;
     }
     log_sum.setZero(3, T);
@@ -269,9 +269,9 @@ struct MeshIkSolver::State {
       for (int a = 0; a < 3; ++a) rhs.col(b.vertices[a]) += beta * b.barycentric[a] * targets->col(k);
     }
     for (Eigen::Index j = 0; j < V; ++j) {
-      const int v = m.collision.tangle_vertices[std::size_t(j)];
-      tangle_reference.col(j) = rig.neutral.col(v) + rig.deltas.middleRows<3>(3 * v) * weights;
-      rhs.col(v) += tangle_weight * tangle_reference.col(j);
+      const int v = m.collision.held_vertices[std::size_t(j)];
+      held_reference.col(j) = rig.neutral.col(v) + rig.deltas.middleRows<3>(3 * v) * weights;
+      rhs.col(v) += hold_weight[j] * held_reference.col(j);
     }
     lap(SolveStage::kRhs);
     x = rhs;
@@ -286,10 +286,9 @@ struct MeshIkSolver::State {
       for (int a = 0; a < 3; ++a) r += b.barycentric[a] * x.col(b.vertices[a]);
       r *= sqrt_beta;
     }
-    const double sqrt_tangle = std::sqrt(tangle_weight);
     for (Eigen::Index j = 0; j < V; ++j)
       residual.segment<3>(6 * T + 3 * K + 3 * j) =
-          sqrt_tangle * (x.col(m.collision.tangle_vertices[std::size_t(j)]) - tangle_reference.col(j));
+          std::sqrt(hold_weight[j]) * (x.col(m.collision.held_vertices[std::size_t(j)]) - held_reference.col(j));
     lap(SolveStage::kWeights);  // the residual belongs to the Gauss-Newton step
     return residual.squaredNorm();
   }
@@ -330,7 +329,10 @@ struct MeshIkSolver::State {
         const Eigen::Matrix3d contribution = dT * Q;
         for (int k = 0; k < 3; ++k) column_rhs.col(rig.triangles(k, t)) += contribution.col(k);
       });
-      for (const int v : m.collision.tangle_vertices) column_rhs.col(v) += tangle_weight * rig.deltas.block<3, 1>(3 * v, i);
+      for (Eigen::Index j = 0; j < V; ++j) {
+        const int v = m.collision.held_vertices[std::size_t(j)];
+        column_rhs.col(v) += hold_weight[j] * rig.deltas.block<3, 1>(3 * v, i);
+      }
       solve_system(column_rhs);  // dx / dw_i
       auto column = jacobian.col(i);
       triangle_residuals(column_rhs, column, /*with_targets=*/false);
@@ -346,10 +348,10 @@ struct MeshIkSolver::State {
         for (int a = 0; a < 3; ++a) r += b.barycentric[a] * column_rhs.col(b.vertices[a]);
         column.segment<3>(6 * T + 3 * k) = sqrt_beta * r;
       }
-      const double sqrt_tangle = std::sqrt(tangle_weight);
       for (Eigen::Index j = 0; j < V; ++j) {
-        const int v = m.collision.tangle_vertices[std::size_t(j)];
-        column.segment<3>(6 * T + 3 * K + 3 * j) = sqrt_tangle * (column_rhs.col(v) - rig.deltas.block<3, 1>(3 * v, i));
+        const int v = m.collision.held_vertices[std::size_t(j)];
+        column.segment<3>(6 * T + 3 * K + 3 * j) =
+            std::sqrt(hold_weight[j]) * (column_rhs.col(v) - rig.deltas.block<3, 1>(3 * v, i));
       }
     }
   }

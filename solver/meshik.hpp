@@ -3,18 +3,19 @@
 // optimised together on the energy the nonlinear solver minimises over x alone,
 //
 //   E(x, w) = sum_j area_j |(X_j grad_j^T - T_j(w)) P_j|_F^2 + beta sum_k |c_k x - b_k|^2
-//             + kTangleWeight beta sum_v |x_v - (x0 + B w)_v|^2,
+//             + beta sum_v h_v |x_v - (x0 + B w)_v|^2,
 //   T_j(w)  = exp(sum_i w_i log R_ij) (I + sum_i w_i (S_ij - I))            (Eq. 4)
 //
 // where X_j grad_j^T is triangle j's deformation gradient from the vertices, P_j projects
 // onto the rest triangle's plane (the only part of T_j that Eq. 5's right-hand side
 // sees; the part along the normal does not depend on x and would keep a shape from
 // being a minimum of its own markers), c_k x is marker k's surface point and v runs over
-// CollisionData::tangle_vertices (held to the linear blend, as in the real-time solvers).
+// CollisionData::held_vertices, weights h_v (the tangles and the outer boundary, held to
+// the linear blend as in the real-time solvers).
 //
 // By variable projection: for fixed w,
-// x(w) = A^-1 (G^T W T(w) + beta C^T b + kTangleWeight beta H^T H (x0 + B w)), H selecting
-// the tangle vertices, with the model's factor (missing markers by the same low-rank correction the real-time solvers
+// x(w) = A^-1 (G^T W T(w) + beta C^T b + beta H^T D H (x0 + B w)), H selecting the
+// held vertices and D their weights h_v, with the model's factor (missing markers by the same low-rank correction the real-time solvers
 // use), and Levenberg-damped Gauss-Newton on w over the box 0 <= w <= 1, starting from
 // the Eq. 2 weights. The Jacobian column of shape i needs d T_j / d w_i on the triangles
 // shape i touches (the rotation exponential by central differences) and one

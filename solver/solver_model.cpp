@@ -34,9 +34,10 @@ void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const S
     throw Error(fmt::format("solver: collision_max_pins {} is not in [0, 1024]", params.collision_max_pins));
   if (params.weight_qp_iteration_cap < 0)
     throw Error(fmt::format("solver: weight_qp_iteration_cap {} must be >= 0", params.weight_qp_iteration_cap));
-  if (!(params.beta > 0) || !(params.alpha >= 0) || !(params.mu >= 0))
-    throw Error(fmt::format("solver: beta must be > 0 and alpha, mu >= 0 (beta {}, alpha {}, mu {})", params.beta,
-                            params.alpha, params.mu));
+  if (!(params.beta > 0) || !(params.alpha >= 0) || !(params.mu >= 0) || !(params.boundary_hold >= 0) ||
+      !std::isfinite(params.boundary_hold))
+    throw Error(fmt::format("solver: beta must be > 0 and alpha, mu, boundary_hold >= 0 (beta {}, alpha {}, mu {}, "
+                            "boundary_hold {})", params.beta, params.alpha, params.mu, params.boundary_hold));
   for (const auto& m : markers) {
     for (int v : m.vertices)
       if (v < 0 || v >= rig.vertex_count())
@@ -421,11 +422,11 @@ void choose_collision_region(SolverModel& model) {
     }
 }
 
-// CollisionData::reference_*: the collision and tangle vertices, whose linear-blend
+// CollisionData::reference_*: the collision and held vertices, whose linear-blend
 // positions every frame needs.
 void build_reference_terms(SolverModel& model) {
   model.collision.reference_index.assign(std::size_t(model.vertex_count()), -1);
-  for (const auto* vertices : {&model.collision.vertices, &model.collision.tangle_vertices})
+  for (const auto* vertices : {&model.collision.vertices, &model.collision.held_vertices})
     for (const int v : *vertices) {
       if (model.collision.reference_index[std::size_t(v)] >= 0) continue;
       model.collision.reference_index[std::size_t(v)] = int(model.collision.reference_vertices.size());
@@ -457,6 +458,22 @@ void find_tangle_vertices(SolverModel& model) {
   }
   for (Eigen::Index v = 0; v < rig.vertex_count(); ++v)
     if (tangled[std::size_t(v)]) model.collision.tangle_vertices.push_back(int(v));
+}
+
+// CollisionData::held_*: the tangle vertices and the outer boundary, a vertex in both
+// held by the sum of its weights.
+void find_held_vertices(SolverModel& model) {
+  CollisionData& c = model.collision;
+  find_tangle_vertices(model);
+  if (model.params.boundary_hold > 0) c.boundary_vertices = outer_boundary_vertices(model.rig.triangles, model.rig.neutral);
+  std::vector<double> weight(std::size_t(model.vertex_count()), 0.0);
+  for (const int v : c.tangle_vertices) weight[std::size_t(v)] += CollisionData::kTangleWeight;
+  for (const int v : c.boundary_vertices) weight[std::size_t(v)] += model.params.boundary_hold;
+  for (std::size_t v = 0; v < weight.size(); ++v)
+    if (weight[v] > 0) {
+      c.held_vertices.push_back(int(v));
+      c.held_weights.push_back(weight[v]);
+    }
 }
 
 }  // namespace
@@ -580,8 +597,10 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b)
           pins.emplace_back(m.vertices[a], m.vertices[b], params.beta * m.barycentric[a] * m.barycentric[b]);
-    find_tangle_vertices(*model);
-    for (const int v : model->collision.tangle_vertices) pins.emplace_back(v, v, CollisionData::kTangleWeight * params.beta);
+    find_held_vertices(*model);
+    const CollisionData& c = model->collision;
+    for (std::size_t j = 0; j < c.held_vertices.size(); ++j)
+      pins.emplace_back(c.held_vertices[j], c.held_vertices[j], c.held_weights[j] * params.beta);
     Eigen::SparseMatrix<double> P(N, N);
     P.setFromTriplets(pins.begin(), pins.end());
     A += P;

@@ -76,8 +76,8 @@ struct BlendData {
 // present; per frame a PinUpdate (solver/pin_update.hpp) removes missing markers and adds
 // collision pins from the columns A0^-1 u precomputed here.
 struct PoissonData {
-  // A0 = G^T W G + beta C^T C, plus CollisionData::kTangleWeight beta e_v e_v^T at the
-  // tangle vertices. N x N.
+  // A0 = G^T W G + beta C^T C, plus h_v beta e_v e_v^T at the held vertices
+  // (CollisionData::held_vertices). N x N.
   std::unique_ptr<SparseLdlt> factor;
   Eigen::MatrixXd marker_solution;  // N x K: column k is A0^-1 c_k
   // N x C: column i is A0^-1 e_v for v = CollisionData::vertices[i] when the region is
@@ -92,16 +92,21 @@ struct CollisionData {
   std::vector<int> triangles;     // the candidate set the collision stage checks
   std::vector<int> vertices;      // their vertices: the ones it may pin (C)
   std::vector<int> vertex_index;  // N: index into vertices or -1
-  // Vertices held to the linear blend x0 + B w in every frame, through
-  // kTangleWeight beta e_v e_v^T in A0 and kTangleWeight beta (x0 + B w)_v in the
-  // right-hand side. They are the corners of triangles that already cross in the neutral
-  // (ICT's lip corners), and one ring around them. Such crumpled triangles have no
-  // meaningful rotation: blended, they fold through their neighbours where the linear
-  // blend does not.
+  // Vertices held to the linear blend x0 + B w in every frame, through h_v beta e_v e_v^T
+  // in A0 and h_v beta (x0 + B w)_v in the right-hand side:
+  // - the tangle vertices, h = kTangleWeight: the corners of triangles that already cross
+  //   in the neutral (ICT's lip corners), and one ring around them. Such crumpled
+  //   triangles have no meaningful rotation: blended, they fold through their neighbours
+  //   where the linear blend does not.
+  // - the outer boundary loop, h = SolverParams::boundary_hold: beyond the markers
+  //   nothing else holds it.
   static constexpr double kTangleWeight = 10.0;  // times beta: at beta alone they still cross by a hair
   std::vector<int> tangle_vertices;
+  std::vector<int> boundary_vertices;  // empty when boundary_hold is 0 or the mesh is closed
+  std::vector<int> held_vertices;      // both, ascending, each once
+  std::vector<double> held_weights;    // h_v of held_vertices[i], times beta
   // The vertices whose linear blend (x0 + B w)_v each frame needs: the collision and the
-  // tangle vertices, with B's rows there laid out like BlendData::vertex_deltas.
+  // held vertices, with B's rows there laid out like BlendData::vertex_deltas.
   // Element i of reference_blocks is vertex reference_vertices[i].
   std::vector<int> reference_vertices;
   std::vector<int> reference_index;  // N: index into reference_vertices or -1

@@ -146,7 +146,7 @@ class PoissonSolver final : public FaceSolver {
       }
     }
     collisions_.begin_frame(active_.data());
-    collisions_.add_tangle_targets(rhs_);
+    collisions_.add_held_targets(rhs_);
     clock.lap(SolveStage::kRhs);
 
     m.poisson.factor->solve_in_place(rhs_, work_);  // rhs_ now holds y = A0^-1 r

@@ -1,4 +1,6 @@
+#include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <numbers>
 #include <random>
 
@@ -11,6 +13,7 @@
 #include "solver/builtin_face.hpp"
 #include "solver/face_solver.hpp"
 #include "solver/marker_layout.hpp"
+#include "solver/mesh_topology.hpp"
 #include "solver/solver_model.hpp"
 #include "solver/sparse_ldlt.hpp"
 #include "tests/solver_test_support.hpp"
@@ -203,7 +206,10 @@ TEST_CASE("nonlinear with weight refinements matches the articulated jaw better 
   const Rig& rig = face.rig();
   const auto layout = spread_marker_layout(rig, 60);
   SolverParams refined;
-  refined.weight_refinements = 2;  // off by default (no gain on real takes); this hinge is what they are for
+  refined.weight_refinements = 2;  // the default; this hinge is what they are for
+  // The built-in face's outer edge runs under its chin, which the jaw swings: held to the
+  // linear blend (boundary_hold, for real rigs' free forehead edges) it triples this error.
+  refined.boundary_hold = 0.0;
   const auto model = build_solver_model(rig, layout, refined);
   Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.shape_count());
   w[*rig.shape_index("jawOpen")] = 0.5;
@@ -699,4 +705,94 @@ TEST_CASE("Shapes left out of the weight fit stay at exactly 0 and the rest stil
   }
   CHECK_THROWS_WITH(build_solver_model(rig, layout, SolverParams{}, {"noSuchShape"}),
                     Catch::Contains("shape 'noSuchShape' to leave out of the weight fit"));
+}
+
+TEST_CASE("the outer boundary is a mesh's longest run of open edges, not a hole in it") {
+  // A 4 x 4 grid of quads (5 x 5 vertices) with its centre quad cut out: a 16-vertex outer
+  // edge and a 4-vertex hole.
+  std::vector<Eigen::Vector3i> triangles;
+  Eigen::Matrix3Xd vertices(3, 25);
+  for (int y = 0; y < 5; ++y)
+    for (int x = 0; x < 5; ++x) vertices.col(5 * y + x) = Eigen::Vector3d(x, y, 0.0);
+  for (int y = 0; y < 4; ++y)
+    for (int x = 0; x < 4; ++x) {
+      if ((x == 1 || x == 2) && (y == 1 || y == 2) && !(x == 1 && y == 1)) continue;  // the hole: 3 quads
+      const int a = 5 * y + x;
+      triangles.emplace_back(a, a + 1, a + 6);
+      triangles.emplace_back(a, a + 6, a + 5);
+    }
+  Eigen::Matrix3Xi T(3, Eigen::Index(triangles.size()));
+  for (std::size_t t = 0; t < triangles.size(); ++t) T.col(Eigen::Index(t)) = triangles[t];
+  std::vector<int> perimeter;
+  for (int v = 0; v < 25; ++v)
+    if (v % 5 == 0 || v % 5 == 4 || v / 5 == 0 || v / 5 == 4) perimeter.push_back(v);
+  CHECK(boundary_edges(T).size() == 16 + 8);  // the hole's edge: 8 edges around 3 quads
+  CHECK(outer_boundary_vertices(T, vertices) == perimeter);
+
+  Eigen::Matrix3Xi tetrahedron(3, 4);
+  tetrahedron << 0, 0, 0, 1, 1, 2, 3, 2, 2, 3, 1, 3;
+  CHECK(boundary_edges(tetrahedron).empty());
+  CHECK(outer_boundary_vertices(tetrahedron, Eigen::Matrix3Xd::Random(3, 4)).empty());
+}
+
+// SolverParams::boundary_hold: a pinned solve moves the outer edge as the triangles
+// around it say; held, it follows the rig's linear blend of the same weights.
+TEST_CASE("held strongly, the outer edge of nonlinear, dt and meshik solves lies on the linear blend") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  Eigen::VectorXd w = Eigen::VectorXd::Constant(rig.shape_count(), 0.4);
+  const Eigen::Matrix3Xd blend = rig.linear_blend(w);
+  // Markers off the blend, as real ones are (noise, a face that is not the rig's): the
+  // pinned solve carries their offsets out to the edge.
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> offset(-0.1, 0.1);
+  Eigen::Matrix3Xd targets = markers_of(blend, layout);
+  for (double& c : targets.reshaped()) c += offset(random);
+  SolverParams free_edge, held_edge;
+  free_edge.boundary_hold = 0.0;
+  held_edge.boundary_hold = 1e4;
+  const auto free_model = build_solver_model(rig, layout, free_edge);
+  const auto held_model = build_solver_model(rig, layout, held_edge);
+  CHECK(free_model->collision.boundary_vertices.empty());
+  const std::vector<int>& edge = held_model->collision.boundary_vertices;
+  REQUIRE(edge.size() > 10);
+  auto edge_error = [&](const Eigen::Matrix3Xd& vertices) {
+    double worst = 0.0;
+    for (const int v : edge) worst = std::max(worst, (vertices.col(v) - blend.col(v)).norm());
+    return worst;
+  };
+  for (const SolverMethod method : {SolverMethod::kNonlinear, SolverMethod::kDt, SolverMethod::kMeshik}) {
+    INFO(kSolverMethods.name(method));
+    auto free_solver = make_solver(method, free_model), held_solver = make_solver(method, held_model);
+    SolveResult free_out = free_solver->make_result(), held_out = held_solver->make_result();
+    free_solver->solve_with_weights(w, targets, all_present(60), free_out);
+    held_solver->solve_with_weights(w, targets, all_present(60), held_out);
+    const double free_mm = edge_error(free_out.vertices), held_mm = edge_error(held_out.vertices);
+    INFO("outer edge from the linear blend: free " << free_mm << ", held " << held_mm << " (rig units)");
+    CHECK(free_mm > 0.01);
+    CHECK(held_mm < 0.01 * free_mm);
+    CHECK(mean_error(held_out.vertices, free_out.vertices) < 0.5 * free_mm);  // the rest of the face moves far less
+  }
+}
+
+TEST_CASE("ICT's outer boundary is its outer edge, not its eye and mouth openings", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
+  const Rig rig = load_rig(dir.string());
+  const std::vector<int> outer = outer_boundary_vertices(rig.triangles, rig.neutral);
+  std::vector<int> open;  // every vertex on an open edge
+  for (const auto& [a, b] : boundary_edges(rig.triangles)) open.insert(open.end(), {a, b});
+  std::sort(open.begin(), open.end());
+  open.erase(std::unique(open.begin(), open.end()), open.end());
+  std::vector<int> openings;  // on an open edge, not on the outer one
+  std::set_difference(open.begin(), open.end(), outer.begin(), outer.end(), std::back_inserter(openings));
+  const BoundingBox box = bounding_box(rig.neutral);
+  double outer_top = -1e300, openings_top = -1e300;
+  for (const int v : outer) outer_top = std::max(outer_top, rig.neutral(1, v));
+  for (const int v : openings) openings_top = std::max(openings_top, rig.neutral(1, v));
+  INFO(outer.size() << " outer edge vertices up to y " << outer_top << ", " << openings.size() << " on openings up to y "
+                    << openings_top << "; the face spans y " << box.min.y() << " to " << box.max.y());
+  CHECK(outer.size() == 138);
+  CHECK(openings.size() == 2 * 42 + 74);  // two eyes and the mouth
+  CHECK(outer_top == box.max.y());        // the forehead's top edge
+  CHECK(openings_top < outer_top - 1);    // the eyes' openings are well below it (cm)
 }
