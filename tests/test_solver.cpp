@@ -799,7 +799,7 @@ TEST_CASE("ICT's outer boundary is its outer edge, not its eye and mouth opening
 
 // Issue 20's finding: fitted along the nonlinear blend's marker paths (weight_refinements),
 // an authored rig's own poses (its linear blend) come back re-mixed: jawOpen 0.5 gains
-// mouthLowerDown_R 0.34 and the mesh moves 2.1 mm. The plain fit gives them back.
+// mouthLowerDown_R 0.24 and the mesh moves 2.4 mm. The plain fit gives them back.
 TEST_CASE("ICT's own poses come back with their weights from the plain weight fit", "[data]") {
   FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
   const Rig rig = load_rig(dir.string());
