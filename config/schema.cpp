@@ -221,10 +221,11 @@ const std::vector<KeySpec>& schema_rows() {
        .description = "Regularisation of the weights' size: mu |w|^2 in Eq. 2."},
       {FACECAP_KEY(solver.beta), .default_value = kSolverDefaults.beta, .min = 0.001, .max = 1e6, .reload = Reload::kRebuild,
        .description = "How strongly markers pin the mesh in Eq. 5."},
-      {FACECAP_KEY(solver.weight_refinements), .default_value = int64_t{kSolverDefaults.weight_refinements}, .min = 0, .max = 10,
+      {FACECAP_KEY(solver.weight_refinements), .default_value = int64_t{kSolverDefaults.weight_refinements}, .min = -1, .max = 10,
        .reload = Reload::kRebuild,
        .description = "Gauss-Newton refinements of the weights along the paths rotations move markers (nonlinear "
-                      "solver); 0 gives the paper's linear fit."},
+                      "solver); 0 gives the paper's linear fit. -1: the rig's choice, 2 for the built-in face (its "
+                      "jaw turns about a hinge) and 0 for other rigs (on an artist's rig they re-mix its own poses)."},
       {FACECAP_CHOICE_KEY_NAMED("solver.collisions", solver.collision_region, kCollisionRegions),
        .default_value = std::string(kCollisionRegions.name(kSolverDefaults.collision_region)),
        .reload = Reload::kRebuild,
@@ -236,11 +237,12 @@ const std::vector<KeySpec>& schema_rows() {
        .reload = Reload::kRebuild,
        .description = "Vertices the collision stage pins per frame at most, which bounds its cost (64 pins take "
                       "about 0.15 ms on a 6,706-vertex face); a pose that needs more keeps some crossings."},
-      {FACECAP_KEY(solver.boundary_hold), .default_value = kSolverDefaults.boundary_hold, .unit = "times beta", .min = 0, .max = 100,
+      {FACECAP_KEY(solver.boundary_hold), .default_value = kSolverDefaults.boundary_hold, .unit = "times beta", .min = -1, .max = 100,
        .reload = Reload::kRebuild,
        .description = "How strongly the mesh's outer edge is held to the rig's linear blend of the weights (the eyes' "
                       "and mouth's openings stay free); 0 leaves it free, so that a pinned solve can carry the "
-                      "markers' motion out to it."},
+                      "markers' motion out to it. -1: the rig's choice, 0.003, and 0 for the built-in face (its jaw "
+                      "swings its edge)."},
       {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
 

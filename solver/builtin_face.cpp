@@ -175,6 +175,7 @@ BuiltinFace::BuiltinFace() {
   const Eigen::Index n = Eigen::Index(points.size());
   rig_.name = "builtin";
   rig_.source = "builtin";
+  rig_.hinged = true;  // its jaw and lids turn about hinges (articulated_pose)
   rig_.neutral.resize(3, n);
   for (Eigen::Index v = 0; v < n; ++v) rig_.neutral.col(v) = points[std::size_t(v)];
   rig_.triangles.resize(3, Eigen::Index(tris.size()));

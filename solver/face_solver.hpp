@@ -81,8 +81,9 @@ class FaceSolver {
 
 // Precomputes deformation gradients, the factorisation and the collision structure.
 // unfitted_shapes (names) are left out of Eq. 2: their weights stay 0 (the shapes the
-// calibration's markers cannot observe, align::Calibration::unfitted_shapes). Throws
-// Error on an unusable rig or binding, or an unfitted name the rig lacks.
+// calibration's markers cannot observe, align::Calibration::unfitted_shapes). Settings
+// left at kByRig are decided for the rig (SolverParams); SolverModel::params holds them
+// decided. Throws Error on an unusable rig or binding, or an unfitted name the rig lacks.
 std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vector<MarkerBinding> markers,
                                                       const SolverParams& params = {},
                                                       const std::vector<std::string>& unfitted_shapes = {});

@@ -38,6 +38,9 @@ inline constexpr EnumTable kCollisionRegions{std::array{
 SolverMethod parse_solver_method(std::string_view name);
 CollisionRegion parse_collision_region(std::string_view name);
 
+// SolverParams values that the rig decides unless given (see build_solver_model).
+inline constexpr int kByRig = -1;
+
 struct SolverParams {
   double alpha = 0.1;     // temporal weight regularisation (Eq. 2)
   double mu = 0.001;      // weight magnitude regularisation (Eq. 2)
@@ -49,17 +52,23 @@ struct SolverParams {
   // kSolvedPinsBeyondCapacity.
   int collision_max_pins = 64;
   double active_weight = 1e-4;      // weights below this are left out of T(w)
+  // The two settings below default to kByRig: the rig's own choice, by whether its shapes
+  // swing parts about hinges as a real jaw does (Rig::hinged: the built-in face) or are an
+  // artist's linear blend (ICT, ARKit and MetaHuman heads). build_solver_model decides.
+  //
   // The mesh's outer boundary loop held to the linear blend x0 + B w at this times beta
   // (0: free). Eq. 5 leaves it free, so where a marker near it is missing the pinned solve
   // carries the others' motion out to it: on EyebrowsMoCap, nonlinear's held-out p95 is
-  // 7.26 mm free and 6.12 held, linear's 7.13 (docs/solver.md, "The mesh's outer edge").
-  double boundary_hold = 0.003;
+  // 7.26 mm free and 6.12 held, linear's 7.13. By rig: 0.003, and 0 for a hinged rig,
+  // whose edge may swing with the hinge (docs/solver.md, "The mesh's outer edge").
+  double boundary_hold = kByRig;
   // Gauss-Newton refinements of Eq. 2 for the nonlinear solver, fitting markers along
   // the paths the rotations of Eq. 4 move them (a hinge swings, it does not slide);
-  // 0 gives the paper's linear fit. Default 2: on the built-in face's hinged jaw 0 more
-  // than doubles the truth error; on real takes 0 and 2 differ by at most 0.02 mm median
-  // held-out error (docs/solver.md, "Weight refinements on real takes").
-  int weight_refinements = 2;
+  // 0 gives the paper's linear fit. By rig: 2 for a hinged rig (0 more than doubles the
+  // built-in face's truth error), else 0: on an artist's rig they re-mix its own poses
+  // and on real takes they help on none (docs/solver.md, "Weight refinements on real
+  // takes").
+  int weight_refinements = kByRig;
   // Iterations Eq. 2's box QP may take per solve; 0: 10 M + 10, far more than the few it
   // takes. A solve stopped at the cap keeps its last feasible iterate and is flagged
   // kSolvedQpIterationCap.

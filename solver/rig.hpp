@@ -20,6 +20,10 @@ struct Rig {
   Eigen::Matrix3Xi triangles;            // 3 x T, vertex indices into neutral
   std::vector<std::string> shape_names;  // M, unique
   Eigen::MatrixXd deltas;                // 3N x M; row 3v+k is coordinate k of vertex v
+  // Its shapes swing parts about hinges, as a real jaw does (the built-in face, built by
+  // rotation), rather than being an artist's linear blend: the solver's kByRig settings
+  // follow (SolverParams).
+  bool hinged = false;
 
   Eigen::Index vertex_count() const { return neutral.cols(); }
   Eigen::Index triangle_count() const { return triangles.cols(); }

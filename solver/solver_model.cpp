@@ -27,17 +27,27 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
+// SolverParams' kByRig settings decided for `rig`.
+SolverParams params_for_rig(SolverParams params, const Rig& rig) {
+  if (params.weight_refinements == kByRig) params.weight_refinements = rig.hinged ? 2 : 0;
+  if (params.boundary_hold == kByRig) params.boundary_hold = rig.hinged ? 0.0 : 0.003;
+  return params;
+}
+
 void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const SolverParams& params) {
   if (rig.vertex_count() == 0 || rig.triangle_count() == 0) throw Error("solver: the rig has no mesh");
   if (markers.empty()) throw Error("solver: no markers to solve from");
   if (params.collision_max_pins < 0 || params.collision_max_pins > 1024)
     throw Error(fmt::format("solver: collision_max_pins {} is not in [0, 1024]", params.collision_max_pins));
+  if (params.weight_refinements < 0)
+    throw Error(fmt::format("solver: weight_refinements {} must be >= 0, or {} for the rig's choice", params.weight_refinements, kByRig));
   if (params.weight_qp_iteration_cap < 0)
     throw Error(fmt::format("solver: weight_qp_iteration_cap {} must be >= 0", params.weight_qp_iteration_cap));
   if (!(params.beta > 0) || !(params.alpha >= 0) || !(params.mu >= 0) || !(params.boundary_hold >= 0) ||
       !std::isfinite(params.boundary_hold))
     throw Error(fmt::format("solver: beta must be > 0 and alpha, mu, boundary_hold >= 0 (beta {}, alpha {}, mu {}, "
-                            "boundary_hold {})", params.beta, params.alpha, params.mu, params.boundary_hold));
+                            "boundary_hold {}; {} for the rig's choice)", params.beta, params.alpha, params.mu,
+                            params.boundary_hold, kByRig));
   for (const auto& m : markers) {
     for (int v : m.vertices)
       if (v < 0 || v >= rig.vertex_count())
@@ -553,8 +563,9 @@ Eigen::Vector3d nearest_log_branch(const Eigen::Vector3d& r, const Eigen::Vector
 }
 
 std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vector<MarkerBinding> markers,
-                                                      const SolverParams& params,
+                                                      const SolverParams& requested,
                                                       const std::vector<std::string>& unfitted_shapes) {
+  const SolverParams params = params_for_rig(requested, rig);
   validate(rig, markers, params);
   const auto start = Clock::now();
   auto model = std::make_shared<SolverModel>();
