@@ -394,9 +394,10 @@ std::string Daemon::flagged_text(const Figures& w) {
 void Daemon::log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::Calibration& calibration_,
                           double build_seconds) const {
   const pipeline::MarkerMapper& mapper = solve.mapper();
-  spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes) built in {:.2f} s; calibration {}: {} of {} markers "
-               "in the source, head stabilisation {}{}", solve.method(), rig_->name, rig_->vertex_count(),
-               rig_->shape_count(), build_seconds, calibration_.source_take, mapper.markers_found(),
+  spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes, weight refinements {}, outer edge hold {:g}) built in "
+               "{:.2f} s; calibration {}: {} of {} markers in the source, head stabilisation {}{}", solve.method(),
+               rig_->name, rig_->vertex_count(), rig_->shape_count(), solve.solver_params().weight_refinements,
+               solve.solver_params().boundary_hold, build_seconds, calibration_.source_take, mapper.markers_found(),
                calibration_.markers.size(),
                mapper.stabilising() ? fmt::format("on ({} stable markers)", mapper.stable_markers_found()) : "off",
                mapper.source_to_take() != 1.0 ? fmt::format(", source units scaled by {:g}", mapper.source_to_take()) : "");

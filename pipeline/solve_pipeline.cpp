@@ -4,6 +4,7 @@
 
 #include "core/time.hpp"
 #include "solver/marker_layout.hpp"
+#include "solver/solver_model.hpp"
 
 namespace facecap::pipeline {
 namespace {
@@ -73,6 +74,8 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
     points_.resize(source.labels.size());
   }
 }
+
+const SolverParams& SolvePipeline::solver_params() const noexcept { return solver_->model().params; }
 
 SolvedFrame SolvePipeline::make_solved_frame(bool with_vertices) const {
   SolvedFrame frame;

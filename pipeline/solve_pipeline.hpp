@@ -84,6 +84,8 @@ class SolvePipeline {
   // labelling (the calibration's markers, bound ones first); empty without either.
   const MarkerFrame& labelled_frame() const noexcept { return checked_; }
   std::string_view method() const noexcept { return solver_->name(); }
+  // The solver's settings as decided for the rig (kByRig ones resolved).
+  const SolverParams& solver_params() const noexcept;
 
  private:
   void record_fit_residuals(SolvedFrame& out) const noexcept;

@@ -196,6 +196,9 @@ TEST_CASE("facecap calibrate then solve to CSV and fcrec then eval on a syntheti
   REQUIRE(r.exit_code == 0);
   const auto eval = nlohmann::json::parse(r.out);
   CHECK(eval["sampling"]["sampled_frames"] == 9);
+  // The settings as decided for the built-in face, which is hinged.
+  CHECK(eval["solver"]["weight_refinements"] == 2);
+  CHECK(eval["solver"]["boundary_hold"] == 0.0);
   CHECK(eval["stable_residual_mm"]["median"].get<double>() < 0.5);
   for (const char* name : {"nonlinear", "linear", "dt"}) {
     INFO(name);
@@ -300,6 +303,9 @@ TEST_CASE("facecap eval on a real AnimFace take reports held-out error for every
   REQUIRE(r.exit_code == 0);
   const auto eval = nlohmann::json::parse(r.out);
   CHECK(eval["frames"] == 240);
+  // ICT is an artist's linear blend: no refinements, the outer edge held.
+  CHECK(eval["solver"]["weight_refinements"] == 0);
+  CHECK(eval["solver"]["boundary_hold"] == 0.003);
   CHECK(eval["stable_residual_mm"]["median"].get<double>() < 1.0);
   // meshik (offline, about 0.6 s a solve) only on frame 0.
   CHECK(eval["solvers"]["meshik"]["frames_solved"] == 1);

@@ -44,6 +44,8 @@ TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth a
   INFO(d.log());
   REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
   CHECK(notify.messages.front().find("READY=1") != std::string::npos);  // nothing before READY
+  // The built-in face is hinged: the solver settings left to the rig are its choice, said at start.
+  CHECK(d.log().find("weight refinements 2, outer edge hold 0)") != std::string::npos);
 
   client::Subscriber reader(shm);  // exists once READY is sent
   CHECK(reader.writer_pid() == d.pid());

@@ -288,6 +288,12 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   j["take"] = o.take;
   j["rig"] = {{"name", rig.name}, {"content_hash", fmt::format("{:016x}", rig.content_hash())}};
   j["calib"] = o.calib;
+  // As decided for the rig (SolverParams' kByRig settings), not as given.
+  j["solver"] = {{"alpha", model->params.alpha},
+                 {"mu", model->params.mu},
+                 {"beta", model->params.beta},
+                 {"weight_refinements", model->params.weight_refinements},
+                 {"boundary_hold", model->params.boundary_hold}};
   j["frames"] = F;
   j["markers"] = K;
   std::vector<std::string> face_labels, stable_labels;
