@@ -210,7 +210,7 @@ const std::vector<KeySpec>& schema_rows() {
                       "calibration's markers (tracking them from frame to frame, re-acquiring the set from the "
                       "calibration's neutral shape when it loses it), so that a face is solved from an unlabelled "
                       "point cloud. The labels a source gives are ignored. Turned on by itself for a source that "
-                      "delivers only unlabelled points (v4l2, natnet without a marker_set)."},
+                      "delivers only unlabelled points (v4l2, natnet without a marker_set, a replay of either)."},
 
       {FACECAP_CHOICE_KEY(solver.method, kSolverMethods), .default_value = std::string("nonlinear"),
        .reload = Reload::kRebuild,

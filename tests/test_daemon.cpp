@@ -125,6 +125,47 @@ TEST_CASE("lockstep replay solves every frame and the recorder writes them all")
   CHECK(last.weights.size() == rig->shape_count());
 }
 
+TEST_CASE("a replay of unlabelled points, as facecapd records cameras, is labelled without being told and solves the face") {
+  const fs::path dir = test::scratch_dir("unlabelled-replay");
+  const config::DaemonConfig defaults = config::default_config();
+  REQUIRE_FALSE(defaults.calibration.label_markers);
+  const auto rig = builtin_rig();
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(defaults), *rig);
+  constexpr int64_t kFrames = 240;
+  test::write_sim_take(dir / "cloud.fcrec", defaults.source.sim, rig, pipeline::rest_marker_set(calibration), kFrames,
+                       {}, test::SimTakeLabels::kUnlabelled);
+
+  Daemon d({.handle_signals = false},
+           loaded({"source.driver=replay", "source.replay.file=" + (dir / "cloud.fcrec").string(), "loop.mode=lockstep",
+                   "outputs.shm.name=" + unique_shm("cloud"), "outputs.recording.enabled=true",
+                   "outputs.recording.directory=" + (dir / "rec").string(), "loop.realtime=false"}));
+  d.start();  // before, it refused: none of the calibration's markers were among the source's
+  CHECK(d.run() == 0);
+  formats::RecordingReader reader(d.recording_file());
+  REQUIRE(reader.solved_frame_count() == std::size_t(kFrames));
+  CHECK_THAT(reader.header().solver_settings, Catch::Contains("label_markers = true"));
+
+  // The solved weights against the sim's truth, once the labeller and the solve have settled.
+  drivers::SimSource sim(defaults.source.sim, rig, pipeline::rest_marker_set(calibration));
+  sim.open();
+  const Eigen::Index jaw = *rig->shape_index("jawOpen");
+  double weight_error = 0, jaw_error = 0;
+  int compared = 0;
+  SolvedFrame solved;
+  for (std::size_t i = 60; i < reader.solved_frame_count(); ++i) {
+    reader.read_solved_frame(i, solved);
+    const Eigen::VectorXd truth = sim.weights_at(solved.frame_no);
+    weight_error += (solved.weights.cast<double>() - truth).cwiseAbs().mean();
+    jaw_error += std::abs(solved.weights[jaw] - truth[jaw]);
+    ++compared;
+  }
+  weight_error /= compared;
+  jaw_error /= compared;
+  INFO("mean |w - w_true| " << weight_error << ", jawOpen " << jaw_error);
+  CHECK(weight_error < 0.06);
+  CHECK(jaw_error < 0.03);
+}
+
 TEST_CASE("a new solver is swapped in between frames and the old one retired off the loop") {
   const auto rig = builtin_rig();
   const config::DaemonConfig c = config::default_config();

@@ -35,8 +35,8 @@ SimOptions sim_options() {
   return o;
 }
 
-// 3 markers, `frames` frames at 10 Hz, marker k of frame i at (i, k, 0).
-std::filesystem::path write_small_take(const std::string& name, int frames) {
+// 3 markers, `frames` frames at 10 Hz, marker k of frame i at (i, k, 0), each with `flags`.
+std::filesystem::path write_small_take(const std::string& name, int frames, uint32_t flags = 0) {
   formats::MarkerTake take;
   take.format = formats::TakeFormat::kRecording;
   take.labels = {"A", "B", "C"};
@@ -46,7 +46,7 @@ std::filesystem::path write_small_take(const std::string& name, int frames) {
     MarkerFrame& f = formats::append_empty_frame(take, i, int64_t(i) * 100 * kNsPerMs);
     for (int k = 0; k < 3; ++k) {
       f.markers[std::size_t(k)].position = Eigen::Vector3d(i, k, 0);
-      f.markers[std::size_t(k)].flags = 0;
+      f.markers[std::size_t(k)].flags = flags;
     }
   }
   const auto path = test::scratch_dir("replay") / name;
@@ -204,6 +204,19 @@ TEST_CASE("replay in lockstep hands every frame of the window in order and then 
   CHECK(seen == std::vector<int64_t>{2, 3, 4, 5, 6});
   CHECK(frame.markers[1].position == Eigen::Vector3d(6, 1, 0));
   CHECK(replay.health().finished);
+}
+
+TEST_CASE("a replay whose every point came without identity says its source is unlabelled, and only then") {
+  ReplaySource named(replay_options(write_small_take("named.fcrec", 4)));
+  named.open();
+  CHECK_FALSE(named.info().unlabelled);
+  ReplaySource cloud(replay_options(write_small_take("cloud.fcrec", 4, kMarkerUnlabelled)));
+  cloud.open();
+  CHECK(cloud.info().unlabelled);
+  // A missing slot of a cloud is unlabelled too (as the camera and NatNet drivers mark it).
+  ReplaySource gappy(replay_options(write_small_take("gappy.fcrec", 4, kMarkerUnlabelled | kMarkerMissing)));
+  gappy.open();
+  CHECK(gappy.info().unlabelled);
 }
 
 TEST_CASE("paced replay hands the frame due at each time and counts the ones passed over and loops") {

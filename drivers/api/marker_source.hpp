@@ -25,8 +25,8 @@ struct SourceInfo {
   double nominal_rate_hz = 0.0;     // 0 when unknown
   bool own_clock = false;           // frames arrive on the source's schedule (devices, sim),
                                     // rather than when the loop asks (replay)
-  bool unlabelled = false;          // the slots carry unnamed points (cameras, a NatNet cloud):
-                                    // they are solved only through the labeller
+  bool unlabelled = false;          // the slots carry unnamed points (cameras, a NatNet cloud,
+                                    // a replay of either): solved only through the labeller
 };
 
 // Counters an operator (and STATUS=) reads; all since start().

@@ -12,6 +12,21 @@
 #include "formats/natnet_markers.hpp"
 
 namespace facecap::drivers {
+namespace {
+
+// Every slot of every frame carries kMarkerUnlabelled: a recording of cameras' points or of
+// a NatNet cloud, which only the labeller can solve (as facecapd did when it recorded them).
+bool only_unlabelled_points(const formats::MarkerTake& take) {
+  bool any = false;
+  for (const MarkerFrame& frame : take.frames)
+    for (const Marker& m : frame.markers) {
+      if ((m.flags & kMarkerUnlabelled) == 0) return false;
+      any = true;
+    }
+  return any;
+}
+
+}  // namespace
 
 ReplaySource::ReplaySource(ReplayOptions options, NatNetOptions natnet)
     : options_(std::move(options)), natnet_(std::move(natnet)) {}
@@ -64,6 +79,7 @@ void ReplaySource::open() {
   info_.units = options_.units == TakeUnits::kStated ? take_.units : std::string(kTakeUnits.name(options_.units));
   info_.nominal_rate_hz = take_.rate_hz;
   info_.own_clock = false;
+  info_.unlabelled = only_unlabelled_points(take_);
 }
 
 void ReplaySource::start(const SourceStart& start) {
