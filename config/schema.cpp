@@ -224,8 +224,9 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(solver.weight_refinements), .default_value = int64_t{kSolverDefaults.weight_refinements}, .min = -1, .max = 10,
        .reload = Reload::kRebuild,
        .description = "Gauss-Newton refinements of the weights along the paths rotations move markers (nonlinear "
-                      "solver); 0 gives the paper's linear fit. -1: the rig's choice, 2 for the built-in face (its "
-                      "jaw turns about a hinge) and 0 for other rigs (on an artist's rig they re-mix its own poses)."},
+                      "solver); 0 gives the paper's linear fit. -1: the rig's choice, 2 for a hinged rig (the built-in "
+                      "face, or a rig manifest's hinged = true) and 0 for others (on an artist's rig they re-mix its "
+                      "own poses)."},
       {FACECAP_CHOICE_KEY_NAMED("solver.collisions", solver.collision_region, kCollisionRegions),
        .default_value = std::string(kCollisionRegions.name(kSolverDefaults.collision_region)),
        .reload = Reload::kRebuild,
@@ -241,8 +242,8 @@ const std::vector<KeySpec>& schema_rows() {
        .reload = Reload::kRebuild,
        .description = "How strongly the mesh's outer edge is held to the rig's linear blend of the weights (the eyes' "
                       "and mouth's openings stay free); 0 leaves it free, so that a pinned solve can carry the "
-                      "markers' motion out to it. -1: the rig's choice, 0.003, and 0 for the built-in face (its jaw "
-                      "swings its edge)."},
+                      "markers' motion out to it. -1: the rig's choice, 0.003, and 0 for a hinged rig (the built-in "
+                      "face, whose jaw swings its edge)."},
       {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
 

@@ -82,8 +82,8 @@ RigManifest parse_rig_manifest(std::string_view text, const fs::path& manifest) 
     return Error(std::move(what), ErrorLocation{.file = file, .line = b.line, .column = b.column, .key = std::move(key)});
   };
   for (const auto& [key, value] : table) {
-    if (key != "name" && key != "neutral" && key != "shapes")
-      throw fail(value, fmt::format("unknown key '{}' (a manifest has name, neutral and [shapes])", key.str()),
+    if (key != "name" && key != "hinged" && key != "neutral" && key != "shapes")
+      throw fail(value, fmt::format("unknown key '{}' (a manifest has name, hinged, neutral and [shapes])", key.str()),
                  std::string(key.str()));
   }
   const fs::path dir = manifest.parent_path();
@@ -92,6 +92,10 @@ RigManifest parse_rig_manifest(std::string_view text, const fs::path& manifest) 
   if (const toml::node* name = table.get("name")) {
     if (!name->is_string()) throw fail(*name, "name must be a string", "name");
     out.name = name->as_string()->get();
+  }
+  if (const toml::node* hinged = table.get("hinged")) {
+    if (!hinged->is_boolean()) throw fail(*hinged, "hinged must be true or false", "hinged");
+    out.hinged = hinged->as_boolean()->get();
   }
   const toml::node* neutral = table.get("neutral");
   if (!neutral) throw Error("missing 'neutral = \"file.obj\"'", ErrorLocation{.file = file, .key = "neutral"});
@@ -158,6 +162,7 @@ Rig load_obj_rig(const RigFiles& files) {
   const std::string neutral_name = files.neutral.filename().string();
   Rig rig;
   rig.name = files.name;
+  rig.hinged = files.hinged;
   rig.neutral = neutral.vertices;
   rig.triangles = neutral.triangles;
   // Gathered as the shapes are read rather than sized 3N x M up front: N and M come from

@@ -69,6 +69,7 @@ struct RigLoadReport {
 
 // A rig manifest (rig.toml):
 //   name = "actor"            # optional
+//   hinged = true             # optional: its shapes swing about hinges (Rig::hinged)
 //   neutral = "neutral.obj"
 //   [shapes]
 //   jawOpen = "jaw_open.obj"  # one OBJ per shape, in file order
@@ -79,6 +80,7 @@ struct RigShapeFile {
 };
 struct RigManifest {
   std::string name;
+  bool hinged = false;
   std::filesystem::path neutral;
   std::vector<RigShapeFile> shapes;
 };

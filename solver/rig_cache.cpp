@@ -99,6 +99,7 @@ std::vector<char> serialize_rig(const Rig& rig, RigCacheKey key) {
   Writer w;
   w.string(rig.name);
   w.string(rig.source);
+  w.value<uint8_t>(rig.hinged ? 1 : 0);
   w.value<uint64_t>(uint64_t(rig.neutral.cols()));
   w.raw(rig.neutral.data(), sizeof(double) * std::size_t(rig.neutral.size()));
   w.value<uint64_t>(uint64_t(rig.triangles.cols()));
@@ -143,6 +144,9 @@ Rig deserialize_rig(const std::vector<char>& bytes, RigCacheKey expected_key, co
   Rig rig;
   rig.name = r.string();
   rig.source = r.string();
+  const auto hinged = r.value<uint8_t>();
+  if (hinged > 1) throw Error(fmt::format("hinged flag is {}, not 0 or 1", hinged), ErrorLocation{.file = name});
+  rig.hinged = hinged == 1;
   const auto n = r.count(3 * sizeof(double));
   rig.neutral.resize(3, Eigen::Index(n));
   r.raw(rig.neutral.data(), sizeof(double) * std::size_t(rig.neutral.size()));

@@ -12,7 +12,7 @@
 
 namespace facecap {
 
-inline constexpr uint32_t kRigCacheVersion = 1;
+inline constexpr uint32_t kRigCacheVersion = 2;  // 2: Rig::hinged
 
 struct RigCacheKey {
   uint64_t value = 0;

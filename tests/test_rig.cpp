@@ -8,6 +8,7 @@
 
 #include "core/error.hpp"
 #include "solver/builtin_face.hpp"
+#include "solver/solver_model.hpp"
 #include "solver/gltf_rig.hpp"
 #include "solver/obj_mesh.hpp"
 #include "solver/rig.hpp"
@@ -68,6 +69,28 @@ TEST_CASE("a TOML manifest names the neutral and the shapes") {
   const Rig rig = load_rig((dir / "face.toml").string(), no_cache());
   CHECK(rig.name == "tiny");
   CHECK(rig.shape_names == std::vector<std::string>{"open"});
+  CHECK_FALSE(rig.hinged);
+}
+
+TEST_CASE("a manifest says a rig is hinged, and the cache keeps it") {
+  const auto dir = write_small_rig("manifest-hinged");
+  test::write_text(dir / "rig.toml", "hinged = true\nneutral = \"generic_neutral_mesh.obj\"\n[shapes]\nopen = \"jawOpen.obj\"\n");
+  RigLoadOptions options;
+  options.cache_dir = test::scratch_dir("manifest-hinged-cache");
+  RigLoadReport first, second;
+  CHECK(load_rig(dir.string(), options, &first).hinged);
+  CHECK(load_rig(dir.string(), options, &second).hinged);
+  CHECK(second.from_cache);
+  // The solver's kByRig settings follow it (SolverParams).
+  const Rig hinged = load_rig(dir.string(), no_cache());
+  const std::vector<MarkerBinding> markers{MarkerBinding::at_vertex("a", 0), MarkerBinding::at_vertex("b", 4),
+                                           MarkerBinding::at_vertex("c", 5)};
+  SolverParams by_rig;
+  by_rig.collision_region = CollisionRegion::kNone;  // this strip has no lips to find
+  CHECK(build_solver_model(hinged, markers, by_rig)->params.weight_refinements == 2);
+
+  test::write_text(dir / "rig.toml", "hinged = \"yes\"\nneutral = \"generic_neutral_mesh.obj\"\n[shapes]\nopen = \"jawOpen.obj\"\n");
+  CHECK_THROWS_WITH(load_rig(dir.string(), no_cache()), Contains("rig.toml:1:") && Contains("hinged must be true or false"));
 }
 
 TEST_CASE("malformed rigs fail with the file and line") {
