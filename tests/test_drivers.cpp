@@ -219,6 +219,24 @@ TEST_CASE("a replay whose every point came without identity says its source is u
   CHECK(gappy.info().unlabelled);
 }
 
+TEST_CASE("a real Motive capture replayed as a cloud (no marker set) is unlabelled, and by its marker set it is not") {
+  FACECAP_REQUIRE_SHARED_DATA(natnet, "natnet");
+  ReplayOptions options = replay_options(natnet / "traffic.pcapng");
+  NatNetOptions cloud;
+  cloud.unlabelled_markers = 8;
+  ReplaySource as_cloud(options, cloud);
+  as_cloud.open();
+  CHECK(as_cloud.info().unlabelled);
+  std::size_t points = 0;
+  for (const MarkerFrame& frame : as_cloud.recorded_frames()) points += frame.present_count();
+  CHECK(points > 0);  // the capture's points, in the unlabelled slots
+  NatNetOptions named;
+  named.marker_set = "RaceQuad";
+  ReplaySource by_set(options, named);
+  by_set.open();
+  CHECK_FALSE(by_set.info().unlabelled);
+}
+
 TEST_CASE("paced replay hands the frame due at each time and counts the ones passed over and loops") {
   const auto file = write_small_take("paced.fcrec", 10);  // 1 s long at 10 Hz
   ReplayOptions options = replay_options(file);
