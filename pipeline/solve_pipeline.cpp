@@ -32,6 +32,14 @@ OneEuroFilter make_target_filter(const FilterSettings& filter, Eigen::Index mark
   return OneEuroFilter(3, markers, params);
 }
 
+OneEuroFilter make_weight_filter(const FilterSettings& filter, Eigen::Index shapes) {
+  return OneEuroFilter(1, shapes, filter.weight_params);
+}
+
+void filter_weights(OneEuroFilter& filter, Eigen::VectorXd& weights, int64_t time_ns) noexcept {
+  filter.filter(Eigen::Map<Eigen::MatrixXd>(weights.data(), 1, weights.size()), {}, time_ns);
+}
+
 SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibration, const SourceDescription& source,
                              const SolveSettings& settings)
     : mapper_(calibration, settings.label_markers ? calibration_labels(calibration) : source.labels, source.units,
@@ -50,7 +58,7 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
   if (settings.filter.targets) {
     target_filter_.emplace(make_target_filter(settings.filter, mapper_.marker_count(), rig_mm_per_unit_));
     if (settings.filter.weights) {
-      weight_filter_.emplace(1, shape_count_, settings.filter.weight_params);
+      weight_filter_.emplace(make_weight_filter(settings.filter, shape_count_));
       filtered_weights_.resize(shape_count_);
     }
   }
@@ -110,8 +118,7 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
 
   if (weight_filter_) {  // the weights sent out; the solver's result (its warm start) stays as solved
     filtered_weights_ = result_.weights;  // same size: no allocation
-    weight_filter_->filter(Eigen::Map<Eigen::MatrixXd>(filtered_weights_.data(), 1, filtered_weights_.size()), {},
-                           markers.source_time_ns);
+    filter_weights(*weight_filter_, filtered_weights_, markers.source_time_ns);
     out.weights = filtered_weights_.cast<float>();
   } else {
     out.weights = result_.weights.cast<float>();  // same size: no allocation

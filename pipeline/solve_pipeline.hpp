@@ -38,6 +38,11 @@ struct FilterSettings {
 // The targets' filter for `markers` markers in rig space, beta converted from per mm/s to
 // per rig unit/s. Not RT-safe.
 OneEuroFilter make_target_filter(const FilterSettings& filter, Eigen::Index markers, double rig_mm_per_unit);
+// The weights' filter for `shapes` shapes: one row of scalars, a channel per shape. Not
+// RT-safe.
+OneEuroFilter make_weight_filter(const FilterSettings& filter, Eigen::Index shapes);
+// Filters `weights` (M, a make_weight_filter filter's channels) in place. RT-safe.
+void filter_weights(OneEuroFilter& filter, Eigen::VectorXd& weights, int64_t time_ns) noexcept;
 
 // How to solve: the [solver] section's method and parameters, and the mapping options.
 struct SolveSettings {

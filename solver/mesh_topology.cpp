@@ -36,6 +36,7 @@ std::vector<std::pair<int, int>> boundary_edges(const Eigen::Matrix3Xi& triangle
 
 std::vector<int> outer_boundary_vertices(const Eigen::Matrix3Xi& triangles, const Eigen::Matrix3Xd& vertices) {
   const std::vector<std::pair<int, int>> edges = boundary_edges(triangles);
+  if (edges.empty()) return {};
   // Union-find over the boundary edges' vertices; each run's length summed at its root.
   std::vector<int> parent(std::size_t(vertices.cols()));
   std::iota(parent.begin(), parent.end(), 0);
@@ -46,7 +47,6 @@ std::vector<int> outer_boundary_vertices(const Eigen::Matrix3Xi& triangles, cons
   for (const auto& [a, b] : edges) parent[std::size_t(root(a))] = root(b);
   std::vector<double> length(parent.size(), 0.0);
   for (const auto& [a, b] : edges) length[std::size_t(root(a))] += (vertices.col(a) - vertices.col(b)).norm();
-  if (edges.empty()) return {};
   const int longest = int(std::max_element(length.begin(), length.end()) - length.begin());
   std::vector<int> loop;
   for (const auto& [a, b] : edges)

@@ -104,7 +104,7 @@ struct CollisionData {
   std::vector<int> tangle_vertices;
   std::vector<int> boundary_vertices;  // empty when boundary_hold is 0 or the mesh is closed
   std::vector<int> held_vertices;      // both, ascending, each once
-  std::vector<double> held_weights;    // h_v of held_vertices[i], times beta
+  std::vector<double> held_weights;    // h_v of held_vertices[i] (A0 and the rhs scale it by beta)
   // The vertices whose linear blend (x0 + B w)_v each frame needs: the collision and the
   // held vertices, with B's rows there laid out like BlendData::vertex_deltas.
   // Element i of reference_blocks is vertex reference_vertices[i].

@@ -12,6 +12,7 @@
 #include "formats/take.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/solve_pipeline.hpp"
 #include "pipeline/source_units.hpp"
 #include "solver/collide/metrics.hpp"
 #include "solver/marker_layout.hpp"
@@ -175,7 +176,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(method, model));
     run.heldout_by_marker.resize(face_markers.size());
     run.held_result = run.full->make_result();
-    if (o.settings.filter.weights) run.weight_filter.emplace(1, run.result.weights.size(), o.settings.filter.weight_params);
+    if (o.settings.filter.weights) run.weight_filter.emplace(pipeline::make_weight_filter(o.settings.filter, run.result.weights.size()));
     runs.push_back(std::move(run));
   }
 
@@ -231,8 +232,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
           run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - raw_targets.col(k)).norm() * rig_mm);
       run.weights = run.result.weights;
       if (run.weight_filter) {
-        run.weight_filter->filter(Eigen::Map<Eigen::MatrixXd>(run.weights.data(), 1, run.weights.size()), {},
-                                  take.frames[f].source_time_ns);
+        pipeline::filter_weights(*run.weight_filter, run.weights, take.frames[f].source_time_ns);
         run.solved_weights_history.push_back(run.result.weights);
         run.sent_weights_history.push_back(run.weights);
       }
