@@ -246,6 +246,10 @@ const std::vector<KeySpec>& schema_rows() {
                       "face, whose jaw swings its edge)."},
       {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
+      {FACECAP_CHOICE_KEY(solver.kernels, kKernelPaths), .default_value = std::string(kKernelPaths.name(kSolverDefaults.kernels)),
+       .reload = Reload::kRebuild,
+       .description = "Which compiled per-frame kernels solve: auto takes the widest instruction set this CPU runs "
+                      "(facecapd logs it, /status shows it); a path the CPU lacks is refused at start."},
 
       {FACECAP_CHOICE_KEY(filter.mode, kFilterModes), .default_value = std::string("live"), .reload = Reload::kRebuild,
        .description = "When to filter the marker targets in time (the One Euro filter, after head stabilisation, so "

@@ -30,6 +30,7 @@ nlohmann::json status_json(const StatusReport& r) {
        {{"name", r.rig_name}, {"hash", fmt::format("{:016x}", r.rig_hash)}, {"vertices", r.rig_vertices},
         {"shapes", r.rig_shapes}}},
       {"solver", r.solver},
+      {"kernels", {{"path", r.kernels}, {"cpu", r.cpu_features}}},
       {"actor", r.actor},
       {"calibration",
        {{"source", r.calibration}, {"markers", r.calibration_markers}, {"markers_in_source", r.calibration_markers_found},

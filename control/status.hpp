@@ -46,6 +46,7 @@ struct StatusReport {
   std::string source_units_look_like, source_units_problem;
   // The rig, the solver, the actor and the calibration.
   std::string rig_name, solver;
+  std::string kernels, cpu_features;  // the solver's kernel path and what the CPU offers
   uint64_t rig_hash = 0;
   int64_t rig_vertices = 0, rig_shapes = 0;
   std::string actor, calibration;  // the actor's name ("" when none); what the calibration came from

@@ -23,6 +23,7 @@
 #include "control/status.hpp"
 #include "pipeline/settings.hpp"
 #include "solver/builtin_face.hpp"
+#include "solver/kernels/kernels.hpp"
 
 namespace facecap::daemon {
 namespace {
@@ -394,10 +395,11 @@ std::string Daemon::flagged_text(const Figures& w) {
 void Daemon::log_pipeline(const pipeline::SolvePipeline& solve, const pipeline::Calibration& calibration_,
                           double build_seconds) const {
   const pipeline::MarkerMapper& mapper = solve.mapper();
-  spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes, weight refinements {}, outer edge hold {:g}) built in "
-               "{:.2f} s; calibration {}: {} of {} markers in the source, head stabilisation {}{}", solve.method(),
-               rig_->name, rig_->vertex_count(), rig_->shape_count(), solve.solver_params().weight_refinements,
-               solve.solver_params().boundary_hold, build_seconds, calibration_.source_take, mapper.markers_found(),
+  spdlog::info("{} solver on rig '{}' ({} vertices, {} shapes, weight refinements {}, outer edge hold {:g}, {} kernels "
+               "on a CPU with {}) built in {:.2f} s; calibration {}: {} of {} markers in the source, head stabilisation {}{}",
+               solve.method(), rig_->name, rig_->vertex_count(), rig_->shape_count(),
+               solve.solver_params().weight_refinements, solve.solver_params().boundary_hold,
+               kKernelPaths.name(solve.kernel_path()), kernels::cpu_features(), build_seconds, calibration_.source_take, mapper.markers_found(),
                calibration_.markers.size(),
                mapper.stabilising() ? fmt::format("on ({} stable markers)", mapper.stable_markers_found()) : "off",
                mapper.source_to_take() != 1.0 ? fmt::format(", source units scaled by {:g}", mapper.source_to_take()) : "");
@@ -648,6 +650,8 @@ void Daemon::publish_status(int64_t now_ns) {
   r.rig_vertices = rig_->vertex_count();
   r.rig_shapes = rig_->shape_count();
   r.solver = kSolverMethods.name(c.solver.method);
+  r.kernels = kKernelPaths.name(c.solver.kernels == KernelPath::kAuto ? kernels::best_path() : c.solver.kernels);
+  r.cpu_features = kernels::cpu_features();
   controller_->report(r);
   r.mode = config::kLoopModes.name(c.loop.mode);
   r.rate_hz = c.loop.rate_hz;

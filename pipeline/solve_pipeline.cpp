@@ -84,6 +84,7 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
 }
 
 const SolverParams& SolvePipeline::solver_params() const noexcept { return solver_->model().params; }
+KernelPath SolvePipeline::kernel_path() const noexcept { return solver_->model().kernels->path; }
 
 SolvedFrame SolvePipeline::make_solved_frame(bool with_vertices) const {
   SolvedFrame frame;

@@ -91,6 +91,8 @@ class SolvePipeline {
   std::string_view method() const noexcept { return solver_->name(); }
   // The solver's settings as decided for the rig (kByRig ones resolved).
   const SolverParams& solver_params() const noexcept;
+  // The kernels the solver runs (SolverParams::kernels decided for this CPU).
+  KernelPath kernel_path() const noexcept;
 
  private:
   void record_fit_residuals(SolvedFrame& out) const noexcept;

@@ -81,17 +81,4 @@ void active_weights(const Eigen::VectorXd& w, double active_weight, std::vector<
   for (Eigen::Index i = 0; i < w.size(); ++i) out[std::size_t(i)] = w[i] > active_weight ? float(w[i]) : 0.0f;
 }
 
-void linear_blend_block(const ShapeBlocks& blocks, const BlendTerms& terms, const Eigen::Matrix3Xd& neutral,
-                        std::span<const int> vertices, const float* weights, int block, Eigen::Matrix3Xd& out) noexcept {
-  constexpr int B = ShapeBlocks::kBlock;
-  alignas(64) float sum[3 * B];
-  sum_block<3>(terms, block, weights, sum);
-  for (int i = 0; i < B; ++i) {
-    const int32_t e = blocks.element_of_slot[std::size_t(block) * B + std::size_t(i)];
-    if (e < 0) continue;
-    const int v = vertices.empty() ? e : vertices[std::size_t(e)];
-    for (int c = 0; c < 3; ++c) out(c, e) = neutral(c, v) + double(sum[c * B + i]);
-  }
-}
-
 }  // namespace facecap

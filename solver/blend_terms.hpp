@@ -14,7 +14,7 @@
 #include <Eigen/Core>
 
 #include "core/huge_pages.hpp"
-#include "solver/simd.hpp"
+#include "solver/kernels/kernels.hpp"
 
 namespace facecap {
 
@@ -55,14 +55,12 @@ struct ShapeBlocks {
 // kScaleUnit (the smallest at least the step needed; 11 bits keep them within 0.1%),
 // the offsets floats.
 struct BlendTerms {
-  static constexpr int kWidths = 3;
+  static constexpr int kWidths = kernels::kWidths;
   static constexpr int kBytesPerValue[kWidths] = {1, 2, 4};
-  static constexpr float kScaleUnit = 1.0f / 32768.0f;  // float entries' scale, 1, is the half 32768
-  struct BlockRun {
-    std::size_t values = 0;       // byte offset of the block's first value (64-byte aligned)
-    int32_t first = 0;            // its first position
-    int32_t count[kWidths] = {};  // its 8-bit, 16-bit and float entries, in that order
-  };
+  static constexpr float kScaleUnit = kernels::kScaleUnit;  // float entries' scale, 1, is the half 32768
+  // Per block: the byte offset of its first value (64-byte aligned), its first position,
+  // its 8-bit, 16-bit and float entries, in that order.
+  using BlockRun = kernels::BlockRun;
 
   int components = 0;
   std::vector<BlockRun> blocks;
@@ -77,6 +75,10 @@ struct BlendTerms {
   // (components x kBlock). Not on the per-frame path.
   double at(int32_t entry, int component, int slot) const noexcept;
   void decode(int32_t entry, std::span<double> out) const noexcept;
+  // As the per-frame kernels read it. Valid while this lives unchanged.
+  kernels::BlendTermsView view() const noexcept {
+    return {blocks.data(), shape.data(), scales.data(), offsets.data(), values.data()};
+  }
 
  private:
   struct Located {
@@ -96,109 +98,30 @@ uint16_t half_at_least(float x) noexcept;
 // active_weight, so that their entries are skipped. out: M. Real-time safe.
 void active_weights(const Eigen::VectorXd& w, double active_weight, std::vector<float>& out) noexcept;
 
-// x0 + B w over the active weights (from active_weights) for the elements in one block
-// of `blocks`: element e is rig vertex vertices[e], or vertex e when vertices is empty;
-// out column e. Real-time safe.
-void linear_blend_block(const ShapeBlocks& blocks, const BlendTerms& terms, const Eigen::Matrix3Xd& neutral,
-                        std::span<const int> vertices, const float* weights, int block, Eigen::Matrix3Xd& out) noexcept;
+// x0 + B w over the active weights (from active_weights) for the elements of `blocks`,
+// one block at a time, by the kernels of `table`: element e is rig vertex vertices[e], or
+// vertex e when vertices is empty; out column e.
+class LinearBlend {
+ public:
+  // Keeps references to its arguments. Not real-time.
+  LinearBlend(const kernels::KernelTable& table, const ShapeBlocks& blocks, const BlendTerms& terms,
+              const Eigen::Matrix3Xd& neutral, std::span<const int> vertices = {}) noexcept
+      : table_(table), blocks_(blocks),
+        view_{terms.view(), blocks.element_of_slot.data(), neutral.data(), vertices.empty() ? nullptr : vertices.data()} {}
+  int block_count() const noexcept { return blocks_.block_count(); }
+  // One block into out (3 x elements). Real-time safe.
+  void block(const float* weights, int block, Eigen::Matrix3Xd& out) const noexcept {
+    table_.linear_blend_block(view_, weights, block, out.data());
+  }
+  // Every block. Real-time safe.
+  void all(const float* weights, Eigen::Matrix3Xd& out) const noexcept {
+    for (int b = 0; b < block_count(); ++b) block(weights, b, out);
+  }
 
-namespace blend_kernel {
-
-using simd::FloatX16;
-
-// 16 stored values as floats: 8-bit and 16-bit ones widened and converted (GCC 12 turns
-// __builtin_convertvector from small integers into scalar code, so AVX-512 gets the two
-// instructions spelled out).
-template <int Width>
-FloatX16 load_values(const std::byte* p) noexcept {
-#if defined(__AVX512F__)
-  if constexpr (Width == 0)
-    return FloatX16(_mm512_cvtepi32_ps(_mm512_cvtepi8_epi32(_mm_load_si128(reinterpret_cast<const __m128i*>(p)))));
-  else if constexpr (Width == 1)
-    return FloatX16(_mm512_cvtepi32_ps(_mm512_cvtepi16_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(p)))));
-  else
-    return FloatX16(_mm512_load_ps(p));
-#else
-  using Stored = std::conditional_t<Width == 0, int8_t, std::conditional_t<Width == 1, int16_t, float>>;
-  Stored v[16];
-  std::memcpy(v, p, sizeof v);
-  FloatX16 out;
-  for (int i = 0; i < 16; ++i) out[i] = float(v[i]);
-  return out;
-#endif
-}
-
-// `Components` floats from p into the first lanes, zeros after.
-template <int Components>
-FloatX16 load_head(const float* p) noexcept {
-  static_assert(Components <= 16);
-#if defined(__AVX512F__)
-  return FloatX16(_mm512_maskz_loadu_ps(__mmask16((1u << Components) - 1), p));
-#else
-  FloatX16 out = {};
-  for (int i = 0; i < Components; ++i) out[i] = p[i];
-  return out;
-#endif
-}
-
-// `Components` half floats from p as floats into the first lanes, zeros after.
-template <int Components>
-FloatX16 load_half_head(const uint16_t* p) noexcept {
-  static_assert(Components <= 16);
-#if defined(__AVX512F__) && defined(__AVX512BW__) && defined(__AVX512VL__)
-  return FloatX16(_mm512_cvtph_ps(_mm256_maskz_loadu_epi16(__mmask16((1u << Components) - 1), p)));
-#else
-  FloatX16 out = {};
-  for (int i = 0; i < Components; ++i) out[i] = half_to_float(p[i]);
-  return out;
-#endif
-}
-
-}  // namespace blend_kernel
-
-// sum over the active entries of `block` of w_shape * value, component-major (BlendTerms),
-// in FloatX16 lanes so that the block's sums stay in registers. An entry's weighted scales
-// and offsets take one vector operation each; every value one load, conversion and
-// multiply-add. weights: per shape, from active_weights. Always inlined, so that the
-// sums stay in registers for the caller's next step (out of line the blend measured 10%
-// slower). Real-time safe.
-template <int Components>
-[[gnu::always_inline]] inline void sum_block(const BlendTerms& terms, int block, const float* weights, float (&sum)[Components * ShapeBlocks::kBlock]) noexcept {
-  using simd::FloatX16;
-  constexpr int B = ShapeBlocks::kBlock, L = B / 16;  // FloatX16 per component
-  static_assert(L * 16 == B);
-  FloatX16 lanes[Components][L] = {};
-  FloatX16 offsets = {};  // lane c: the weighted offsets of component c
-  alignas(64) float factor[16];
-  const BlendTerms::BlockRun& run = terms.blocks[std::size_t(block)];
-  const std::byte* values = terms.values.data() + run.values;
-  int32_t position = run.first;
-  auto add_entries = [&]<int Width>(std::integral_constant<int, Width>) {
-    constexpr std::size_t kEntryBytes = std::size_t(Components) * B * BlendTerms::kBytesPerValue[Width];
-    constexpr std::size_t kLaneBytes = 16 * BlendTerms::kBytesPerValue[Width];
-    for (const int32_t end = position + run.count[Width]; position < end; ++position, values += kEntryBytes) {
-      const float w = weights[terms.shape[std::size_t(position)]];
-      if (w == 0.0f) continue;
-      const auto at = std::size_t(position) * Components;
-      const FloatX16 wv = FloatX16{} + w;
-      offsets += wv * blend_kernel::load_head<Components>(terms.offsets.data() + at);
-      const FloatX16 f = (wv * BlendTerms::kScaleUnit) * blend_kernel::load_half_head<Components>(terms.scales.data() + at);
-      std::memcpy(factor, &f, sizeof f);
-#pragma GCC unroll 16
-      for (int c = 0; c < Components; ++c)
-#pragma GCC unroll 2
-        for (int l = 0; l < L; ++l)
-          lanes[c][l] += factor[c] * blend_kernel::load_values<Width>(values + (c * L + l) * kLaneBytes);
-    }
-  };
-  add_entries(std::integral_constant<int, 0>{});
-  add_entries(std::integral_constant<int, 1>{});
-  add_entries(std::integral_constant<int, 2>{});
-  for (int c = 0; c < Components; ++c)
-    for (int l = 0; l < L; ++l) {
-      const FloatX16 v = lanes[c][l] + offsets[c];
-      std::memcpy(sum + (c * L + l) * 16, &v, sizeof v);
-    }
-}
+ private:
+  const kernels::KernelTable& table_;
+  const ShapeBlocks& blocks_;
+  kernels::LinearBlendView view_;
+};
 
 }  // namespace facecap

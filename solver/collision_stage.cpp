@@ -20,7 +20,10 @@ Eigen::Vector3d triangle_normal(const Eigen::Matrix3Xd& x, const Eigen::Ref<cons
 
 }  // namespace
 
-CollisionStage::CollisionStage(const SolverModel& model) : model_(model) {
+CollisionStage::CollisionStage(const SolverModel& model)
+    : model_(model),
+      reference_blend_(*model.kernels, model.collision.reference_blocks, model.collision.reference_deltas, model.rig.neutral,
+                       model.collision.reference_vertices) {
   const SolverModel& m = model_;
   const Eigen::Index T = m.rig.triangle_count(), N = m.vertex_count();
   reference_.resize(3, Eigen::Index(m.collision.reference_vertices.size()));
@@ -30,6 +33,7 @@ CollisionStage::CollisionStage(const SolverModel& model) : model_(model) {
     config.epsilon = m.params.collision_epsilon;
     config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
     config.neighbour_edges = 2;
+    config.kernels = m.kernels;
     collider_.configure(m.rig.triangles, m.rig.neutral, m.collision.triangles, config);
     pin_stamp_.assign(std::size_t(N), 0);
     collisions_ = collider_.make_result();
@@ -63,8 +67,7 @@ inline Eigen::Vector3d CollisionStage::reference(int v) noexcept {
   const int block = c.reference_blocks.slot_of_element[std::size_t(i)] / ShapeBlocks::kBlock;
   if (reference_stamp_[std::size_t(block)] != frame_stamp_) {
     reference_stamp_[std::size_t(block)] = frame_stamp_;
-    linear_blend_block(c.reference_blocks, c.reference_deltas, model_.rig.neutral, c.reference_vertices, weights_, block,
-                       reference_);
+    reference_blend_.block(weights_, block, reference_);
   }
   return reference_.col(i);
 }
@@ -127,7 +130,7 @@ CollisionStage::Result CollisionStage::add_pins(const Eigen::Matrix3Xd& vertices
   const TrianglePair* batch_pairs[kCloserBatch];
   int batched = 0;
   auto pin_batch = [&] {
-    const uint32_t close = triangles_closer_than(std::span(batch, std::size_t(batched)), epsilon);
+    const uint32_t close = triangles_closer_than(*m.kernels, std::span(batch, std::size_t(batched)), epsilon);
     for (int k = 0; k < batched; ++k) {
       const auto ta = m.rig.triangles.col(batch_pairs[k]->first), tb = m.rig.triangles.col(batch_pairs[k]->second);
       if (!wants_pins(ta, tb)) continue;

@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include "solver/blend_terms.hpp"
 #include "solver/collide/collider.hpp"
 #include "solver/pin_update.hpp"
 
@@ -63,6 +64,7 @@ class CollisionStage {
   Eigen::Index pin_capacity_ = 0;
   Eigen::MatrixXd pin_columns_;  // A0^-1 e_v solved per frame when not precomputed
   Eigen::VectorXd pin_work_;
+  LinearBlend reference_blend_;     // x0 + B w at CollisionData::reference_vertices
   const float* weights_ = nullptr;  // this frame's active weights
   Eigen::Matrix3Xd reference_;      // the linear blend at CollisionData::reference_vertices (reference())
   uint32_t frame_stamp_ = 0;

@@ -34,6 +34,17 @@ inline constexpr EnumTable kCollisionRegions{std::array{
     EnumEntry{CollisionRegion::kLips, "lips", "the triangles around the mouth opening, found from the rig's shapes"},
     EnumEntry{CollisionRegion::kFace, "face", "every triangle of the face (slower: pins are solved for as they occur)"}}};
 
+// Which compiled set of per-frame kernels the solver runs (solver/kernels/kernels.hpp):
+// the widest the CPU has, or one forced, so that a machine with AVX-512 can run and
+// measure the AVX2 path.
+enum class KernelPath : uint8_t { kAuto, kAvx512, kAvx2, kPortable };
+
+inline constexpr EnumTable kKernelPaths{std::array{
+    EnumEntry{KernelPath::kAuto, "auto", "the widest this CPU runs: avx512, else avx2, else portable"},
+    EnumEntry{KernelPath::kAvx512, "avx512", "AVX-512 F/BW/VL/DQ (x86-64-v4): Intel Xeon and recent desktops, AMD Zen 4 on"},
+    EnumEntry{KernelPath::kAvx2, "avx2", "AVX2 with FMA and F16C (x86-64-v3): most capture boxes"},
+    EnumEntry{KernelPath::kPortable, "portable", "the baseline (x86-64-v2, SSE4.2): runs on any x86-64 CPU facecap supports"}}};
+
 // The value named `name`; throws Error naming the allowed names when there is none.
 SolverMethod parse_solver_method(std::string_view name);
 CollisionRegion parse_collision_region(std::string_view name);
@@ -73,6 +84,9 @@ struct SolverParams {
   // takes. A solve stopped at the cap keeps its last feasible iterate and is flagged
   // kSolvedQpIterationCap.
   int weight_qp_iteration_cap = 0;
+  // The kernels the model's solvers run; a path the CPU lacks is refused when the model
+  // is built.
+  KernelPath kernels = KernelPath::kAuto;
 };
 
 }  // namespace facecap

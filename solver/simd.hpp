@@ -1,9 +1,9 @@
 #pragma once
-// The SIMD lane vocabulary of the per-frame kernels (blend sums, batched triangle tests,
-// BVH boxes, back-substitution), in GCC's vector extensions: element-wise arithmetic and
-// comparisons on fixed-width lanes, compiled to what the target has (AVX-512 on the
-// capture box, narrower elsewhere). Defined once here so that every kernel speaks the
-// same types. Everything here is real-time safe.
+// The SIMD lane vocabulary of the collider's BVH (solver/collide/bvh.hpp), in GCC's
+// vector extensions: element-wise arithmetic and comparisons on fixed-width lanes,
+// compiled for the build's baseline CPU (SSE4.2). The per-frame kernels that gain from
+// wider registers live in solver/kernels/, compiled per instruction set. Everything here
+// is real-time safe.
 #include <cstdint>
 #include <cstring>
 
@@ -31,6 +31,11 @@ inline uint32_t lane_bits(const MaskX16& m) noexcept {
 #if defined(__AVX512F__)
   const __m512i lanes = reinterpret_cast<__m512i>(m);
   return uint32_t(_mm512_test_epi32_mask(lanes, lanes));
+#elif defined(__SSE2__)
+  __m128 quarter[4];
+  std::memcpy(quarter, &m, sizeof quarter);
+  return uint32_t(_mm_movemask_ps(quarter[0])) | uint32_t(_mm_movemask_ps(quarter[1])) << 4 |
+         uint32_t(_mm_movemask_ps(quarter[2])) << 8 | uint32_t(_mm_movemask_ps(quarter[3])) << 12;
 #else
   uint32_t bits = 0;
   for (int i = 0; i < kFloatX16Lanes; ++i) bits |= uint32_t(m[i] != 0) << i;

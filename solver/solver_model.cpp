@@ -571,6 +571,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
   auto model = std::make_shared<SolverModel>();
   model->rig = rig;
   model->params = params;
+  model->kernels = &kernels::table(params.kernels);
   model->markers = std::move(markers);
   model->weights.fitted.assign(std::size_t(rig.shape_count()), 1);
   for (const std::string& name : unfitted_shapes) {
@@ -615,7 +616,7 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
     Eigen::SparseMatrix<double> P(N, N);
     P.setFromTriplets(pins.begin(), pins.end());
     A += P;
-    model->poisson.factor = std::make_unique<SparseLdlt>(A);
+    model->poisson.factor = std::make_unique<SparseLdlt>(A, *model->kernels);
     model->setup.factor_s = seconds_since(t0);
   }
   {

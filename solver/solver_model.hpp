@@ -63,7 +63,7 @@ struct BlendData {
   BlendTerms triangle_nonlinear;
   // Deformation transfer: (F - I) t1, then (F - I) t2 (world).
   BlendTerms triangle_gradient;
-  static constexpr int kNonlinearComponents = 8, kGradientComponents = 6;
+  static constexpr int kNonlinearComponents = kernels::kNonlinearComponents, kGradientComponents = kernels::kGradientComponents;
 
   // The rotation log of `shape` at `triangle`; zero where the shape leaves it unchanged.
   Eigen::Vector3d rotation_log(Eigen::Index shape, Eigen::Index triangle) const noexcept;
@@ -120,6 +120,8 @@ class SolverModel {
   Rig rig;
   SolverParams params;
   std::vector<MarkerBinding> markers;  // K
+  // The per-frame kernels of params.kernels (kAuto decided for this CPU); never null.
+  const kernels::KernelTable* kernels = nullptr;
 
   WeightsData weights;
   BlendData blend;

@@ -53,7 +53,10 @@ void solve_weights(WeightsStage& weights, const Eigen::Matrix3Xd& targets, std::
 class LinearSolver final : public FaceSolver {
  public:
   explicit LinearSolver(std::shared_ptr<const SolverModel> model)
-      : FaceSolver(std::move(model)), weights_(*model_, false), active_(std::size_t(model_->shape_count())) {}
+      : FaceSolver(std::move(model)),
+        weights_(*model_, false),
+        blend_(*model_->kernels, model_->blend.vertex_blocks, model_->blend.vertex_deltas, model_->rig.neutral),
+        active_(std::size_t(model_->shape_count())) {}
   std::string_view name() const noexcept override { return kSolverMethods.name(SolverMethod::kLinear); }
   void reset() noexcept override { weights_.reset(); }
   void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
@@ -77,13 +80,12 @@ class LinearSolver final : public FaceSolver {
 
  private:
   void blend(SolveResult& out) noexcept {
-    const SolverModel& m = *model_;
-    active_weights(out.weights, m.params.active_weight, active_);
-    for (int block = 0; block < m.blend.vertex_blocks.block_count(); ++block)
-      linear_blend_block(m.blend.vertex_blocks, m.blend.vertex_deltas, m.rig.neutral, {}, active_.data(), block, out.vertices);
+    active_weights(out.weights, model_->params.active_weight, active_);
+    blend_.all(active_.data(), out.vertices);
   }
 
   WeightsStage weights_;
+  LinearBlend blend_;
   std::vector<float> active_;  // per shape: its weight, 0 if inactive
 };
 

@@ -4,11 +4,11 @@
 #include <fmt/format.h>
 
 #include "core/error.hpp"
-#include "solver/simd.hpp"
 
 namespace facecap {
 
-SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A) : n_(A.rows()) {
+SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A, const kernels::KernelTable& kernels)
+    : n_(A.rows()), kernels_(kernels) {
   if (A.rows() != A.cols()) throw Error("SparseLdlt: matrix is not square");
   cholmod_common common;
   cholmod_start(&common);
@@ -61,48 +61,11 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A) : n_(A.rows()) {
   col_start_[std::size_t(n_)] = int(value_.size());
   cholmod_free_factor(&factor, &common);
   cholmod_finish(&common);
+  view_ = {n_, perm_.data(), col_start_.data(), short_rows_ ? row16_.data() : nullptr, short_rows_ ? nullptr : row32_.data(),
+           value_.data(), inv_diagonal_.data()};
 }
 
 namespace {
-// x, y, z and a pad lane of one vertex: one vector operation per factor entry.
-using simd::DoubleX4;
-
-// Both triangular solves walk L by columns. L y = b scatters each solved entry down its
-// column (independent updates, so no chain of dependent additions); L^T u = z gathers
-// with four partial sums to keep the adds' latency from bounding the loop.
-template <class Row>
-void solve_lanes(Eigen::Index n, const int* perm, const int* col_start, const Row* rows, const double* vals,
-                 const double* inv_diagonal, Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) noexcept {
-  DoubleX4* w = reinterpret_cast<DoubleX4*>(work.data());
-  const double* b = xyz.data();
-  for (Eigen::Index k = 0; k < n; ++k) {
-    const double* src = b + 3 * perm[k];
-    w[k] = DoubleX4{src[0], src[1], src[2], 0.0};
-  }
-  for (Eigen::Index j = 0; j < n; ++j) {
-    const DoubleX4 y = w[j];
-    for (int k = col_start[j]; k < col_start[j + 1]; ++k) w[rows[k]] -= vals[k] * y;
-  }
-  for (Eigen::Index j = n - 1; j >= 0; --j) {
-    DoubleX4 s0 = w[j] * inv_diagonal[j], s1{}, s2{}, s3{};
-    int k = col_start[j];
-    const int end = col_start[j + 1];
-    for (; k + 4 <= end; k += 4) {
-      s0 -= vals[k] * w[rows[k]];
-      s1 -= vals[k + 1] * w[rows[k + 1]];
-      s2 -= vals[k + 2] * w[rows[k + 2]];
-      s3 -= vals[k + 3] * w[rows[k + 3]];
-    }
-    for (; k < end; ++k) s0 -= vals[k] * w[rows[k]];
-    w[j] = (s0 + s1) + (s2 + s3);
-  }
-  double* out = xyz.data();
-  for (Eigen::Index k = 0; k < n; ++k) {
-    double* dst = out + 3 * perm[k];
-    const DoubleX4 v = w[k];
-    dst[0] = v[0]; dst[1] = v[1]; dst[2] = v[2];
-  }
-}
 
 template <class Row>
 void solve_one(Eigen::Index n, const int* perm, const int* col_start, const Row* rows, const double* vals,
@@ -124,10 +87,7 @@ void solve_one(Eigen::Index n, const int* perm, const int* col_start, const Row*
 }  // namespace
 
 void SparseLdlt::solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) const noexcept {
-  if (short_rows_)
-    solve_lanes(n_, perm_.data(), col_start_.data(), row16_.data(), value_.data(), inv_diagonal_.data(), xyz, work);
-  else
-    solve_lanes(n_, perm_.data(), col_start_.data(), row32_.data(), value_.data(), inv_diagonal_.data(), xyz, work);
+  kernels_.ldlt_solve(view_, xyz.data(), work.data());
 }
 
 void SparseLdlt::solve_in_place(Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept {

@@ -11,14 +11,16 @@
 #include <Eigen/SparseCore>
 
 #include "core/huge_pages.hpp"
+#include "solver/kernels/kernels.hpp"
 
 namespace facecap {
 
 class SparseLdlt {
  public:
-  // Factors A (symmetric; both triangles or the lower one given). Throws Error if A is
-  // not positive definite. Not real-time.
-  explicit SparseLdlt(const Eigen::SparseMatrix<double>& A);
+  // Factors A (symmetric; both triangles or the lower one given); the three-column solve
+  // runs the kernels of `kernels`. Throws Error if A is not positive definite. Not
+  // real-time.
+  SparseLdlt(const Eigen::SparseMatrix<double>& A, const kernels::KernelTable& kernels);
 
   Eigen::Index size() const { return n_; }
   Eigen::Index factor_nonzeros() const { return Eigen::Index(value_.size()); }
@@ -40,6 +42,8 @@ class SparseLdlt {
   HugePageVector<int> row32_;
   HugePageVector<double> value_;
   std::vector<double> inv_diagonal_; // 1 / D
+  const kernels::KernelTable& kernels_;
+  kernels::LdltView view_;
 };
 
 }  // namespace facecap

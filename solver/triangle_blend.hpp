@@ -13,6 +13,8 @@
 
 #include <Eigen/Core>
 
+#include "solver/kernels/kernels.hpp"
+
 namespace facecap {
 
 class SolverModel;
@@ -49,6 +51,7 @@ class TriangleBlend {
   std::vector<std::array<int32_t, 3>> slot_corners_;  // per slot of triangle_blocks: its vertices, -1 for padding
   Eigen::Matrix3Xd identity_rhs_;                     // G^T W G x0: the right-hand side of T = I everywhere
   std::vector<std::span<const std::byte>> streamed_;
+  kernels::TriangleBlendView view_;
 };
 
 }  // namespace facecap

@@ -6,8 +6,17 @@
 #include <Eigen/Core>
 
 #include "solver/face_solver.hpp"
+#include "solver/kernels/kernels.hpp"
 
 namespace facecap::test {
+
+// The kernel paths this CPU runs (solver/kernels/kernels.hpp), portable first.
+inline std::vector<KernelPath> runnable_kernel_paths() {
+  std::vector<KernelPath> paths;
+  for (const KernelPath p : {KernelPath::kPortable, KernelPath::kAvx2, KernelPath::kAvx512})
+    if (kernels::cpu_runs(p)) paths.push_back(p);
+  return paths;
+}
 
 inline std::vector<uint8_t> all_present(Eigen::Index k) { return std::vector<uint8_t>(std::size_t(k), 1); }
 

@@ -503,9 +503,16 @@ TEST_CASE("ICT FaceKit lip poses with and without collision handling") {
 }
 
 // A path graph's Laplacian plus a diagonal: factored with both row-index widths (16-bit
-// up to 65,536 rows, 32-bit beyond), the solves must match Eigen's own LDL^T.
+// up to 65,536 rows, 32-bit beyond), the solves of every kernel path this CPU runs must
+// match Eigen's own LDL^T.
 TEST_CASE("SparseLdlt solves match Eigen's with 16-bit and 32-bit row indices") {
-  for (const Eigen::Index n : {Eigen::Index(1000), Eigen::Index(70000)}) {
+  for (const auto [n, path] : [] {
+         std::vector<std::pair<Eigen::Index, KernelPath>> cases;
+         for (const KernelPath p : facecap::test::runnable_kernel_paths())
+           for (const Eigen::Index size : {Eigen::Index(1000), Eigen::Index(70000)}) cases.push_back({size, p});
+         return cases;
+       }()) {
+    INFO("kernels " << kKernelPaths.name(path) << ", " << n << " rows");
     std::vector<Eigen::Triplet<double>> entries;
     for (Eigen::Index i = 0; i < n; ++i) {
       entries.emplace_back(i, i, 2.0 + 0.01 * double(i % 7));
@@ -515,7 +522,7 @@ TEST_CASE("SparseLdlt solves match Eigen's with 16-bit and 32-bit row indices") 
     Eigen::SparseMatrix<double> A(n, n);
     A.setFromTriplets(entries.begin(), entries.end());
     for (Eigen::Index i = 0; i < n; ++i) A.coeffRef(i, i) += 1.0;  // diagonally dominant
-    const facecap::SparseLdlt factor(A);
+    const facecap::SparseLdlt factor(A, facecap::kernels::table(path));
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> reference(A);
     REQUIRE(reference.info() == Eigen::Success);
 

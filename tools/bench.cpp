@@ -12,6 +12,7 @@
 
 #include "core/error.hpp"
 #include "core/frame.hpp"
+#include "solver/kernels/kernels.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/alloc_counter.hpp"
@@ -26,6 +27,7 @@ struct Options {
   int markers = 60;
   long frames = -1;
   long meshik_frames = 20;
+  std::string kernels = "auto";
   bool json = false;
 };
 
@@ -39,6 +41,40 @@ int64_t thread_cpu_ns() noexcept {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return int64_t(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// How fast one core reads memory that is not in its caches: the best of three passes
+// summing a buffer four times the size of a large last-level cache. The stages that
+// stream their data can go no faster than bytes / this.
+double read_bandwidth_bytes_per_s() {
+  constexpr std::size_t kBytes = std::size_t(128) << 20;
+  std::vector<uint64_t> buffer(kBytes / sizeof(uint64_t));
+  for (std::size_t i = 0; i < buffer.size(); ++i) buffer[i] = i;
+  double best = 0.0;
+  volatile uint64_t sink = 0;
+  for (int pass = 0; pass < 3; ++pass) {
+    const int64_t start = thread_cpu_ns();
+    uint64_t s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+    for (std::size_t i = 0; i < buffer.size(); i += 4) s0 += buffer[i], s1 += buffer[i + 1], s2 += buffer[i + 2], s3 += buffer[i + 3];
+    sink = sink + s0 + s1 + s2 + s3;
+    best = std::max(best, double(kBytes) / (double(thread_cpu_ns() - start) * 1e-9));
+  }
+  return best;
+}
+
+// Bytes of `terms` a frame reads for each shape active in it: the shape's stored values,
+// scales and offsets (BlendTerms' layout).
+std::vector<double> bytes_per_shape(const BlendTerms& terms, Eigen::Index shapes) {
+  std::vector<double> bytes(std::size_t(shapes), 0.0);
+  const std::size_t values_per_entry = std::size_t(terms.components) * ShapeBlocks::kBlock;
+  for (const BlendTerms::BlockRun& run : terms.blocks) {
+    int32_t position = run.first;
+    for (int w = 0; w < BlendTerms::kWidths; ++w)
+      for (int32_t k = 0; k < run.count[w]; ++k, ++position)
+        bytes[std::size_t(terms.shape[std::size_t(position)])] +=
+            double(values_per_entry * std::size_t(BlendTerms::kBytesPerValue[w]) + std::size_t(terms.components) * 6);
+  }
+  return bytes;
 }
 
 Percentiles summarise(std::vector<double> values) {
@@ -70,8 +106,10 @@ void run_bench(const Options& o) {
   const auto layout = spread_marker_layout(rig, o.markers);
   const Eigen::Index K = Eigen::Index(layout.size());
 
+  SolverParams params;
+  params.kernels = kKernelPaths.parse(o.kernels).value();
   const auto build_start = Clock::now();
-  const auto model = build_solver_model(rig, layout);
+  const auto model = build_solver_model(rig, layout, params);
   const double build_s = std::chrono::duration<double>(Clock::now() - build_start).count();
 
   // Markers from the pose the weights really produce (articulated for the built-in face).
@@ -96,8 +134,19 @@ void run_bench(const Options& o) {
                        {"total", model->setup.total_s},
                        {"build_solver_model", build_s}};
   report["solvers"] = nlohmann::json::object();
+  report["kernels"] = {{"path", kKernelPaths.name(model->kernels->path)}, {"cpu", kernels::cpu_features()}};
+  const double bandwidth = read_bandwidth_bytes_per_s();
+  report["read_bandwidth_gb_s"] = bandwidth * 1e-9;
+  // Per frame, the bytes each streaming stage reads: the blend's terms of the active
+  // shapes (and the triangles' rest frames), the factor's entries twice (two sweeps).
+  const std::vector<double> triangle_bytes = bytes_per_shape(model->blend.triangle_nonlinear, rig.shape_count());
+  const std::vector<double> gradient_bytes = bytes_per_shape(model->blend.triangle_gradient, rig.shape_count());
+  const std::vector<double> vertex_bytes = bytes_per_shape(model->blend.vertex_deltas, rig.shape_count());
+  const double operator_bytes = double(model->blend.triangle_blocks.element_of_slot.size()) * (9 * 4 + 12);
+  const double factor_bytes = 2.0 * double(model->poisson.factor->factor_nonzeros()) * 10.0 +
+                              double(model->vertex_count()) * (4 + 4 + 8 + 2 * 32);
 
-  std::vector<std::string> lines;
+  std::vector<std::string> lines, floor_lines;
   for (const SolverMethod method : solver_list) {
     const std::string name(kSolverMethods.name(method));
     auto solver = make_solver(method, model);
@@ -105,7 +154,7 @@ void run_bench(const Options& o) {
     const std::size_t frames = !solver_method_is_realtime(method) ? std::min<std::size_t>(F, std::size_t(std::max(1L, o.meshik_frames))) : F;
     std::vector<double> total_us(frames), cpu_us(frames);
     std::vector<std::vector<double>> stage_us(kSolveStageCount, std::vector<double>(frames));
-    std::vector<double> collision_pairs(frames), collision_pins(frames);
+    std::vector<double> collision_pairs(frames), collision_pins(frames), blend_bytes(frames);
     uint64_t allocations = 0;
     std::size_t held = 0;
     solver->reset();
@@ -120,6 +169,12 @@ void run_bench(const Options& o) {
       held += (result.status & kSolvedTooFewMarkers) != 0;
       total_us[f] = double(result.total_ns) * 1e-3;
       for (std::size_t s = 0; s < kSolveStageCount; ++s) stage_us[s][f] = double(result.stage_ns[s]) * 1e-3;
+      const std::vector<double>& shape_bytes = method == SolverMethod::kLinear ? vertex_bytes
+                                               : method == SolverMethod::kDt    ? gradient_bytes
+                                                                                : triangle_bytes;
+      blend_bytes[f] = method == SolverMethod::kLinear ? 0.0 : operator_bytes;
+      for (Eigen::Index s = 0; s < rig.shape_count(); ++s)
+        if (result.weights[s] > model->params.active_weight) blend_bytes[f] += shape_bytes[std::size_t(s)];
       collision_pairs[f] = result.collision_pairs;
       collision_pins[f] = result.collision_constraints;
     }
@@ -140,6 +195,22 @@ void run_bench(const Options& o) {
       const std::string stage_name(solve_stage_name(stage));
       entry["stages_us"][stage_name] = {{"median", p.median}, {"p99", p.p99}};
       stage_text += fmt::format("  {} {:.1f}", stage_name, p.median);
+    }
+    // Each streaming stage's memory floor (bytes / read bandwidth) and its median over it.
+    if (solver_method_is_realtime(method)) {
+      const double blend_mb = summarise(blend_bytes).median * 1e-6;
+      std::vector<std::pair<SolveStage, double>> floors = {{SolveStage::kBlend, blend_mb * 1e6 / bandwidth * 1e6}};
+      if (method != SolverMethod::kLinear) floors.push_back({SolveStage::kBacksolve, factor_bytes / bandwidth * 1e6});
+      entry["blend_mb_per_frame"] = blend_mb;
+      std::string floor_text;
+      for (const auto& [stage, floor_us] : floors) {
+        const double median = summarise(stage_us[std::size_t(stage)]).median;
+        const std::string stage_name(solve_stage_name(stage));
+        entry["floor_us"][stage_name] = floor_us;
+        entry["over_floor"][stage_name] = median / floor_us;
+        floor_text += fmt::format("{} {:.1f} ({:.1f}x)  ", stage_name, floor_us, median / floor_us);
+      }
+      floor_lines.push_back(fmt::format("{:<10} {}blend reads {:.2f} MB a frame", name, floor_text, blend_mb));
     }
     if (reported_stage(method, SolveStage::kCollide, stage_us[std::size_t(SolveStage::kCollide)])) {
       const Percentiles pairs = summarise(collision_pairs), pins = summarise(collision_pins);
@@ -170,6 +241,9 @@ void run_bench(const Options& o) {
              "{:<10} {:>6} {:>11} {:>11} {:>11} {:>11} {:>9} {:>8}  {}\n",
              "solver", "frames", "median", "p99", "cpu median", "cpu p99", "fps", "allocs", "stage medians");
   for (const auto& line : lines) fmt::print("{}\n", line);
+  fmt::print("\nkernels {} (CPU: {}); one core reads {:.1f} GB/s, so each streaming stage's floor, in microseconds, "
+             "and its median over it:\n", kKernelPaths.name(model->kernels->path), kernels::cpu_features(), bandwidth * 1e-9);
+  for (const auto& line : floor_lines) fmt::print("{}\n", line);
 }
 
 }  // namespace
@@ -186,6 +260,14 @@ void add_bench_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--meshik-frames", o->meshik_frames, "At most this many frames for meshik (it is an offline baseline)")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--kernels", o->kernels,
+                  "Which compiled kernels solve: auto (the widest this CPU runs), avx512, avx2 or portable")
+      ->capture_default_str()
+      ->check(CLI::IsMember([] {
+        std::vector<std::string> names;
+        for (const auto& name : kKernelPaths.names()) names.emplace_back(name);
+        return names;
+      }()));
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
   cmd->callback([o, &exit_code] {
     run_bench(*o);

@@ -18,7 +18,7 @@ namespace facecap::bvh {
 
 using Vec3 = Eigen::Vector3d;
 
-inline constexpr int kMaxLeafSize = simd::kFloatX16Lanes;  // one AVX-512 register of float lanes
+inline constexpr int kMaxLeafSize = simd::kFloatX16Lanes;
 
 // Boxes are stored in float, rounded outwards, so that sixteen leaf slots fit one AVX-512
 // register; every decision about a pair is still made in double by the exact test.
@@ -181,6 +181,14 @@ class Tree {
 #if defined(__AVX512F__)
       const __mmask16 hit = _mm512_cmpeq_epi32_mask(_mm512_loadu_si512(skip_leaf_.data() + k), _mm512_set1_epi32(leaf_b));
       if (hit != 0) return skip_mask_[std::size_t(k + std::countr_zero(unsigned(hit)))];
+#elif defined(__SSE2__)
+      const __m128i wanted = _mm_set1_epi32(leaf_b);
+      uint32_t hit = 0;
+      for (int q = 0; q < 4; ++q) {
+        const __m128i four = _mm_loadu_si128(reinterpret_cast<const __m128i*>(skip_leaf_.data() + k + 4 * q));
+        hit |= uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(four, wanted)))) << (4 * q);
+      }
+      if (hit != 0) return skip_mask_[std::size_t(k + std::countr_zero(hit))];
 #else
       for (int32_t i = k; i < k + kSkipGroup; ++i)
         if (skip_leaf_[std::size_t(i)] == leaf_b) return skip_mask_[std::size_t(i)];

@@ -88,6 +88,7 @@ void TriangleCollider::configure(const Eigen::Matrix3Xi& triangles, const Eigen:
   if (!rest_positions.allFinite()) throw Error("collision rest positions contain NaN or infinity");
   auto state = std::make_unique<State>();
   state->config = config;
+  if (!state->config.kernels) state->config.kernels = &kernels::table(KernelPath::kAuto);
   state->vertex_count = n;
   state->candidate_triangles.reserve(candidate_triangles.size());
   for (int t : candidate_triangles) {
@@ -168,7 +169,7 @@ bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& position
   TrianglePairVertices batch[kCloserBatch];
   int batched = 0;
   auto test_batch = [&] {
-    const uint32_t found = triangles_closer_than(positions, std::span(batch, std::size_t(batched)), epsilon);
+    const uint32_t found = triangles_closer_than(*s.config.kernels, positions, std::span(batch, std::size_t(batched)), epsilon);
     for (uint32_t close = found; close != 0; close &= close - 1) {
       const auto [slot_a, slot_b] = batch_slots[std::countr_zero(close)];
       const int32_t ta = slot_triangles[std::size_t(slot_a)], tb = slot_triangles[std::size_t(slot_b)];

@@ -16,6 +16,7 @@
 #include <Eigen/Core>
 
 #include "solver/collide/triangle_pair.hpp"
+#include "solver/kernels/kernels.hpp"
 
 namespace facecap {
 
@@ -34,6 +35,8 @@ struct ColliderConfig {
   // on one sheet of skin, near by construction rather than in contact, and their boxes
   // overlap: leaving them out spares most exact tests (>= 0).
   int neighbour_edges = 0;
+  // The kernels of the batched closeness test; null: the widest this CPU runs.
+  const kernels::KernelTable* kernels = nullptr;
 };
 
 // One frame's collisions, sized once by TriangleCollider::make_result(); detect() only

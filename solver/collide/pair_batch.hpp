@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 
+#include "solver/kernels/kernels.hpp"
+
 namespace facecap {
 
 // The corners of two triangles a and b, for the batched test below.
@@ -22,16 +24,18 @@ struct TrianglePairVertices {
   int32_t b[3];
 };
 
-inline constexpr int kCloserBatch = 16;
+inline constexpr int kCloserBatch = kernels::kPairLanes;
 
 // triangles_closer_than for up to kCloserBatch pairs (more are ignored): bit k is set
 // when pair k is closer than epsilon. A float pass over all of them settles the clear
-// cases, with margins far above its rounding; the double test decides the rest.
-uint32_t triangles_closer_than(std::span<const TrianglePairCorners> pairs, double epsilon) noexcept;
+// cases, with margins far above its rounding (by the kernels of `table`); the double
+// test decides the rest.
+uint32_t triangles_closer_than(const kernels::KernelTable& table, std::span<const TrianglePairCorners> pairs,
+                               double epsilon) noexcept;
 // The same for pairs given by vertex indices into `positions` (3 x N), read where the
 // test needs them: the collider tests thousands of candidate pairs a frame, and copying
 // their corners first measured 25% slower.
-uint32_t triangles_closer_than(const Eigen::Ref<const Eigen::Matrix3Xd>& positions,
+uint32_t triangles_closer_than(const kernels::KernelTable& table, const Eigen::Ref<const Eigen::Matrix3Xd>& positions,
                                std::span<const TrianglePairVertices> pairs, double epsilon) noexcept;
 
 }  // namespace facecap

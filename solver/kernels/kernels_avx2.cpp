@@ -1,0 +1,4 @@
+// The avx2 path of the per-frame kernels (kernels.hpp); CMake compiles this file with
+// that path's flags (solver/CMakeLists.txt).
+#define FACECAP_KERNEL_NS avx2
+#include "solver/kernels/kernels_impl.inl"
