@@ -238,6 +238,11 @@ const std::vector<KeySpec>& schema_rows() {
        .reload = Reload::kRebuild,
        .description = "Vertices the collision stage pins per frame at most, which bounds its cost (64 pins take "
                       "about 0.15 ms on a 6,706-vertex face); a pose that needs more keeps some crossings."},
+      {FACECAP_KEY(solver.collision_skin_mm), .default_value = kSolverDefaults.collision_skin_mm, .unit = "mm", .min = 0, .max = 100,
+       .reload = Reload::kRebuild,
+       .description = "The collision stage finds the lip triangles whose boxes come near each other only when a lip "
+                      "vertex has moved farther than this since it last looked, and tests those pairs in between; "
+                      "the pairs found do not depend on it, only the stage's time. 0 looks every frame."},
       {FACECAP_KEY(solver.boundary_hold), .default_value = kSolverDefaults.boundary_hold, .unit = "times beta", .min = -1, .max = 100,
        .reload = Reload::kRebuild,
        .description = "How strongly the mesh's outer edge is held to the rig's linear blend of the weights (the eyes' "
@@ -246,6 +251,11 @@ const std::vector<KeySpec>& schema_rows() {
                       "face, whose jaw swings its edge)."},
       {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
+      {FACECAP_KEY(solver.negligible_displacement_mm), .default_value = kSolverDefaults.negligible_displacement_mm, .unit = "mm",
+       .min = 0, .max = 1, .reload = Reload::kRebuild,
+       .description = "A shape whose weight moves no vertex by more than this (weight times the shape's largest "
+                      "displacement) is left out of the blends for that frame, for speed; its weight is still sent. "
+                      "0 blends every shape above active_weight."},
       {FACECAP_CHOICE_KEY(solver.kernels, kKernelPaths), .default_value = std::string(kKernelPaths.name(kSolverDefaults.kernels)),
        .reload = Reload::kRebuild,
        .description = "Which compiled per-frame kernels solve: auto takes the widest instruction set this CPU runs "

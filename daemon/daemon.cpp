@@ -86,11 +86,13 @@ void label_unlabelled_source(config::DaemonConfig& c, const drivers::SourceInfo&
 }  // namespace
 
 std::string check_rig_and_calibration(const config::DaemonConfig& config) {
+  const kernels::KernelTable& kernels = kernels::table(config.solver.kernels);  // throws when the CPU lacks them
   const std::shared_ptr<const Rig> rig = load_configured_rig(config.rig);
   const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(config), *rig);
-  return fmt::format("rig {} ({} vertices, {} shapes), calibration {} ({} markers)", config.rig.path, rig->vertex_count(),
-                     rig->shape_count(), config.calibration.file.empty() ? "default marker set" : config.calibration.file,
-                     calibration.markers.size());
+  return fmt::format("rig {} ({} vertices, {} shapes), calibration {} ({} markers), {} kernels", config.rig.path,
+                     rig->vertex_count(), rig->shape_count(),
+                     config.calibration.file.empty() ? "default marker set" : config.calibration.file,
+                     calibration.markers.size(), kKernelPaths.name(kernels.path));
 }
 
 // Counters at one moment, for figures over a window.

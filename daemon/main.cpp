@@ -40,6 +40,9 @@ int main(int argc, char** argv) {
   app.add_option("-c,--config", config_file, "Configuration file (TOML); without one, every key has its default")
       ->check(CLI::ExistingFile);
   app.add_option("--set", overrides, "Override one key, e.g. --set loop.rate_hz=240 (repeatable)");
+  std::string kernels;
+  app.add_option("--kernels", kernels,
+                 "The solver's compiled kernels: auto, avx512, avx2 or portable (the same as --set solver.kernels=...)");
   app.add_option("--check-config", check_file, "Validate FILE and exit: 0 when valid, 1 with every problem listed");
   app.add_flag("--print-config", print_config, "Print the effective configuration and where each value came from");
   app.add_flag("--print-default-config", print_defaults, "Print the documented default configuration file");
@@ -49,6 +52,7 @@ int main(int argc, char** argv) {
   const std::string version = fmt::format("facecapd {}", version_string());
   app.set_version_flag("--version", version, "Print the version (and the git commit it was built from) and exit");
   CLI11_PARSE(app, argc, argv);
+  if (!kernels.empty()) overrides.push_back("solver.kernels=" + kernels);
 
   configure_log_output();
 

@@ -77,8 +77,10 @@ int32_t ShapeBlocks::find_entry(Eigen::Index shape, int block) const noexcept {
   return -1;
 }
 
-void active_weights(const Eigen::VectorXd& w, double active_weight, std::vector<float>& out) noexcept {
-  for (Eigen::Index i = 0; i < w.size(); ++i) out[std::size_t(i)] = w[i] > active_weight ? float(w[i]) : 0.0f;
+void active_weights(const Eigen::VectorXd& w, double active_weight, const Eigen::VectorXd& reach, double negligible,
+                    std::vector<float>& out) noexcept {
+  for (Eigen::Index i = 0; i < w.size(); ++i)
+    out[std::size_t(i)] = w[i] > active_weight && w[i] * reach[i] > negligible ? float(w[i]) : 0.0f;
 }
 
 }  // namespace facecap

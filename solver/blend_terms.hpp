@@ -95,8 +95,11 @@ float half_to_float(uint16_t h) noexcept;
 uint16_t half_at_least(float x) noexcept;
 
 // Per frame, each shape's weight as the blend reads it: 0 for weights at or below
-// active_weight, so that their entries are skipped. out: M. Real-time safe.
-void active_weights(const Eigen::VectorXd& w, double active_weight, std::vector<float>& out) noexcept;
+// active_weight and where the weight times the shape's reach (its largest vertex
+// displacement, M) stays within `negligible`, so that their entries are skipped. out: M.
+// Real-time safe.
+void active_weights(const Eigen::VectorXd& w, double active_weight, const Eigen::VectorXd& reach, double negligible,
+                    std::vector<float>& out) noexcept;
 
 // x0 + B w over the active weights (from active_weights) for the elements of `blocks`,
 // one block at a time, by the kernels of `table`: element e is rig vertex vertices[e], or

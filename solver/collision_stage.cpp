@@ -34,6 +34,7 @@ CollisionStage::CollisionStage(const SolverModel& model)
     config.ignore_rest_contacts = true;  // a neutral that already touches is the artist's intent
     config.neighbour_edges = 2;
     config.kernels = m.kernels;
+    config.skin = m.params.collision_skin_mm * rig_units_per_mm(m.rig);
     collider_.configure(m.rig.triangles, m.rig.neutral, m.collision.triangles, config);
     pin_stamp_.assign(std::size_t(N), 0);
     collisions_ = collider_.make_result();

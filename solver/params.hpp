@@ -62,7 +62,17 @@ struct SolverParams {
   // need more keep some crossings (ICT: one pose in 41 needs 100) and are flagged
   // kSolvedPinsBeyondCapacity.
   int collision_max_pins = 64;
+  // How far the collision stage's box-overlap pairs stay valid: the tree is traversed
+  // again only once a lip vertex has moved farther than this since the last traversal
+  // (solver/collide/collider.hpp); 0 traverses every frame. Results do not depend on it,
+  // only the time.
+  double collision_skin_mm = 0.15;
   double active_weight = 1e-4;      // weights below this are left out of T(w)
+  // A shape whose weight moves no vertex by more than this (its weight times its largest
+  // displacement) is left out of T(w) and x0 + B w for that frame; its weight is still
+  // solved and sent. Such shapes cost the blend's memory traffic and change nothing
+  // measurable (docs/solver.md, "Kernels").
+  double negligible_displacement_mm = 0.01;
   // The two settings below default to kByRig: the rig's own choice, by whether its shapes
   // swing parts about hinges as a real jaw does (Rig::hinged: the built-in face) or are an
   // artist's linear blend (ICT, ARKit and MetaHuman heads). build_solver_model decides.

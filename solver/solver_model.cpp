@@ -43,6 +43,10 @@ void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const S
     throw Error(fmt::format("solver: weight_refinements {} must be >= 0, or {} for the rig's choice", params.weight_refinements, kByRig));
   if (params.weight_qp_iteration_cap < 0)
     throw Error(fmt::format("solver: weight_qp_iteration_cap {} must be >= 0", params.weight_qp_iteration_cap));
+  if (!(params.collision_skin_mm >= 0) || !std::isfinite(params.collision_skin_mm))
+    throw Error(fmt::format("solver: collision_skin_mm {} must be a distance >= 0", params.collision_skin_mm));
+  if (!(params.negligible_displacement_mm >= 0) || !std::isfinite(params.negligible_displacement_mm))
+    throw Error(fmt::format("solver: negligible_displacement_mm {} must be a distance >= 0", params.negligible_displacement_mm));
   if (!(params.beta > 0) || !(params.alpha >= 0) || !(params.mu >= 0) || !(params.boundary_hold >= 0) ||
       !std::isfinite(params.boundary_hold))
     throw Error(fmt::format("solver: beta must be > 0 and alpha, mu, boundary_hold >= 0 (beta {}, alpha {}, mu {}, "
@@ -579,6 +583,8 @@ std::shared_ptr<const SolverModel> build_solver_model(const Rig& rig, std::vecto
     if (!s) throw Error(fmt::format("solver: shape '{}' to leave out of the weight fit is not a shape of rig '{}'", name, rig.name));
     model->weights.fitted[std::size_t(*s)] = 0;
   }
+  model->blend.shape_reach = max_shape_displacement(rig);
+  model->blend.negligible_reach = params.negligible_displacement_mm * rig_units_per_mm(rig);
   build_marker_rows(*model);
   build_vertex_terms(rig, {}, model->blend.vertex_blocks, model->blend.vertex_deltas);
 

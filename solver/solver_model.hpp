@@ -49,6 +49,8 @@ struct WeightsData {
 
 // Eq. 3-4, and the linear blend x0 + B w (N vertices, T triangles, M shapes).
 struct BlendData {
+  Eigen::VectorXd shape_reach;   // M: each shape's largest vertex displacement, rig units
+  double negligible_reach = 0;   // SolverParams::negligible_displacement_mm in rig units
   ShapeBlocks vertex_blocks;
   BlendTerms vertex_deltas;  // B's columns (x, y, z), for x0 + B w
   // Eq. 3-5: per triangle j, Q_j = area_j [grad phi_1, grad phi_2, grad phi_3] so the

@@ -80,7 +80,7 @@ class LinearSolver final : public FaceSolver {
 
  private:
   void blend(SolveResult& out) noexcept {
-    active_weights(out.weights, model_->params.active_weight, active_);
+    active_weights(out.weights, model_->params.active_weight, model_->blend.shape_reach, model_->blend.negligible_reach, active_);
     blend_.all(active_.data(), out.vertices);
   }
 
@@ -133,7 +133,7 @@ class PoissonSolver final : public FaceSolver {
   void solve_mesh(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out,
                   StageClock& clock) noexcept {
     const SolverModel& m = *model_;
-    active_weights(out.weights, m.params.active_weight, active_);
+    active_weights(out.weights, m.params.active_weight, m.blend.shape_reach, m.blend.negligible_reach, active_);
     blend_.right_hand_side(active_.data(), rhs_);  // the triangles' share of the right-hand side
     clock.lap(SolveStage::kBlend);
 

@@ -842,3 +842,40 @@ TEST_CASE("ICT FaceKit: intersecting lip pairs of the linear blend, and the lip 
   }
   WARN(table.str());
 }
+
+// The collider's kept pairs (ColliderConfig::skin): frame after frame, small steps reuse
+// the last traversal's pairs and large ones traverse again, and every frame finds exactly
+// the pairs a collider without a skin finds, which the brute-force oracle confirms.
+TEST_CASE("a collider with a skin finds the same pairs as one without, frame after frame") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const std::vector<int> lips = lip_region_triangles(rig);
+  const Eigen::Matrix3Xd closed = rig.shape_positions(*rig.shape_index("mouthClose"));
+  ColliderConfig config;
+  config.epsilon = 0.15;  // the closed lips come within 0.1 (the test above)
+  TriangleCollider plain, skinned;
+  plain.configure(rig.triangles, rig.neutral, lips, config);
+  config.skin = 0.02;
+  skinned.configure(rig.triangles, rig.neutral, lips, config);
+  CollisionResult plain_result = plain.make_result(), skinned_result = skinned.make_result();
+  int traversals = 0, reuses = 0, frames_with_pairs = 0;
+  for (int frame = 0; frame <= 120; ++frame) {
+    // Closing the mouth in steps of 1/60 (small: reused) with a jump every 40 frames.
+    const double t = std::min(1.0, frame / 60.0 + (frame % 40 == 39 ? 0.3 : 0.0));
+    const Eigen::Matrix3Xd positions = rig.neutral + t * (closed - rig.neutral);
+    REQUIRE(plain.detect(positions, plain_result));
+    REQUIRE(skinned.detect(positions, skinned_result));
+    INFO("frame " << frame);
+    REQUIRE(skinned_result.pairs_found == plain_result.pairs_found);
+    CHECK(std::equal(plain_result.valid_pairs().begin(), plain_result.valid_pairs().end(),
+                     skinned_result.valid_pairs().begin(), skinned_result.valid_pairs().end()));
+    CHECK(plain_result.traversed);
+    (skinned_result.traversed ? traversals : reuses) += 1;
+    if (plain_result.pairs_found > 0) {
+      ++frames_with_pairs;
+      CHECK(std::size_t(plain_result.pairs_found) == brute_force_pairs(rig.triangles, positions, lips, config.epsilon).size());
+    }
+  }
+  CHECK(frames_with_pairs > 20);
+  CHECK(reuses > 60);      // small steps keep the pairs
+  CHECK(traversals >= 4);  // the jumps and the first frame traverse
+}

@@ -18,6 +18,7 @@
 #include "pipeline/settings.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
+#include "solver/kernels/kernels.hpp"
 #include "tests/daemon_test_support.hpp"
 #include "tests/process_test_support.hpp"
 
@@ -244,6 +245,35 @@ TEST_CASE("facecapd --check-config loads the calibration against the rig and nam
     CHECK(WEXITSTATUS(status) == 1);
     CHECK_THAT(out, Contains((dir / bad).string()));
   }
+}
+
+// The solver's kernels (solver/kernels/kernels.hpp): facecapd --kernels forces a path and
+// says which it runs; a path this CPU cannot run is refused by --check-config and at start,
+// naming it.
+TEST_CASE("facecapd --kernels runs the path it names and refuses one the CPU lacks") {
+  const fs::path dir = test::scratch_dir("facecapd-kernels");
+  int status = 0;
+  std::string out = test::run_and_capture(
+      kFacecapd + " --kernels portable --set control.run_seconds=0.5 --set outputs.shm.name=" + unique_shm("kernels") +
+          " 2>&1", &status);
+  INFO(out);
+  CHECK(WEXITSTATUS(status) == 0);
+  CHECK_THAT(out, Contains("portable kernels on a CPU with"));
+  bool refused_one = false;
+  for (const KernelPath path : {KernelPath::kAvx512, KernelPath::kAvx2}) {
+    if (kernels::cpu_runs(path)) continue;
+    const std::string name(kKernelPaths.name(path));
+    test::write_text(dir / "facecapd.toml", fmt::format("version = 1\n[solver]\nkernels = \"{}\"\n", name));
+    out = test::run_and_capture(kFacecapd + " --check-config " + (dir / "facecapd.toml").string() + " 2>&1", &status);
+    CHECK(WEXITSTATUS(status) == 1);
+    CHECK_THAT(out, Contains("kernels \"" + name + "\": this CPU cannot run them"));
+    out = test::run_and_capture(kFacecapd + " --kernels " + name + " --set outputs.shm.name=" + unique_shm("kernels") + " 2>&1",
+                                &status);
+    CHECK(WEXITSTATUS(status) != 0);
+    CHECK_THAT(out, Contains("kernels \"" + name + "\": this CPU cannot run them"));
+    refused_one = true;
+  }
+  if (!refused_one) WARN("this CPU runs every kernel path: there is none to refuse");
 }
 
 TEST_CASE("under journald every log line starts with its sd-daemon priority, and errors are <2> or <3>") {

@@ -12,6 +12,7 @@
 
 #include "core/error.hpp"
 #include "core/frame.hpp"
+#include "solver/blend_terms.hpp"
 #include "solver/kernels/kernels.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
@@ -155,6 +156,7 @@ void run_bench(const Options& o) {
     std::vector<double> total_us(frames), cpu_us(frames);
     std::vector<std::vector<double>> stage_us(kSolveStageCount, std::vector<double>(frames));
     std::vector<double> collision_pairs(frames), collision_pins(frames), blend_bytes(frames);
+    std::vector<float> active(std::size_t(rig.shape_count()));
     uint64_t allocations = 0;
     std::size_t held = 0;
     solver->reset();
@@ -173,8 +175,9 @@ void run_bench(const Options& o) {
                                                : method == SolverMethod::kDt    ? gradient_bytes
                                                                                 : triangle_bytes;
       blend_bytes[f] = method == SolverMethod::kLinear ? 0.0 : operator_bytes;
+      active_weights(result.weights, model->params.active_weight, model->blend.shape_reach, model->blend.negligible_reach, active);
       for (Eigen::Index s = 0; s < rig.shape_count(); ++s)
-        if (result.weights[s] > model->params.active_weight) blend_bytes[f] += shape_bytes[std::size_t(s)];
+        if (active[std::size_t(s)] != 0.0f) blend_bytes[f] += shape_bytes[std::size_t(s)];
       collision_pairs[f] = result.collision_pairs;
       collision_pins[f] = result.collision_constraints;
     }

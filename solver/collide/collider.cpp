@@ -71,6 +71,12 @@ struct TriangleCollider::State {
   std::vector<uint32_t> vertex_stamp;        // N: frame stamp when a vertex was last collected
   uint32_t stamp = 0;
   int max_vertices = 0;
+  // The box-overlapping slot pairs of the last traversal, and where the candidate
+  // vertices were then (3 x candidate_vertices); valid while kept_valid.
+  std::vector<std::array<int32_t, 2>> kept_pairs;
+  int32_t kept_count = 0;
+  bool kept_valid = false;
+  Eigen::Matrix3Xd kept_positions;
 };
 
 TriangleCollider::TriangleCollider() = default;
@@ -108,6 +114,13 @@ void TriangleCollider::configure(const Eigen::Matrix3Xi& triangles, const Eigen:
   state->max_vertices = config.max_vertices < 0 ? all_vertices : std::min(config.max_vertices, all_vertices);
   state->vertex_stamp.assign(std::size_t(n), 0);
   if (config.neighbour_edges < 0) throw Error(fmt::format("collision neighbour_edges {} must be >= 0", config.neighbour_edges));
+  if (!(config.skin >= 0.0) || !std::isfinite(config.skin))
+    throw Error(fmt::format("collision skin {} must be a finite distance >= 0", config.skin));
+  if (config.max_kept_pairs < 0) throw Error(fmt::format("collision max_kept_pairs {} must be >= 0", config.max_kept_pairs));
+  if (config.skin > 0.0) {
+    state->kept_pairs.resize(std::size_t(config.max_kept_pairs));
+    state->kept_positions.resize(3, Eigen::Index(state->candidate_vertices.size()));
+  }
   state->tree.build(triangles, rest_positions, state->candidate_triangles);
   std::vector<TrianglePair> skipped;
   if (config.neighbour_edges > 0) {
@@ -143,7 +156,8 @@ CollisionResult TriangleCollider::make_result() const {
 }
 
 bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& positions, CollisionResult& out) noexcept {
-  out.pair_count = out.vertex_count = out.pairs_found = out.vertices_found = 0;
+  out.pair_count = out.vertex_count = out.pairs_found = out.vertices_found = out.pairs_tested = 0;
+  out.traversed = false;
   if (!state_ || positions.cols() != state_->vertex_count) return false;
   State& s = *state_;
   // A NaN would poison the boxes above it and hide other pairs: refuse the frame.
@@ -156,7 +170,15 @@ bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& position
     s.stamp = 1;
   }
   const double epsilon = s.config.epsilon;
-  s.tree.refit(positions, 0.5 * epsilon);  // boxes closer than epsilon overlap
+  // The kept pairs still hold every pair closer than epsilon while each candidate vertex
+  // is within the skin of where it was at the traversal (each box then still holds its
+  // triangle grown by epsilon / 2).
+  bool reuse = s.kept_valid;
+  if (reuse) {
+    const double skin_sq = s.config.skin * s.config.skin;
+    for (std::size_t i = 0; i < s.candidate_vertices.size() && reuse; ++i)
+      reuse = (positions.col(s.candidate_vertices[i]) - s.kept_positions.col(Eigen::Index(i))).squaredNorm() <= skin_sq;
+  }
   auto collect_vertex = [&](int32_t v) {
     if (s.vertex_stamp[std::size_t(v)] == s.stamp) return;
     s.vertex_stamp[std::size_t(v)] = s.stamp;
@@ -182,13 +204,33 @@ bool TriangleCollider::detect(const Eigen::Ref<const Eigen::Matrix3Xd>& position
     }
     batched = 0;
   };
-  const bool complete = s.tree.for_each_overlapping_pair([&](int32_t slot_a, int32_t slot_b) {
+  auto test_pair = [&](int32_t slot_a, int32_t slot_b) {
     batch_slots[batched] = {slot_a, slot_b};
     const auto& va = s.tree.slot_vertices(slot_a);
     const auto& vb = s.tree.slot_vertices(slot_b);
     batch[batched] = {{va[0], va[1], va[2]}, {vb[0], vb[1], vb[2]}};
+    ++out.pairs_tested;
     if (++batched == kCloserBatch) test_batch();
-  });
+  };
+  bool complete = true;
+  if (reuse) {
+    for (int32_t k = 0; k < s.kept_count; ++k) test_pair(s.kept_pairs[std::size_t(k)][0], s.kept_pairs[std::size_t(k)][1]);
+  } else {
+    const bool keep = s.config.skin > 0.0;
+    s.tree.refit(positions, 0.5 * epsilon + s.config.skin);  // boxes closer than epsilon overlap
+    s.kept_count = 0;
+    bool kept_all = keep;
+    complete = s.tree.for_each_overlapping_pair([&](int32_t slot_a, int32_t slot_b) {
+      if (kept_all && s.kept_count < int32_t(s.kept_pairs.size())) s.kept_pairs[std::size_t(s.kept_count++)] = {slot_a, slot_b};
+      else kept_all = false;
+      test_pair(slot_a, slot_b);
+    });
+    s.kept_valid = complete && kept_all;
+    if (s.kept_valid)
+      for (std::size_t i = 0; i < s.candidate_vertices.size(); ++i)
+        s.kept_positions.col(Eigen::Index(i)) = positions.col(s.candidate_vertices[i]);
+    out.traversed = true;
+  }
   test_batch();
   // std::sort is in place (introsort): no allocation.
   std::sort(out.pairs.begin(), out.pairs.begin() + out.pair_count);

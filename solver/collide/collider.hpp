@@ -4,7 +4,10 @@
 // region or the whole face, collide/lip_region.hpp), built once on the rest mesh and
 // refitted every frame with each triangle's box grown by epsilon / 2, finds the triangle
 // pairs closer than epsilon that share no vertex. The solver pins those pairs' vertices
-// to the linear blend.
+// to the linear blend. Frame to frame the tree is traversed only when needed: its boxes
+// are grown by a skin beyond epsilon / 2, and the pairs whose boxes overlapped are tested
+// again as they are until some candidate vertex has moved farther than the skin (a
+// Verlet list: no pair closer than epsilon can be missed).
 //
 // Lifecycle: TriangleCollider::configure() (allocates, not real-time) -> make_result()
 // (allocates the output once) -> detect() per frame (real-time safe).
@@ -37,6 +40,13 @@ struct ColliderConfig {
   int neighbour_edges = 0;
   // The kernels of the batched closeness test; null: the widest this CPU runs.
   const kernels::KernelTable* kernels = nullptr;
+  // Rig units the boxes are grown by beyond epsilon / 2, so that their overlapping pairs
+  // serve the following frames while no candidate vertex moves farther (>= 0; 0 traverses
+  // the tree every frame).
+  double skin = 0.0;
+  // Box-overlapping pairs kept for the following frames at most; a frame with more
+  // traverses the tree again next frame.
+  int max_kept_pairs = 1 << 15;
 };
 
 // One frame's collisions, sized once by TriangleCollider::make_result(); detect() only
@@ -48,6 +58,8 @@ struct CollisionResult {
   int32_t vertex_count = 0;
   int32_t pairs_found = 0;     // colliding pairs this frame, including those not stored
   int32_t vertices_found = 0;  // distinct vertices of all pairs found, including unstored
+  int32_t pairs_tested = 0;    // box-overlapping pairs given the closeness test
+  bool traversed = false;      // the tree was traversed (else last traversal's pairs were reused)
   // True when pairs or vertices exceeded capacity. The vertices always come from every
   // pair found, stored or not, so pinning stays complete while vertex capacity lasts.
   bool overflowed() const noexcept { return pairs_found > pair_count || vertices_found > vertex_count; }
