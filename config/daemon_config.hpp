@@ -42,6 +42,7 @@ struct CalibrationSection {
   bool stabilise_head = true;
   bool label_markers = false;
   double max_marker_speed_mm_s = 0.0;
+  double neutral_min_presence = 0.0;
 };
 
 // The solver's parameters as the solver takes them (their initialisers are the defaults),
@@ -152,6 +153,9 @@ struct QualitySection {
   double head_held_bad = 0.0;
   double residual_p95_degraded_mm = 0.0;
   double residual_p95_bad_mm = 0.0;
+  double noise_degraded_mm = 0.0;      // the median marker's noise, per coordinate
+  double noise_bad_mm = 0.0;
+  double hold_s = 0.0;                 // a new state shows once it held this long
 };
 
 struct LoggingSection {

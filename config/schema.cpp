@@ -198,6 +198,10 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(calibration.stabilise_head), .default_value = true, .reload = Reload::kRebuild,
        .description = "Fit the head's rigid motion to the head markers every frame and solve the face in head space "
                       "(needs 3 head markers present; otherwise the last pose is held)."},
+      {FACECAP_KEY(calibration.neutral_min_presence), .default_value = 0.8, .min = 0.05, .max = 1.0,
+       .description = "Calibration on the box (POST /calibrate): the neutral stretch is the stillest one where each "
+                      "marker is present in at least this fraction of the frames; a marker's neutral position is the "
+                      "robust mean of its samples there. A marker below it in every stretch is named in the refusal."},
       {FACECAP_KEY(calibration.max_marker_speed_mm_s), .default_value = 1000.0, .unit = "mm/s", .min = 0, .max = 1e6,
        .reload = Reload::kRebuild,
        .description = "A marker whose target (rig space, head stabilised) moved faster than this since it was last "
@@ -425,6 +429,18 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(quality.residual_p95_bad_mm), .default_value = 4.0, .unit = "mm", .min = 0, .max = 1000,
        .reload = Reload::kLive,
        .description = "The capture is bad when the residuals' 95th percentile is above this."},
+      {FACECAP_KEY(quality.noise_degraded_mm), .default_value = 0.5, .unit = "mm", .min = 0, .max = 1000,
+       .reload = Reload::kLive,
+       .description = "The capture is degraded when the median marker's noise over a window is above this, or names "
+                      "each marker noisier than this. A marker's noise is measured from the data: the second "
+                      "difference of its position over three consecutive frames, as a standard deviation per "
+                      "coordinate (the face's own motion adds a few hundredths of a millimetre at capture rates)."},
+      {FACECAP_KEY(quality.noise_bad_mm), .default_value = 2.0, .unit = "mm", .min = 0, .max = 1000,
+       .reload = Reload::kLive, .description = "The capture is bad when the median marker's noise is above this."},
+      {FACECAP_KEY(quality.hold_s), .default_value = 3.0, .unit = "s", .min = 0, .max = 600, .reload = Reload::kLive,
+       .description = "The quality shown changes only once every status window for this long agrees on the new "
+                      "state (hysteresis: a capture at the edge of a threshold does not flap); 0 follows every "
+                      "window."},
 
       {FACECAP_CHOICE_KEY(logging.level, kLogLevels), .default_value = std::string("info"),
        .reload = Reload::kLive, .description = "Least severe log level written."},

@@ -118,13 +118,14 @@ std::variant<Request, Reply> parse_command(std::string_view path, const std::str
     return Request{actor};
   }
   if (path == "/calibrate") {
-    auto parsed = Body::parse(body_text, {"seconds", "save"});
+    auto parsed = Body::parse(body_text, {"seconds", "save", "replace"});
     if (auto* reply = std::get_if<Reply>(&parsed)) return *reply;
     const Body& body = std::get<Body>(parsed);
     Calibrate calibrate;
     if (auto e = first_error({body.number("seconds", calibrate.seconds, kMinCalibrationSeconds, kMaxCalibrationSeconds),
-                              body.text("save", calibrate.save)}))
+                              body.text("save", calibrate.save), body.flag("replace", calibrate.replace)}))
       return *e;
+    if (calibrate.replace && calibrate.save.empty()) return error_reply(400, "\"replace\" needs \"save\": the profile to replace");
     if (!calibrate.save.empty() && (calibrate.save.find('/') != std::string::npos || calibrate.save.front() == '.'))
       return error_reply(400, fmt::format("\"{}\" is not a profile name (no '/', not starting with '.')", calibrate.save));
     return Request{calibrate};
@@ -138,7 +139,6 @@ std::variant<Request, Reply> parse_command(std::string_view path, const std::str
                               body.text("shot", start.shot), body.text("notes", start.notes, kMaxNotesBytes),
                               body.flag("markers_only", start.markers_only)}))
       return *e;
-    if (start.take.empty()) return error_reply(400, "\"take\" is required: the take's name");
     return Request{start};
   }
   auto parsed = Body::parse(body_text, {});  // /record/stop takes no fields

@@ -37,8 +37,9 @@ struct SelectActor {
 struct Calibrate {
   double seconds = 3.0;
   std::string save;
+  bool replace = false;  // an existing profile `save` is replaced, the old one kept as a backup
 };
-// A take and its slate.
+// A take and its slate; an empty take is the scene and shot's next take number.
 struct StartRecording {
   std::string take, actor, scene, shot, notes;
   bool markers_only = false;  // raw markers only: a new actor with no profile yet

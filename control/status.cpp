@@ -1,5 +1,7 @@
 #include "control/status.hpp"
 
+#include <cmath>
+
 #include <fmt/format.h>
 
 namespace facecap::control {
@@ -13,6 +15,15 @@ nlohmann::json status_json(const StatusReport& r) {
     outputs.push_back({{"name", o.name}, {"description", o.description}, {"offered", o.offered},
                        {"delivered", o.delivered}, {"dropped", o.dropped}, {"errors", o.errors}, {"failed", o.failed},
                        {"offer_us", {{"p50", o.offer_p50_us}, {"p99", o.offer_p99_us}, {"max", o.offer_max_us}}}});
+  // NaN (not measured) is null.
+  auto number = [](double x) { return std::isfinite(x) ? json(x) : json(nullptr); };
+  json markers = json::array(), missing = json::array();
+  for (const MarkerReport& m : r.markers) {
+    markers.push_back({{"label", m.label}, {"region", m.region}, {"present_fraction", m.present_fraction},
+                       {"noise_mm", number(m.noise_mm)}, {"residual_mm", number(m.residual_mm)}, {"missing", m.missing},
+                       {"rest", m.rest}});
+    if (m.missing) missing.push_back(m.label);
+  }
   const TakeReport& t = r.recording;
   return {
       {"version", r.version},
@@ -34,7 +45,7 @@ nlohmann::json status_json(const StatusReport& r) {
       {"actor", r.actor},
       {"calibration",
        {{"source", r.calibration}, {"markers", r.calibration_markers}, {"markers_in_source", r.calibration_markers_found},
-        {"head_stabilised", r.head_stabilised}}},
+        {"head_stabilised", r.head_stabilised}, {"unobserved_shapes", r.unobserved_shapes}}},
       {"loop", {{"mode", r.mode}, {"rate_hz", r.rate_hz}}},
       {"window",
        {{"seconds", r.window_s},
@@ -48,13 +59,15 @@ nlohmann::json status_json(const StatusReport& r) {
         {"face_held_fraction", r.face_held_fraction},
         {"residual_mm", {{"p50", r.residual_p50_mm}, {"p95", r.residual_p95_mm}, {"max", r.residual_max_mm}}},
         {"quality", r.quality},
-        {"quality_reasons", r.quality_reasons}}},
+        {"quality_reasons", r.quality_reasons},
+        {"markers", markers},
+        {"missing_markers", missing}}},
       {"totals",
        {{"ticks", r.ticks}, {"frames_solved", r.frames_solved}, {"idle_ticks", r.idle_ticks},
         {"missed_deadlines", r.missed_deadlines}, {"late_start_misses", r.late_start_misses},
         {"skipped_ticks", r.skipped_ticks}, {"pipeline_swaps", r.pipeline_swaps}, {"swap_misses", r.swap_misses},
         {"reloads_accepted", r.reloads_accepted}, {"reloads_rejected", r.reloads_rejected},
-        {"flagged_frames", flagged}}},
+        {"quality_changes", r.quality_changes}, {"flagged_frames", flagged}}},
       {"outputs", outputs},
       {"recording",
        {{"active", t.active}, {"file", t.file}, {"take", t.take}, {"actor", t.actor}, {"scene", t.scene},

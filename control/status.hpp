@@ -3,6 +3,7 @@
 // StatusReport from its counters a few times a second and publishes its renderings on a
 // StatusBoard; the I/O thread serves the latest text, so a request never reaches the solve
 // thread or waits for the supervisor. Field meanings: docs/control-api.md. Not real-time code.
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -19,6 +20,14 @@ struct OutputReport {
   uint64_t offered = 0, delivered = 0, dropped = 0, errors = 0;
   bool failed = false;
   double offer_p50_us = 0, offer_p99_us = 0, offer_max_us = 0;  // what its offer() costs the solve thread
+};
+
+// One face marker the calibration binds, over the last status window.
+struct MarkerReport {
+  std::string label, region;
+  double present_fraction = 0, noise_mm = 0, residual_mm = 0;  // NaN: not measured
+  bool missing = false;
+  std::array<double, 3> rest{};  // its bound point on the neutral mesh, rig space: where to draw it when missing
 };
 
 struct TakeReport {
@@ -52,6 +61,7 @@ struct StatusReport {
   std::string actor, calibration;  // the actor's name ("" when none); what the calibration came from
   uint64_t calibration_markers = 0, calibration_markers_found = 0;
   bool head_stabilised = false;
+  std::vector<std::string> unobserved_shapes;  // shapes the calibration's markers cannot observe (left at 0)
   // The loop.
   std::string mode;
   double rate_hz = 0;
@@ -63,9 +73,11 @@ struct StatusReport {
   double residual_p50_mm = 0, residual_p95_mm = 0, residual_max_mm = 0;
   std::string quality;               // good, degraded, bad
   std::vector<std::string> quality_reasons;
+  std::vector<MarkerReport> markers;  // the calibration's face markers
   // Since the start.
   uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed_deadlines = 0, late_start_misses = 0,
-           skipped_ticks = 0, pipeline_swaps = 0, swap_misses = 0, reloads_accepted = 0, reloads_rejected = 0;
+           skipped_ticks = 0, pipeline_swaps = 0, swap_misses = 0, reloads_accepted = 0, reloads_rejected = 0,
+           quality_changes = 0;
   std::vector<std::pair<std::string, uint64_t>> flagged_frames;  // per status bit
   std::vector<OutputReport> outputs;
   TakeReport recording;

@@ -38,6 +38,8 @@ class StreamSink final : public outputs::OutputSink {
   StreamSink(StreamSchema schema, std::size_t slots);
 
   std::string_view name() const noexcept override { return "stream"; }
+  // A browser too slow for the rate it asked for sees the newest frame.
+  bool drops_by_design() const noexcept override { return true; }
   std::string description() const override;
   // Clients may ask for vertices. RT-safe.
   bool wants_vertices() const noexcept override { return true; }

@@ -224,15 +224,17 @@ void Controller::calibrate(const control::Calibrate& request, ReplyFn reply) {
   if (const std::string conflict = conflict_for_calibration(); !conflict.empty()) return reply(error_reply(409, conflict));
   const fs::path profile = fs::path(parts_.config->calibration.profiles_directory) / (request.save + ".toml");
   std::error_code ec;
-  if (!request.save.empty() && fs::exists(profile, ec))
-    return reply(error_reply(409, fmt::format("profile \"{}\" exists ({}): choose another name", request.save, profile.string())));
+  if (!request.save.empty() && !request.replace && fs::exists(profile, ec))
+    return reply(error_reply(409, fmt::format("profile \"{}\" exists ({}): choose another name, or replace it (\"replace\": true, "
+                                              "facecap ctl calibrate --save NAME --force; the old one is kept as a backup)",
+                                              request.save, profile.string())));
   control::StartRecording capture;
   capture.take = "calibration-" + local_stamp();
   capture.actor = request.save;
   capture.markers_only = true;
   const formats::RecordingHeader header = take_header(capture);
-  capture_file_ = outputs::new_take_path(parts_.config->outputs.recording.directory, header);
   try {
+    capture_file_ = outputs::take_path(parts_.config->outputs.recording.directory, header);
     outputs::RecorderOptions options = outputs::take_options(*parts_.config, header, capture_file_);
     options.markers = true;
     options.solved = false;
@@ -270,11 +272,11 @@ void Controller::step_calibration() {
   // The reply is the build's; calibration_reply_ stays set only to answer 503 on a stop.
   build("calibrating",
         [rig = parts_.rig, info, settings = pipeline::solve_settings(*parts_.config, pipeline::SolveContext::kLive), file = summary->file,
-         request = calibration_request_, profile_dir] {
+         request = calibration_request_, profile_dir, min_presence = parts_.config->calibration.neutral_min_presence] {
           const int64_t begin = monotonic_now_ns();
           formats::MarkerTake take = formats::take_from_recording(formats::RecordingReader(file));
           if (take.rate_hz <= 0) take.rate_hz = info.nominal_rate_hz;
-          const pipeline::CaptureCalibration calibrated = pipeline::calibrate_capture(*rig, take, file.filename().string());
+          const pipeline::CaptureCalibration calibrated = pipeline::calibrate_capture(*rig, take, file.filename().string(), min_presence);
           Built built;
           built.calibration = calibrated.result.calibration;
           built.pipeline = std::make_unique<pipeline::SolvePipeline>(*rig, built.calibration,
@@ -294,12 +296,14 @@ void Controller::step_calibration() {
                                {"marker_residual_mm", markers},
                                {"stable_markers", built.calibration.stable_markers},
                                {"notes", built.calibration.notes},
-                               {"profile", nullptr}});
+                               {"warnings", calibrated.warnings},
+                               {"profile", nullptr},
+                               {"backup", nullptr}});
+          for (const auto& w : calibrated.warnings) spdlog::warn("calibration: {}", w);
           if (!request.save.empty()) {
-            fs::create_directories(profile_dir);
             const fs::path profile = profile_dir / (request.save + ".toml");
-            if (fs::exists(profile)) throw file_error(profile.string(), "exists: the calibration was not applied");
-            align::save_calibration_profile(profile, built.calibration);
+            if (const auto backup = pipeline::save_profile(profile, built.calibration, request.replace))
+              built.report["backup"] = backup->string();
             built.report["profile"] = profile.string();
             built.actor = request.save;
           }
@@ -339,8 +343,16 @@ void Controller::start_recording(const control::StartRecording& request, ReplyFn
   if (!parts_.takes) return reply(error_reply(409, "this facecapd has no recording output"));
   if (calibration_step_ != CalibrationStep::kIdle) return reply(error_reply(409, "a calibration is capturing; try again after it"));
   if (parts_.takes->recording()) return reply(error_reply(409, "a take is being recorded: stop it first"));
-  const formats::RecordingHeader header = take_header(request);
-  const fs::path file = outputs::new_take_path(parts_.config->outputs.recording.directory, header);
+  const fs::path directory = parts_.config->outputs.recording.directory;
+  control::StartRecording slate = request;
+  if (slate.take.empty()) slate.take = outputs::next_take_number(directory, slate.scene, slate.shot);
+  const formats::RecordingHeader header = take_header(slate);
+  fs::path file;
+  try {
+    file = outputs::take_path(directory, header);
+  } catch (const Error& e) {
+    return reply(error_reply(409, e.what()));
+  }
   try {
     outputs::RecorderOptions options = outputs::take_options(*parts_.config, header, file);
     if (request.markers_only) options.solved = false, options.markers = true;
@@ -348,10 +360,10 @@ void Controller::start_recording(const control::StartRecording& request, ReplyFn
   } catch (const Error& e) {
     return reply(error_reply(e.what() == std::string_view("the last take is still closing") ? 409 : 500, e.what()));
   }
-  slate_ = request;
+  slate_ = slate;
   slate_.actor = header.actor;
   take_started_ = std::chrono::steady_clock::now();
-  spdlog::info("recording take {} to {}{}", request.take, file.string(), request.markers_only ? " (markers only)" : "");
+  spdlog::info("recording take {} to {}{}", slate.take, file.string(), request.markers_only ? " (markers only)" : "");
   reply({200,
          {{"file", file.string()}, {"take", header.take}, {"actor", header.actor}, {"scene", header.scene},
           {"shot", header.shot}, {"markers_only", request.markers_only}, {"rate_hz", header.rate_hz}}});
@@ -400,6 +412,7 @@ void Controller::report(control::StatusReport& r) const {
                                                        [&](const auto& m) { return in_source(m.label); }));
   r.head_stabilised = parts_.config->calibration.stabilise_head &&
                       std::count_if(calibration_.stable_markers.begin(), calibration_.stable_markers.end(), in_source) >= 3;
+  r.unobserved_shapes = calibration_.unfitted_shapes();
   switch (calibration_step_) {
     case CalibrationStep::kCapturing: r.busy = "calibrating: capturing the neutral"; break;
     case CalibrationStep::kClosingCapture:

@@ -16,6 +16,8 @@
 #include "core/io.hpp"
 #include "core/log.hpp"
 #include "core/time.hpp"
+#include "core/units.hpp"
+#include "daemon/process_signals.hpp"
 #include "drivers/table.hpp"
 #include "outputs/recording/recorder.hpp"
 #include "outputs/table.hpp"
@@ -40,18 +42,6 @@ int64_t process_cpu_ns() {
 
 double ms(int64_t ns) { return double(ns) / kNsPerMs; }
 
-// Waits up to timeout for SIGTERM, SIGINT or SIGHUP (blocked by main()); 0 on timeout.
-int wait_for_signal(int64_t timeout_ns) {
-  sigset_t set;
-  sigemptyset(&set);
-  sigaddset(&set, SIGTERM);
-  sigaddset(&set, SIGINT);
-  sigaddset(&set, SIGHUP);
-  timespec timeout{time_t(timeout_ns / kNsPerSecond), long(timeout_ns % kNsPerSecond)};
-  const int signal = sigtimedwait(&set, nullptr, &timeout);
-  return signal > 0 ? signal : 0;
-}
-
 std::shared_ptr<const Rig> load_configured_rig(const config::RigSection& section) {
   if (section.path == "builtin") {
     // The process-wide instance: no copy of its 6,000 vertices and 45 shapes.
@@ -66,13 +56,16 @@ std::shared_ptr<const Rig> load_configured_rig(const config::RigSection& section
 }
 
 // The dashboard built with this facecapd when it runs from its build tree (the tests, a
-// developer), else the one installed with it.
+// developer), else the one installed with it (relative to facecapd's directory unless the
+// install directories were configured absolute).
 std::string default_dashboard_dir() {
   std::error_code ec;
   const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
   const std::string exe_path = ec ? std::string() : exe.string();
   if (exe_path.starts_with(FACECAP_BUILD_TREE "/")) return FACECAP_BUILT_DASHBOARD_DIR;
-  return FACECAP_INSTALLED_DASHBOARD_DIR;
+  const std::filesystem::path installed = FACECAP_INSTALLED_DASHBOARD_DIR;
+  if (installed.is_absolute() || ec) return installed.string();
+  return (exe.parent_path() / installed).lexically_normal().string();
 }
 
 // A source of unnamed points cannot be solved without the labeller: it is turned on rather
@@ -107,6 +100,7 @@ struct Daemon::Sample {
   LatencyHistogram::Snapshot latency;
   std::array<LatencyHistogram::Snapshot, kLatencyStageCount> latency_chain;
   LatencyHistogram::Snapshot residuals_nm;
+  MarkerCounts markers;
 };
 
 Daemon::Daemon(DaemonOptions options, config::LoadedConfig config)
@@ -127,6 +121,7 @@ void Daemon::start() {
   }
 
   rig_ = load_configured_rig(c.rig);
+  rig_hash_ = rig_->content_hash();  // hashes every vertex: once, not at every status
   pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(c), *rig_);
   source_ = drivers::make_source(c.source, {.rig = rig_, .markers = pipeline::rest_marker_set(calibration)});
   source_->open();
@@ -234,9 +229,21 @@ void Daemon::start_control() {
 
 uint16_t Daemon::control_port() const noexcept { return server_ ? server_->port() : 0; }
 
-// Commands the control API queued, handed to the controller on this thread.
+// Commands the control API queued, handed to the controller on this thread. One that
+// changes what /status says (actor, calibration, take) publishes the status before its
+// answer goes out, so a client that asks /status after the answer sees the change.
 void Daemon::serve_commands() {
-  while (std::optional<control::Command> command = commands_.pop()) controller_->execute(std::move(*command));
+  while (std::optional<control::Command> command = commands_.pop()) {
+    if (std::holds_alternative<control::SelectActor>(command->request) ||
+        std::holds_alternative<control::Calibrate>(command->request) ||
+        std::holds_alternative<control::StartRecording>(command->request) ||
+        std::holds_alternative<control::StopRecording>(command->request))
+      command->reply = [this, reply = std::move(command->reply)](control::Reply answer) {
+        if (server_) publish_status(monotonic_now_ns());
+        reply(std::move(answer));
+      };
+    controller_->execute(std::move(*command));
+  }
   controller_->poll();
   if (takes_ && !takes_->file().empty()) recording_file_ = takes_->file();
 }
@@ -253,13 +260,15 @@ Daemon::Sample Daemon::take_sample() const {
   s.late_start = counters.late_start_misses.load();
   s.skipped = counters.skipped_ticks.load();
   s.source = source_->health();
-  for (const auto& sink : sinks_) s.outputs_dropped += sink->health().dropped;
+  for (const auto& sink : sinks_)
+    if (!sink->drops_by_design()) s.outputs_dropped += sink->health().dropped;
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) s.flagged[bit] = counters.flagged_frames[bit].load();
   s.markers_used = counters.markers_used.load();
   s.markers_expected = counters.markers_expected.load();
   s.latency = loop_->latency();
   for (std::size_t i = 0; i < kLatencyStageCount; ++i) s.latency_chain[i] = loop_->latency(LatencyStage(i));
   s.residuals_nm = loop_->residuals_nm();
+  s.markers = loop_->marker_counts();
   return s;
 }
 
@@ -301,7 +310,33 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
   capture.residual_p50_mm = double(residuals.quantile_ns(0.50)) / 1e6;  // nanometres recorded
   capture.residual_p95_mm = double(residuals.quantile_ns(0.95)) / 1e6;
   capture.residual_max_mm = double(residuals.quantile_ns(1.0)) / 1e6;
+  if (controller_) capture.markers = marker_quality(marker_figures(to.markers.since(from.markers)));
+  // Relabelled every frame, a slot is not one marker: its jitter is not the marker's.
+  capture.noise_measured = !config_.values.calibration.label_markers;
   return f;
+}
+
+std::vector<MarkerQuality> Daemon::marker_quality(const std::vector<MarkerFigures>& slots) const {
+  const pipeline::Calibration& calibration = controller_->calibration();
+  const std::vector<std::string>& labels = source_->info().labels;
+  // The noise is measured in the source's units, the same as the calibration's take units
+  // once the mapper's unit conversion is applied.
+  const double mm_per_source_unit =
+      millimetres_per_unit(source_->info().units).value_or(calibration.take_mm_per_unit);
+  std::vector<MarkerQuality> out;
+  for (const align::MarkerCalibration& m : calibration.markers) {
+    MarkerQuality q;
+    q.label = m.label;
+    q.region = marker_region(m.label, m.binding, *rig_);
+    const auto slot = std::size_t(std::find(labels.begin(), labels.end(), m.label) - labels.begin());
+    if (slot < slots.size()) {  // else the source lacks it: never present
+      q.present_fraction = slots[slot].present_fraction;
+      q.noise_mm = slots[slot].noise * mm_per_source_unit;
+      q.residual_mm = slots[slot].residual_mm;
+    }
+    out.push_back(std::move(q));
+  }
+  return out;
 }
 
 Figures Daemon::figures_since_start() const { return figures_between(*start_sample_, take_sample()); }
@@ -489,13 +524,14 @@ void Daemon::supervise_once(int64_t now_ns) {
     // Before READY (a device waited for), systemd shows why the service is still starting.
     if (ready_sent_) notifier_.status(last_status_);
     else if (!sample.source.state.empty()) notifier_.status(fmt::format("starting: {}", sample.source.state.view()));
-    const QualityAssessment quality = this->quality(status_window_);
+    const CaptureQuality before = quality_hold_.shown().state;
+    const int hold_windows = int(std::ceil(c.quality.hold_s / c.control.status_interval_s - 1e-9));
+    const QualityAssessment& quality = quality_hold_.update(this->quality(status_window_), hold_windows);
     ++quality_windows_[std::size_t(quality.state)];
-    if (quality.state != status_quality_.state) {
+    if (quality.state != before) {
       if (quality.state == CaptureQuality::kGood) spdlog::info("capture quality good again");
       else spdlog::warn("capture quality {}", quality.describe());
     }
-    status_quality_ = quality;
     *status_sample_ = sample;
     next_status_ns_ = now_ns + int64_t(c.control.status_interval_s * kNsPerSecond);
   }
@@ -531,7 +567,7 @@ int Daemon::run() {
   int status = 0;
   while (reason.empty()) {
     if (options_.handle_signals) {
-      switch (wait_for_signal(kSuperviseSliceNs)) {
+      switch (wait_for_control_signal(kSuperviseSliceNs)) {
         case SIGTERM: reason = "SIGTERM"; break;
         case SIGINT: reason = "SIGINT"; break;
         case SIGHUP: reload(); break;
@@ -648,7 +684,7 @@ void Daemon::publish_status(int64_t now_ns) {
     r.source_units_problem = units_problem_;
   }
   r.rig_name = rig_->name;
-  r.rig_hash = rig_->content_hash();
+  r.rig_hash = rig_hash_;
   r.rig_vertices = rig_->vertex_count();
   r.rig_shapes = rig_->shape_count();
   r.solver = kSolverMethods.name(c.solver.method);
@@ -671,8 +707,15 @@ void Daemon::publish_status(int64_t now_ns) {
   r.residual_p50_mm = w.capture.residual_p50_mm;
   r.residual_p95_mm = w.capture.residual_p95_mm;
   r.residual_max_mm = w.capture.residual_max_mm;
-  r.quality = kCaptureQualities.name(status_quality_.state);
-  r.quality_reasons = status_quality_.reasons;
+  r.quality = kCaptureQualities.name(quality_hold_.shown().state);
+  r.quality_reasons = quality_hold_.shown().reasons;
+  r.quality_changes = quality_hold_.changes();
+  const pipeline::Calibration& calibration = controller_->calibration();  // the markers' rest places
+  for (std::size_t m = 0; m < w.capture.markers.size() && m < calibration.markers.size(); ++m) {
+    const MarkerQuality& q = w.capture.markers[m];
+    const Eigen::Vector3d& rest = calibration.markers[m].bound_point;
+    r.markers.push_back({q.label, q.region, q.present_fraction, q.noise_mm, q.residual_mm, q.missing(), {rest.x(), rest.y(), rest.z()}});
+  }
   const LoopCounters& counters = loop_->counters();
   r.ticks = now.ticks;
   r.frames_solved = now.frames_solved;
@@ -747,6 +790,10 @@ void Daemon::write_stats_file(const Figures& f) const {
   nlohmann::json windows = nlohmann::json::object();
   for (const auto& entry : kCaptureQualities.entries()) windows[std::string(entry.name)] = quality_windows_[std::size_t(entry.value)];
   j["quality_windows"] = windows;
+  // The state shown (after the hold) at the end, and how often it changed.
+  j["quality_shown"] = {{"state", kCaptureQualities.name(quality_hold_.shown().state)},
+                        {"reasons", quality_hold_.shown().reasons},
+                        {"changes", quality_hold_.changes()}};
   nlohmann::json outputs = nlohmann::json::object();
   for (std::size_t i = 0; i < loop_->sinks().size(); ++i) {
     const outputs::OutputSink& sink = *loop_->sinks()[i];

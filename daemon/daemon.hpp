@@ -63,7 +63,7 @@ struct Figures {
   uint64_t source_overwritten = 0;
   uint64_t source_late = 0;
   uint64_t source_errors = 0;
-  uint64_t outputs_dropped = 0;  // over every output
+  uint64_t outputs_dropped = 0;  // over every output whose drops are losses (not drops_by_design)
   std::array<uint64_t, kSolvedFlagCount> flagged_frames{};  // solved frames with each SolvedFlags bit
   CaptureFigures capture;        // markers used, held frames, fit residuals
 };
@@ -111,6 +111,9 @@ class Daemon {
   Figures figures_since_start() const;
   // The capture quality of a window's figures against the [quality] thresholds.
   QualityAssessment quality(const Figures& window) const;
+  // Per face marker of the current calibration, its slot's window figures (in mm), named
+  // and given its region.
+  std::vector<MarkerQuality> marker_quality(const std::vector<MarkerFigures>& slots) const;
   std::string status_line(const Figures& window) const;
 
  private:
@@ -142,6 +145,7 @@ class Daemon {
   config::LoadedConfig config_;
   SystemdNotifier notifier_;
   std::shared_ptr<const Rig> rig_;
+  uint64_t rig_hash_ = 0;  // rig_->content_hash()
   std::unique_ptr<drivers::MarkerSource> source_;
   std::unique_ptr<IoThread> io_;  // before the sinks and the server: they schedule work on it
   std::vector<std::unique_ptr<outputs::OutputSink>> sinks_;
@@ -156,7 +160,7 @@ class Daemon {
   std::unique_ptr<control::ControlServer> server_;
   int64_t next_publish_ns_ = 0;
   Figures status_window_;  // the last STATUS window's figures
-  QualityAssessment status_quality_;
+  QualityHold quality_hold_;  // the state shown, from the status windows' assessments
   std::array<uint64_t, 3> quality_windows_{};  // status windows in each quality state
   std::optional<pipeline::LiveUnitsCheck> units_check_;
   uint64_t units_check_swaps_ = 0;  // the loop's pipeline swaps when units_check_ began

@@ -1,5 +1,4 @@
 // facecapd: the real-time facial capture daemon. See docs/daemon.md.
-#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 
@@ -13,26 +12,17 @@
 #include "core/log.hpp"
 #include "core/version.hpp"
 #include "daemon/daemon.hpp"
+#include "daemon/process_signals.hpp"
 #include "drivers/table.hpp"
 
-namespace {
-
-// Blocked in every thread (threads inherit the mask) and awaited by the supervisor with
-// sigtimedwait: no asynchronous handlers anywhere.
-void block_control_signals() {
-  sigset_t set;
-  sigemptyset(&set);
-  sigaddset(&set, SIGTERM);
-  sigaddset(&set, SIGINT);
-  sigaddset(&set, SIGHUP);
-  pthread_sigmask(SIG_BLOCK, &set, nullptr);
-}
-
-}  // namespace
+// Runs before every shared library's constructors: see prepare_process_signals. Only an
+// executable can have a .preinit_array, so this entry lives here.
+static void prepare_process(int, char**, char**) { facecap::daemon::prepare_process_signals(); }
+__attribute__((section(".preinit_array"), used)) static void (*const kPrepareProcess)(int, char**, char**) = prepare_process;
 
 int main(int argc, char** argv) {
-  block_control_signals();
   using namespace facecap;
+  const std::string thread_pools = daemon::pin_library_thread_pools();
   CLI::App app{"facecapd: solves facial markers onto a blendshape rig in real time and publishes the face"};
   std::string config_file, check_file;
   std::vector<std::string> overrides;
@@ -109,6 +99,7 @@ int main(int argc, char** argv) {
     return 1;
   }
 
+  if (!thread_pools.empty()) spdlog::info("library thread pools: {}", thread_pools);
   try {
     daemon::Daemon d({.config_file = config_file, .overrides = overrides, .handle_signals = true, .version = version},
                      std::move(loaded));

@@ -78,7 +78,8 @@ SolveLoop::SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::un
       period_ns_(int64_t(std::llround(double(kNsPerSecond) / options_.rate_hz))),
       marker_frame_(make_marker_frame(source.info().labels)),
       solved_frame_(pipeline_->make_solved_frame(any_wants_vertices(sinks_))),
-      sampled_markers_(kSampledMarkerSlots, marker_frame_) {
+      sampled_markers_(kSampledMarkerSlots, marker_frame_),
+      marker_telemetry_(source.info().labels.size()) {
   const double source_rate = source.info().nominal_rate_hz;
   phase_lock_ = !options_.lockstep && options_.phase_margin_ns > 0 && source.info().own_clock && source_rate > 0.0 &&
                 std::abs(source_rate - options_.rate_hz) <= kPhaseLockRateTolerance * options_.rate_hz;
@@ -135,6 +136,7 @@ void SolveLoop::record_telemetry() noexcept {
   add(counters_.markers_expected, solved_frame_.markers_expected);
   for (const float residual_mm : solved_frame_.marker_residual_mm)
     if (!std::isnan(residual_mm)) residual_nm_.record(int64_t(std::llround(double(residual_mm) * 1e6)));
+  marker_telemetry_.record(marker_frame_, solved_frame_);
 }
 
 bool SolveLoop::tick(int64_t now_ns) noexcept {

@@ -17,6 +17,7 @@
 #include "core/rt/handoff.hpp"
 #include "core/rt/spsc_slots.hpp"
 #include "core/latency_histogram.hpp"
+#include "daemon/marker_telemetry.hpp"
 #include "drivers/api/marker_source.hpp"
 #include "outputs/api/sink.hpp"
 #include "pipeline/solve_pipeline.hpp"
@@ -112,6 +113,8 @@ class SolveLoop {
   // Every fit residual of every solved frame, in nanometres: the histogram's buckets,
   // 1 us wide below 1 ms, ..., are 1 um wide below 1 mm, 10 um below 10 mm, ...
   LatencyHistogram::Snapshot residuals_nm() const noexcept { return residual_nm_.snapshot(); }
+  // Per source marker slot: presence, jitter and fit residual so far. Any thread.
+  MarkerCounts marker_counts() const { return marker_telemetry_.snapshot(); }
   // The outputs in offer order, and what each costs the solve thread.
   std::span<outputs::OutputSink* const> sinks() const noexcept { return sinks_; }
   const SinkTiming& sink_timing(std::size_t i) const noexcept { return sink_timing_[i]; }
@@ -170,6 +173,7 @@ class SolveLoop {
   LatencyHistogram latency_;  // received -> offered to every output
   std::array<LatencyHistogram, kLatencyStageCount> latency_chain_;
   LatencyHistogram residual_nm_;
+  MarkerTelemetry marker_telemetry_;
   RealtimeReport realtime_report_;
   std::atomic<bool> realtime_ready_{false};
   std::atomic<bool> stop_requested_{false};

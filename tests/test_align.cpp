@@ -490,9 +490,70 @@ TEST_CASE("Auto-neutral picks the rest stretch and refuses a take that never res
     busy.push_back(frame);
   }
   CHECK_THROWS_WITH(find_neutral_frame(busy, stable, search), Catch::Contains("no neutral-looking stretch"));
-  // No frame with every marker.
-  for (std::size_t f = 0; f < busy.size(); ++f) busy[f].markers[f % layout.size()].flags = kMarkerMissing;
-  CHECK_THROWS_WITH(find_neutral_frame(busy, stable, search), Catch::Contains("no frame has every marker"));
+  // No frame with every stable marker.
+  for (std::size_t f = 0; f < busy.size(); ++f) busy[f].markers[std::size_t(stable[f % stable.size()])].flags = kMarkerMissing;
+  CHECK_THROWS_WITH(find_neutral_frame(busy, stable, search), Catch::Contains("no frame has every stable marker"));
+}
+
+TEST_CASE("Auto-neutral tolerates dropouts: each marker present in most of the stretch, and names a marker too often missing") {
+  SyntheticTakeOptions o;
+  o.rest_frames = 0;
+  o.motion_frames = 300;
+  auto take = make_synthetic_take(o);
+  SyntheticTakeOptions rest = o;
+  rest.rest_frames = 60;
+  rest.motion_frames = 0;
+  const auto still = make_synthetic_take(rest);
+  for (int f = 0; f < 60; ++f)
+    for (std::size_t k = 0; k < take.labels.size(); ++k)
+      take.frames[std::size_t(120 + f)].markers[k].position = still.frames[std::size_t(f)].markers[k].position;
+  const auto stable = find_stable_markers(take.frames, 6);
+  NeutralSearchOptions search;
+  search.rate_hz = 60.0;
+  search.take_mm_per_unit = 1.0;
+  const NeutralFrame clean = find_neutral_frame(take.frames, stable, search);
+
+  // Every marker drops 0.5% of the frames at random and two (not stable ones) 5%: not one
+  // 15-frame stretch has every marker in every frame.
+  std::vector<int> dropping;
+  for (int k = 0; dropping.size() < 2; ++k)
+    if (std::find(stable.begin(), stable.end(), k) == stable.end()) dropping.push_back(k);
+  std::mt19937 random(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto dropped = take;
+  std::size_t complete_windows = 0;
+  for (auto& f : dropped.frames)
+    for (std::size_t k = 0; k < f.markers.size(); ++k)
+      if (u(random) < (std::find(dropping.begin(), dropping.end(), int(k)) != dropping.end() ? 0.05 : 0.005))
+        f.markers[k].flags = kMarkerMissing;
+  for (std::size_t start = 0; start + 15 <= dropped.frames.size(); ++start) {
+    bool complete = true;
+    for (std::size_t f = start; f < start + 15; ++f) complete &= dropped.frames[f].present_count() == dropped.labels.size();
+    complete_windows += complete;
+  }
+  CHECK(complete_windows == 0);
+  const NeutralFrame n = find_neutral_frame(dropped.frames, stable, search);
+  INFO("clean: frames " << clean.window_start << ".." << clean.window_start + clean.window_frames << "; with dropouts "
+                        << n.window_start << ".." << n.window_start + n.window_frames);
+  CHECK(n.window_start >= 120);  // the rest stretch, as without dropouts
+  CHECK(n.window_start + n.window_frames <= 180);
+  CHECK(n.distance_mm < 1.5);
+  for (int s : stable) CHECK(dropped.frames[n.frame_index].markers[std::size_t(s)].present());  // the average's anchor
+  std::vector<uint8_t> present;
+  const Eigen::Matrix3Xd mean = average_positions(dropped.frames, n.window_start, n.window_frames, n.frame_index, stable,
+                                                  search.min_presence, present);
+  CHECK(std::count(present.begin(), present.end(), 1) == std::ptrdiff_t(dropped.labels.size()));
+  CHECK(mean.allFinite());
+
+  // One marker missing in 2 of every 5 frames: present in most of the take (so not left
+  // out as a ghost slot), but in at most 60% of any stretch: named.
+  for (std::size_t f = 0; f < dropped.frames.size(); ++f)
+    if (f % 5 < 2) dropped.frames[f].markers[std::size_t(dropping[0])].flags = kMarkerMissing;
+  CHECK_THROWS_WITH(find_neutral_frame(dropped.frames, stable, search),
+                    Catch::Contains("has each marker present in 80% of its frames; too often missing: " +
+                                    dropped.labels[std::size_t(dropping[0])] + " (at best 60%)"));
+  search.min_presence = 0.4;  // configurable: then it is accepted
+  CHECK_NOTHROW(find_neutral_frame(dropped.frames, stable, search));
 }
 
 TEST_CASE("Calibration profile round-trips and is read strictly with line numbers") {

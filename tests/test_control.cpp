@@ -150,7 +150,8 @@ TEST_CASE("the API answers malformed requests with the right 4xx and a JSON erro
   CHECK(api.refusal(request(http::verb::post, "/actor", R"({"name": "a", "file": "b"})")).first == 400);
   CHECK(api.refusal(request(http::verb::post, "/calibrate", R"({"seconds": 100})")) ==
         std::pair{400, std::string("\"seconds\" must be a number from 0.5 to 30")});
-  CHECK(api.refusal(request(http::verb::post, "/record/start", R"({"scene": "s"})")).second == "\"take\" is required: the take's name");
+  CHECK(api.refusal(request(http::verb::post, "/calibrate", R"({"replace": true})")).second ==
+        "\"replace\" needs \"save\": the profile to replace");
   CHECK(api.refusal(request(http::verb::post, "/record/start", R"({"take": 7})")).second == "\"take\" must be a string");
   CHECK(api.refusal(request(http::verb::post, "/record/stop", R"({"now": true})")).first == 400);
   CHECK(api.refusal(request(http::verb::get, "/stream")).first == 400);  // not an upgrade
@@ -307,10 +308,11 @@ TEST_CASE("metrics text passes promtool check metrics") {
 TEST_CASE("control API end to end on the sim: status, metrics, takes, calibration, actor swap, stream, tokens") {
   const fs::path dir = test::scratch_dir("control-e2e");
   test::write_text(dir / "token", "s3cret\n");
-  // A 60 Hz source under a 120 Hz loop, no dropouts so that the neutral capture is whole.
+  // A 60 Hz source under a 120 Hz loop, with the sim's default dropouts (0.5% per marker:
+  // hardly a 0.25 s stretch has every marker in every frame).
   RunningDaemon d({"outputs.shm.name=" + unique_shm("control"), "control.http.enabled=true", "control.http.port=0",
                    "control.http.token_file=" + (dir / "token").string(), "control.status_interval_s=0.25",
-                   "source.sim.rate_hz=60", "source.sim.dropout_probability=0",
+                   "source.sim.rate_hz=60",
                    "outputs.recording.directory=" + (dir / "takes").string(),
                    "calibration.profiles_directory=" + (dir / "profiles").string()});
   const uint16_t port = d->control_port();
@@ -379,6 +381,27 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
     CHECK(double(b.source_time_ns - a.source_time_ns) / double(b.frame_no - a.frame_no) == Approx(1e9 / 60).epsilon(0.001));
   }
 
+  // The same slate again is refused, naming the file and the next number; without a take
+  // the scene and shot's next number is used; no take shares a file or a number.
+  CHECK_THAT(post(client, "/record/start", {{"take", "t/1"}, {"scene", "s 1"}, {"shot", "2"}}, 409)["error"].get<std::string>(),
+             Contains("is already recorded in " + (dir / "takes" / "s-1_2_t-1.fcrec").string()));
+  for (const std::string expected : {"1", "2"}) {
+    const json numbered = post(client, "/record/start", {{"scene", "s 1"}, {"shot", "2"}});
+    CHECK(numbered["take"] == expected);
+    CHECK(numbered["file"] == (dir / "takes" / ("s-1_2_" + expected + ".fcrec")).string());
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    // As the README writes it: ctl's own options after the subcommand.
+    const test::Run stop = test::run_facecap(dir, {"ctl", "--port", std::to_string(port), "--token-file", (dir / "token").string(),
+                                                  "record", "stop", "--json"});
+    INFO(stop.out);
+    CHECK(stop.exit_code == 0);
+    CHECK(json::parse(stop.out)["take"] == expected);
+  }
+  CHECK_THAT(post(client, "/record/start", {{"take", "2"}, {"scene", "s 1"}, {"shot", "2"}}, 409)["error"].get<std::string>(),
+             Contains("give another take, or none for the next number (3)"));
+  CHECK(fs::exists(dir / "takes" / "s-1_2_t-1.fcrec"));
+  CHECK_FALSE(fs::exists(dir / "takes" / "s-1_2_t-1-2.fcrec"));
+
   // A new actor with no profile: markers only.
   post(client, "/record/start", {{"take", "newface"}, {"actor", "bob"}, {"markers_only", true}});
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
@@ -399,10 +422,23 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   CHECK(calibrated["residual_mm"]["median"].get<double>() < 1.0);
   // The sim's 48 face markers and 2 of its 4 headband markers are bound: the two above the
   // brow (58-62 mm off the face) are found as head markers, the two at temple height sit
-  // within 10 mm of the built-in face, where a skin marker could be.
+  // within 10 mm of the built-in face, where a skin marker could be: their residuals stand
+  // out, and the answer warns that they move with the head.
   CHECK(calibrated["markers_in_source"] == 50);
+  INFO(calibrated.dump(1));
+  const std::vector<std::string> warnings = calibrated["warnings"];
+  CHECK(warnings.size() == 2);
+  for (const auto& w : warnings) CHECK_THAT(w, Contains("marker 'H") && Contains("likely on a head rig"));
   CHECK(fs::exists(dir / "profiles" / "alice.toml"));
-  CHECK(post(client, "/calibrate", {{"seconds", 1.0}, {"save", "alice"}}, 409)["error"].get<std::string>().starts_with("profile \"alice\" exists"));
+  CHECK(calibrated["backup"].is_null());
+  CHECK_THAT(post(client, "/calibrate", {{"seconds", 1.0}, {"save", "alice"}}, 409)["error"].get<std::string>(),
+             Catch::StartsWith("profile \"alice\" exists") && Contains("\"replace\": true"));
+  // Refreshed: the new profile in place, the old one kept beside it.
+  const std::string first_profile = test::slurp(dir / "profiles" / "alice.toml");
+  const json replaced = post(client, "/calibrate", {{"seconds", 1.0}, {"save", "alice"}, {"replace", true}});
+  CHECK(replaced["backup"] == (dir / "profiles" / "alice.toml.bak").string());
+  CHECK(test::slurp(dir / "profiles" / "alice.toml.bak") == first_profile);
+  CHECK(test::slurp(dir / "profiles" / "alice.toml") != first_profile);
   const json actors = get_json(client, "/actors");
   REQUIRE(actors["actors"].size() == 1);
   CHECK(actors["actors"][0]["name"] == "alice");
@@ -416,7 +452,7 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   CHECK(status["actor"] == "alice");
   CHECK(status["window"]["markers_expected"] == 50.0);
   CHECK(status["window"]["quality"] == "good");
-  CHECK(status["totals"]["pipeline_swaps"] == 2);
+  CHECK(status["totals"]["pipeline_swaps"] == 3);  // calibrated, replaced, selected
   INFO("missed deadlines over the run: " << status["totals"]["missed_deadlines"]);
   CHECK(status["totals"]["swap_misses"] == 0);  // no swap cost a deadline
 

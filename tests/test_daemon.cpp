@@ -6,6 +6,7 @@
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include "client/facecap_client.hpp"
 #include "config/config_file.hpp"
@@ -15,11 +16,14 @@
 #include "daemon/daemon.hpp"
 #include "core/latency_histogram.hpp"
 #include "pipeline/calibration.hpp"
+#include "pipeline/capture_calibration.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
 #include "drivers/replay/replay_source.hpp"
 #include "drivers/sim/sim_source.hpp"
 #include "formats/recording.hpp"
+#include "formats/take.hpp"
+#include "solver/align/profile.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/daemon_test_support.hpp"
 #include "tests/test_support.hpp"
@@ -272,4 +276,74 @@ TEST_CASE("the fixed-rate loop stays on its deadline grid and counts what it ski
   // The solves take longer than the period: these misses ran long, they did not start late.
   CHECK(double(k.max_tick_ns.load()) > kNsPerSecond / kRate);
   CHECK(k.late_start_misses.load() < k.missed_deadlines.load() / 2);
+}
+
+TEST_CASE("on-box calibration of the default sim (0.5 percent dropouts) succeeds with residuals within 10 percent of the sim "
+          "without dropouts") {
+  // The capture the control API's POST /calibrate records: 3 s of the sim at 120 Hz.
+  const fs::path dir = test::scratch_dir("calibrate-dropouts");
+  const config::DaemonConfig defaults = config::default_config();
+  REQUIRE(defaults.source.sim.dropout_probability == 0.005);
+  const auto rig = builtin_rig();
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(defaults), *rig);
+  auto calibrated = [&](double dropout, const std::string& name) {
+    drivers::SimOptions sim = defaults.source.sim;
+    sim.dropout_probability = dropout;
+    test::write_sim_take(dir / name, sim, rig, pipeline::rest_marker_set(calibration), 360);
+    const formats::MarkerTake take = formats::take_from_recording(formats::RecordingReader(dir / name));
+    std::size_t complete = 0;
+    for (const auto& f : take.frames) complete += f.present_count() == take.labels.size();
+    INFO(name << ": " << complete << " of " << take.frames.size() << " frames have every marker");
+    return pipeline::calibrate_capture(*rig, take, name, defaults.calibration.neutral_min_presence);
+  };
+  const pipeline::CaptureCalibration clean = calibrated(0.0, "clean.fcrec");
+  const pipeline::CaptureCalibration dropped = calibrated(defaults.source.sim.dropout_probability, "dropouts.fcrec");
+  WARN(fmt::format("sim calibration residual median {:.3f} max {:.3f} mm; with 0.5% dropouts median {:.3f} max {:.3f} mm",
+                   clean.residual_median_mm, clean.residual_max_mm, dropped.residual_median_mm, dropped.residual_max_mm));
+  CHECK(dropped.result.calibration.markers.size() == clean.result.calibration.markers.size());
+  // The median (about 0.1 mm) is the sim's noise averaged over the stretch, which differs
+  // between the two runs: the dropouts must not make it worse by more than 10%.
+  CHECK(dropped.residual_median_mm <= 1.1 * clean.residual_median_mm);
+  CHECK(dropped.residual_max_mm == Approx(clean.residual_max_mm).epsilon(0.1));
+}
+
+TEST_CASE("a real take with its mouth markers gone reads bad, naming them; the same take whole reads good", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
+  const fs::path dir = test::scratch_dir("quality-mouth");
+  const Rig rig = load_rig(ict.string());
+  formats::MarkerTake take = formats::read_take(animface / "JawMoCap.trc");
+  take.frames.resize(600);  // 10 s at 60 Hz
+  const pipeline::CaptureCalibration calibrated = pipeline::calibrate_capture(rig, take, "JawMoCap.trc", 0.8);
+  align::save_calibration_profile(dir / "actor.toml", calibrated.result.calibration);
+  std::vector<std::string> mouth;
+  for (const auto& label : take.labels)
+    if (label.starts_with("Mouth_")) mouth.push_back(label);
+  REQUIRE(mouth.size() == 8);
+  formats::MarkerTake without_mouth = take;
+  for (auto& f : without_mouth.frames)
+    for (std::size_t k = 0; k < take.labels.size(); ++k)
+      if (take.labels[k].starts_with("Mouth_")) f.markers[k].flags |= kMarkerMissing;
+  take.format = without_mouth.format = formats::TakeFormat::kRecording;
+  formats::write_take(dir / "whole.fcrec", take);
+  formats::write_take(dir / "without-mouth.fcrec", without_mouth);
+
+  for (const std::string name : {"whole", "without-mouth"}) {
+    Daemon d({.handle_signals = false},
+             loaded({"rig.path=" + ict.string(), "calibration.file=" + (dir / "actor.toml").string(), "source.driver=replay",
+                     "source.replay.file=" + (dir / (name + ".fcrec")).string(), "loop.mode=lockstep", "loop.realtime=false",
+                     "outputs.shm.name=" + unique_shm("mouth-" + name), "logging.stats_file=" + (dir / (name + ".json")).string()}));
+    d.start();
+    REQUIRE(d.run() == 0);
+    const auto stats = nlohmann::json::parse(test::slurp(dir / (name + ".json")));
+    const auto& capture = stats["capture"];
+    INFO(name << ": " << capture.dump());
+    const std::string reasons = capture["quality_reasons"].dump();
+    if (name == "whole") {
+      CHECK_THAT(reasons, !Contains("missing"));
+      continue;
+    }
+    CHECK(capture["quality"] == "bad");
+    CHECK_THAT(reasons, Contains("8 of 8 mouth markers missing: " + mouth[0] + ", " + mouth[1]) && Contains(" and 2 more"));
+  }
 }

@@ -32,6 +32,7 @@ struct Options {
   double observable_mm = align::kObservableShapeMm;
   bool json = false;
   bool force = false;
+  double min_presence = align::NeutralSearchOptions{}.min_presence;
 };
 
 // Keeps only the named markers (in the take's order). Throws on an unknown name.
@@ -55,12 +56,6 @@ formats::MarkerTake select_markers(formats::MarkerTake take, const std::vector<s
   }
   out.labels = std::move(labels);
   return out;
-}
-
-double median_of(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
-  return v[v.size() / 2];
 }
 
 void run_calibrate(const Options& o, bool frame_given) {
@@ -91,6 +86,7 @@ void run_calibrate(const Options& o, bool frame_given) {
   topts.calibration.rig_mm_per_unit = rig_mm;
   topts.neutral.rate_hz = take.rate_hz > 0 ? take.rate_hz : 60.0;
   topts.neutral.take_mm_per_unit = pipeline::neutral_search_mm_per_unit(take, given_units);
+  topts.neutral.min_presence = o.min_presence;
   topts.average = o.average;
   topts.stable_count = o.stable_count;
   // Stable markers: named, or found (mutual distances vary least over this take, among
@@ -130,7 +126,7 @@ void run_calibrate(const Options& o, bool frame_given) {
     for (std::size_t i = 0; i < mapper.stable_residual_count(); ++i)
       if (const double r = mapper.stable_residual_mm(i); !std::isnan(r)) stable_residuals.push_back(r);
   }
-  const double stable_median = median_of(stable_residuals);
+  const double stable_median = pipeline::median_of(stable_residuals);
 
   cal.observable_shape_mm = o.observable_mm;
   align::find_unobserved_shapes(cal, rig);
@@ -143,8 +139,9 @@ void run_calibrate(const Options& o, bool frame_given) {
     fmt::print(stderr, "facecap: warning: {}: the scale ended at the end of its search band ({:.4f}; the face would be {:.2f}x "
                        "the rig's): check the units (--units) and the markers (--markers, --head)\n",
                o.take, cal.take_to_rig.scale, cal.face_size_ratio());
-  if (!o.force && std::filesystem::exists(o.output)) throw file_error(o.output, "exists; pass --force to replace it");
-  align::save_calibration_profile(o.output, cal);
+  const std::vector<std::string> warnings = pipeline::residual_outliers(result, take.labels, take.frames);
+  for (const auto& w : warnings) fmt::print(stderr, "facecap: warning: {}: {}\n", o.take, w);
+  const std::optional<std::filesystem::path> backup = pipeline::save_profile(o.output, cal, o.force);
 
   std::vector<double> residuals;
   for (const auto& m : cal.markers) residuals.push_back(m.residual_mm);
@@ -168,7 +165,7 @@ void run_calibrate(const Options& o, bool frame_given) {
     j["ignored_markers"] = ignored;
     j["hull_rms_mm"] = cal.hull_rms_mm;
     j["trimmed_rms_mm"] = cal.trimmed_rms_mm;
-    j["residual_mm"] = {{"median", median_of(residuals)}, {"max", *std::max_element(residuals.begin(), residuals.end())}};
+    j["residual_mm"] = {{"median", pipeline::median_of(residuals)}, {"max", *std::max_element(residuals.begin(), residuals.end())}};
     nlohmann::json per = nlohmann::json::object();
     for (const auto& m : cal.markers) per[m.label] = m.residual_mm;
     j["markers"] = per;
@@ -184,6 +181,8 @@ void run_calibrate(const Options& o, bool frame_given) {
       if (!u.same_as.empty()) same[u.name] = {{"same_as", u.same_as}, {"distinct_mm", u.distinct_mm}};
     j["indistinct_shapes"] = same;
     j["notes"] = cal.notes;
+    j["warnings"] = warnings;
+    j["backup"] = backup ? nlohmann::json(backup->string()) : nlohmann::json(nullptr);
     std::puts(j.dump(2).c_str());
     return;
   }
@@ -201,7 +200,7 @@ void run_calibrate(const Options& o, bool frame_given) {
                m.binding.vertices[1], m.binding.vertices[2], m.binding.barycentric[0], m.binding.barycentric[1],
                m.binding.barycentric[2], stable ? "  stable" : "");
   }
-  fmt::print("\nresidual median {:.2f} mm, max {:.2f} mm over {} markers\n", median_of(residuals),
+  fmt::print("\nresidual median {:.2f} mm, max {:.2f} mm over {} markers\n", pipeline::median_of(residuals),
              *std::max_element(residuals.begin(), residuals.end()), residuals.size());
   if (!cal.head_markers.empty()) {
     std::vector<std::string> heads;
@@ -215,7 +214,7 @@ void run_calibrate(const Options& o, bool frame_given) {
                "markers cannot observe them, the weight fit leaves them at 0: {}\n",
                unobserved.size(), rig.shape_count(), cal.observable_shape_mm, cal.distinct_shape_mm, fmt::join(unobserved, ", "));
   for (const auto& n : cal.notes) fmt::print("note: {}\n", n);
-  fmt::print("wrote {}\n", o.output);
+  fmt::print("wrote {}{}\n", o.output, backup ? fmt::format(" (the old profile kept as {})", backup->string()) : "");
 }
 
 }  // namespace
@@ -244,7 +243,11 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--units", opts->units, "Take units mm|cm|m (default: detected from the face's size)");
   cmd->add_option("--rig-units", opts->rig_units, "Rig units mm|cm|m (default: guessed from the face's size)");
   cmd->add_option("-o,--output", opts->output, "Calibration profile to write (.toml)")->required();
-  cmd->add_flag("--force", opts->force, "Replace the output file if it exists");
+  cmd->add_flag("--force", opts->force, "Replace the output profile if it exists, keeping the old one as NAME.toml.bak");
+  cmd->add_option("--min-presence", opts->min_presence,
+                  "Auto-neutral: each marker must be present in this fraction of the neutral stretch's frames")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 1.0));
   cmd->add_flag("--json", opts->json, "Print JSON instead of text");
   cmd->callback([opts, frame, &exit_code] {
     run_calibrate(*opts, frame->count() > 0);

@@ -28,6 +28,7 @@ struct CtlOptions {
   std::string actor_name, actor_file;
   double seconds = 3.0;
   std::string save;
+  bool replace = false;
   control::StartRecording slate;
 };
 
@@ -108,6 +109,9 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
   auto o = std::make_shared<CtlOptions>();
   auto* ctl = app.add_subcommand("ctl", "Drive a running facecapd through its control API (docs/control-api.md)");
   ctl->require_subcommand(1);
+  // ctl's options after a subcommand too (`facecap ctl record stop --json`): subcommands
+  // made below inherit this.
+  ctl->fallthrough();
   ctl->add_option("--config", o->config, "facecapd.toml to take control.http's address, port and token file from")
       ->check(CLI::ExistingFile);
   ctl->add_option("--address", o->address, "Address of facecapd's control API")->capture_default_str();
@@ -151,9 +155,11 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
   auto* calibrate = ctl->add_subcommand("calibrate", "Capture the actor's neutral from the live source, calibrate, swap it in");
   calibrate->add_option("--seconds", o->seconds, "How long to capture (the actor holds a neutral face)")->capture_default_str();
   calibrate->add_option("--save", o->save, "Save the calibration as this actor's profile");
+  calibrate->add_flag("--force", o->replace, "Replace the --save profile if it exists, keeping the old one as NAME.toml.bak");
   calibrate->callback([o, done] {
     json body = {{"seconds", o->seconds}};
     if (!o->save.empty()) body["save"] = o->save;
+    if (o->replace) body["replace"] = true;
     done(call(*o, "POST", "/calibrate", body), [](const json& c) {
       fmt::print("calibrated from {} ({} frames, neutral at frame {}, {} averaged): units {}, surface ICP {:.2f} mm\n",
                  c["capture"].get<std::string>(), c["frames"].get<uint64_t>(), c["neutral_frame"].get<int64_t>(),
@@ -164,12 +170,15 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
                  c["residual_mm"]["max"].get<double>(), c["markers"].get<uint64_t>(),
                  c["head_stabilised"].get<bool>() ? "stabilised" : "not stabilised",
                  c["profile"].is_null() ? std::string("not saved") : "saved as " + c["profile"].get<std::string>());
+      if (!c["backup"].is_null()) fmt::print("the old profile is kept as {}\n", c["backup"].get<std::string>());
+      for (const auto& w : c["warnings"]) fmt::print("warning: {}\n", w.get<std::string>());
+      for (const auto& n : c["notes"]) fmt::print("note: {}\n", n.get<std::string>());
     });
   });
   auto* record = ctl->add_subcommand("record", "Start or stop a take");
   record->require_subcommand(1);
   auto* start = record->add_subcommand("start", "Record a take (file named from the slate)");
-  start->add_option("take", o->slate.take, "The take's name")->required();
+  start->add_option("take", o->slate.take, "The take's name or number (default: the scene and shot's next number)");
   start->add_option("--actor", o->slate.actor, "Actor (default: the current actor's name)");
   start->add_option("--scene", o->slate.scene, "Scene");
   start->add_option("--shot", o->slate.shot, "Shot");

@@ -9,6 +9,8 @@ import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 const kResidualRedMm = 2.0;
 const kMissingColour = new THREE.Color(0x7a8290);
 const kGatedColour = new THREE.Color(0xd040e0);
+// Calibrated markers the source has no slot for, drawn at their calibrated place.
+const kUnslottedMarkers = 256;
 
 // Green (0 mm) through yellow to red (kResidualRedMm and above).
 function residualColour(mm, out = new THREE.Color()) {
@@ -36,6 +38,8 @@ export class FaceView {
     this.scene.add(this.headAxes);
     this.markerCount = 0;
     this.lastTargets = [];  // per marker slot: last known [x, y, z], for drawing missing ones
+    this.slotLabels = [];   // per marker slot: its label (the schema's)
+    this.calibrated = [];   // the calibration's face markers from /status: label, rest [x, y, z], missing
     this.framed = false;
     this.colour = new THREE.Color();
     this.matrix = new THREE.Matrix4();
@@ -80,11 +84,13 @@ export class FaceView {
       this.scene.add(this.mesh);
     }
     this.markerCount = schema.markers.length;
+    this.slotLabels = schema.markers;
     this.lastTargets = new Array(this.markerCount).fill(null);
     if (this.markerCount > 0) {
       const sphere = new THREE.SphereGeometry(1, 10, 8);
       const material = new THREE.MeshBasicMaterial({ depthTest: false, transparent: true, opacity: 0.95 });
-      this.markers = new THREE.InstancedMesh(sphere, material, this.markerCount);
+      // Room for calibrated markers the source has no slot for (never seen).
+      this.markers = new THREE.InstancedMesh(sphere, material, this.markerCount + kUnslottedMarkers);
       this.markers.renderOrder = 1;  // over the surface, so markers behind it still show
       this.markers.count = 0;
       this.scene.add(this.markers);
@@ -122,17 +128,25 @@ export class FaceView {
     this.headAxes.position.copy(sphere.center).add(new THREE.Vector3(r * 0.95, -r * 0.75, 0));
   }
 
+  // The calibration's face markers (GET /status window.markers): where a marker never seen
+  // is drawn (its bound point on the neutral face), and which ones the quality counts missing.
+  setCalibratedMarkers(markers) {
+    this.calibrated = markers ?? [];
+  }
+
   // Markers: used ones coloured by residual; missing ones (absent this frame) grey at their
-  // last place; gated ones (present but not used: not bound, or left out as implausible)
+  // last place, or at their calibrated place when never seen (also those the source has no
+  // slot for); gated ones (present but not used: not bound, or left out as implausible)
   // magenta and larger.
   updateMarkers(markers) {
     if (!this.markers || !markers) return;
     const size = (this.radius ?? 10) * 0.018;
+    const rest = new Map(this.calibrated.map((m) => [m.label, m.rest]));
     let n = 0;
     for (let k = 0; k < this.markerCount; ++k) {
       const target = markers.targets[k];
       if (target) this.lastTargets[k] = target;
-      const at = target ?? this.lastTargets[k];
+      const at = target ?? this.lastTargets[k] ?? rest.get(this.slotLabels[k]);
       if (!at) continue;
       let scale = size;
       if (target && markers.residual_mm[k] !== null) {
@@ -147,6 +161,15 @@ export class FaceView {
       this.matrix.makeScale(scale, scale, scale).setPosition(at[0], at[1], at[2]);
       this.markers.setMatrixAt(n, this.matrix);
       this.markers.setColorAt(n, this.colour);
+      ++n;
+    }
+    const slotted = new Set(this.slotLabels);
+    for (const m of this.calibrated) {
+      if (slotted.has(m.label) || n >= this.markerCount + kUnslottedMarkers) continue;
+      const s = size * 0.7;
+      this.matrix.makeScale(s, s, s).setPosition(m.rest[0], m.rest[1], m.rest[2]);
+      this.markers.setMatrixAt(n, this.matrix);
+      this.markers.setColorAt(n, kMissingColour);
       ++n;
     }
     this.markers.count = n;

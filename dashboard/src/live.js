@@ -48,12 +48,34 @@ function onFrame(frame) {
   $('markers-used').textContent = `${t.markers_used} / ${t.markers_expected}`;
 }
 
+// The calibration's markers missing over the last window, by region, and the noisiest.
+function showMarkers(markers) {
+  const missing = markers.filter((m) => m.missing);
+  const byRegion = new Map();
+  for (const m of missing) byRegion.set(m.region, [...(byRegion.get(m.region) ?? []), m.label]);
+  $('missing-markers').textContent = missing.length
+    ? [...byRegion].map(([region, labels]) => `${region}: ${labels.join(', ')}`).join('\n')
+    : 'none';
+  document.body.dataset.missingMarkers = missing.map((m) => m.label).join(',');
+  const noisy = markers.filter((m) => m.noise_mm !== null).sort((a, b) => b.noise_mm - a.noise_mm).slice(0, 3);
+  $('noisiest-markers').textContent = noisy.map((m) => `${m.label} ${fmt(m.noise_mm, 2)} mm`).join(', ') || '-';
+}
+
+// The shapes the markers cannot observe: the solve leaves them at 0.
+function showUnobserved(shapes, total) {
+  $('unobserved-count').textContent = `${shapes.length} of ${total}`;
+  $('unobserved-shapes').textContent = shapes.length ? shapes.join(', ') : 'every shape is observed';
+}
+
 function onStatus(s) {
   const w = s.window;
   const quality = $('quality');
   quality.className = `quality ${w.quality || 'unknown'}`;
   quality.textContent = w.quality || 'unknown';
   $('quality-reasons').textContent = (w.quality_reasons ?? []).join('; ');
+  view.setCalibratedMarkers(w.markers);
+  showMarkers(w.markers ?? []);
+  showUnobserved(s.calibration.unobserved_shapes ?? [], s.rig.shapes);
   $('source').textContent = `${s.source.description} (${fmt(s.source.rate_hz, 0)} Hz)`;
   $('actor').textContent = s.actor || '(none: the configured calibration)';
   $('calibration').textContent = `${s.calibration.source} · ${s.calibration.markers} markers` +
@@ -82,12 +104,16 @@ function showRecording(r) {
 
 $('record-start').onclick = () =>
   act($('record-start'), $('record-message'), async () => {
-    const body = { take: $('take').value.trim() };
+    // No take: the scene and shot's next number, chosen by facecapd.
+    const body = {};
+    if ($('take').value.trim()) body.take = $('take').value.trim();
     if ($('scene').value.trim()) body.scene = $('scene').value.trim();
     if ($('shot').value.trim()) body.shot = $('shot').value.trim();
+    if ($('notes').value.trim()) body.notes = $('notes').value.trim();
     const started = await call('/record/start', body);
     showRecording({ active: true, seconds: 0, frames_written: 0, take: started.take });
-    return `recording ${started.file}`;
+    $('take').value = '';
+    return `recording take ${started.take} to ${started.file}`;
   });
 
 $('record-stop').onclick = () =>
@@ -142,21 +168,28 @@ $('profile-load').onclick = () => act($('profile-load'), $('actor-message'), asy
 $('calibrate').onclick = () => act($('calibrate'), $('calibrate-message'), async () => {
   const body = { seconds: Number($('calibrate-seconds').value) };
   if ($('calibrate-save').value.trim()) body.save = $('calibrate-save').value.trim();
+  if (body.save && $('calibrate-replace').checked) body.replace = true;
   show($('calibrate-message'), null, `hold a neutral face for ${body.seconds} s...`);
   $('residual-table').replaceChildren();
+  $('calibrate-warnings').textContent = '';
   const c = await call('/calibrate', body);
   const rows = Object.entries(c.marker_residual_mm).sort((a, b) => b[1] - a[1]);
   const table = $('residual-table');
   table.innerHTML = '<tr><th>marker</th><th>residual mm</th></tr>';
+  // Residual outliers: their rows marked, the likely cause said above the table.
+  const warned = new Set(c.warnings.map((w) => /^marker '([^']*)'/.exec(w)?.[1]));
   for (const [marker, mm] of rows) {
     const row = table.insertRow();
     row.insertCell().textContent = marker;
     row.insertCell().textContent = fmt(mm, 3);
+    row.classList.toggle('warning', warned.has(marker));
   }
+  $('calibrate-warnings').textContent = c.warnings.map((w) => `⚠ ${w}`).join('\n');
   if (body.save) loadActors().catch((e) => show($('actor-message'), e));
   return `calibrated on frame ${c.neutral_frame} of ${c.frames} (${c.units}): residual median ` +
     `${fmt(c.residual_mm.median, 3)} mm, max ${fmt(c.residual_mm.max, 3)} mm; ${c.markers} markers` +
-    (c.profile ? `; saved ${c.profile}` : '') + (c.notes.length ? `\n${c.notes.join('\n')}` : '');
+    (c.profile ? `; saved ${c.profile}` : '') + (c.backup ? ` (the old one kept as ${c.backup})` : '') +
+    (c.notes.length ? `\n${c.notes.join('\n')}` : '');
 });
 
 loadActors().catch((e) => show($('actor-message'), e));

@@ -54,8 +54,9 @@ async function open(entry) {
   $('scrub').max = String(recording.total - 1);
   $('scrub').disabled = false;
   $('play').disabled = false;
-  $('replay-title').textContent = `${entry.name}: take ${entry.take || '-'}, actor ${entry.actor || '-'}, ` +
+  $('replay-title').textContent = `${entry.name}: ${slate(entry)}, actor ${entry.actor || '-'}, ` +
     `${fmt(entry.seconds)} s at ${fmt(first.rate_hz, 0)} Hz`;
+  $('replay-notes').textContent = entry.notes ? `notes: ${entry.notes}` : '';
   draw(first.frames[0], 0);
 }
 
@@ -118,6 +119,12 @@ $('scrub').oninput = () => {
   scrubTo(Number($('scrub').value));
 };
 
+// "scene 12, shot 3, take 1" with the fields the take has.
+function slate(entry) {
+  const parts = [['scene', entry.scene], ['shot', entry.shot], ['take', entry.take]].filter(([, v]) => v);
+  return parts.length ? parts.map(([k, v]) => `${k} ${v}`).join(', ') : 'no slate';
+}
+
 async function list() {
   const answer = await call('/recordings');
   $('recordings-directory').textContent = `${answer.recordings.length} in ${answer.directory}`;
@@ -134,8 +141,9 @@ async function list() {
       cell.classList.add('error');
       continue;
     }
-    row.insertCell().textContent = entry.take || '-';
+    row.insertCell().textContent = slate(entry);
     row.insertCell().textContent = `${fmt(entry.seconds)} s`;
+    row.title = entry.notes || '';
     row.insertCell().textContent = entry.solved_frames ? `${entry.solved_frames} solved` : 'markers only';
     if (!entry.solved_frames) continue;
     row.onclick = async () => {

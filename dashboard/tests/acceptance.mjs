@@ -54,8 +54,6 @@ function startDaemon() {
     '--set', `outputs.recording.directory=${join(work, 'takes')}`,
     '--set', `calibration.profiles_directory=${join(work, 'profiles')}`,
     '--set', 'control.status_interval_s=0.5',
-    // No dropouts: the neutral capture for the calibration needs every marker.
-    '--set', 'source.sim.dropout_probability=0',
     '--set', 'control.run_seconds=600',
   ], { env: { ...process.env, FACECAPD_ALLOW_ROOT: '1' }, stdio: ['ignore', 'pipe', 'pipe'] });
   let log = '';
@@ -154,6 +152,16 @@ try {
   check('the capture quality is shown in colour', /quality (good|degraded|bad)/.test(quality), quality);
   const sourceText = await page.textContent('#source');
   check('the source in use is shown', sourceText.startsWith('sim'), sourceText);
+  const live = await status(daemon.port);
+  const unobserved = await page.textContent('#unobserved-shapes');
+  const listed = live.calibration.unobserved_shapes;
+  check('the shapes panel lists every shape the markers cannot observe, as /status does',
+        listed.every((name) => unobserved.includes(name)) &&
+          (await page.textContent('#unobserved-count')) === `${listed.length} of ${live.rig.shapes}`,
+        `/status: ${listed.join(', ')}; page: "${unobserved}"`);
+  const missingShown = await page.textContent('#missing-markers');
+  check('the markers panel says no marker is missing on the sim', missingShown === 'none' &&
+        live.window.missing_markers.length === 0, `"${missingShown}"; /status ${JSON.stringify(live.window.missing_markers)}`);
 
   // ---------------------------------------------------------------- calibrate, then switch to it
   await page.fill('#calibrate-seconds', '1');
@@ -164,6 +172,12 @@ try {
   const residualRows = await page.locator('#residual-table tr').count();
   check('calibrate neutral shows its residual table', residualRows > 10 && calibrateMessage.includes('calibrated'),
         `${residualRows} rows; "${calibrateMessage}"`);
+  // The sim's two temple headband markers sit near the face: bound, their residuals stand out.
+  const calibrateWarnings = await page.textContent('#calibrate-warnings');
+  const warnedRows = await page.locator('#residual-table tr.warning').count();
+  check('calibration warns of the head-rig markers bound to the face, in the table and in words',
+        warnedRows === 2 && (calibrateWarnings.match(/likely on a head rig/g) ?? []).length === 2,
+        `${warnedRows} rows marked; "${calibrateWarnings}"`);
   // The calibration made alice the current actor: a second profile (a copy) to switch to.
   writeFileSync(join(work, 'profiles', 'bob.toml'), readFileSync(join(work, 'profiles', 'alice.toml')));
   await page.click('#actors-refresh');
@@ -197,6 +211,7 @@ try {
   await page.fill('#take', take);
   await page.fill('#scene', '12');
   await page.fill('#shot', '3');
+  await page.fill('#notes', 'brows up, twice');
   await page.click('#record-start');
   // Any length from one second on: status comes about once a second, so a busy machine
   // may show 00:00 and then 00:02.
@@ -218,6 +233,10 @@ try {
   await page.goto(`${base}/replay.html`);
   await page.click(`#recordings tr[data-name="${basename(file)}"]`);
   await page.waitForFunction(() => document.body.dataset.replayFrame === '0', null, { timeout: 10000 });
+  const title = await page.textContent('#replay-title');
+  const notes = await page.textContent('#replay-notes');
+  check('the replay page shows the take\'s scene, shot, take and notes',
+        title.includes(`scene 12, shot 3, take ${take}`) && notes === 'notes: brows up, twice', `"${title}" / "${notes}"`);
   const total = Number(await page.getAttribute('#scrub', 'max')) + 1;
   check('the replay page opens the take with all its solved frames', total === inspected.solved.frames,
         `slider ${total}, inspect ${inspected.solved.frames}`);

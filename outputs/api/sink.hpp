@@ -47,6 +47,9 @@ class OutputSink {
   // Whether offer() would take a frame now rather than drop it. A lockstep loop (not real
   // time) waits for it instead of dropping. RT-safe.
   virtual bool ready() noexcept { return true; }
+  // Whether dropping is how this sink works (a live preview that keeps the newest frame
+  // for a slow viewer), not a loss: its drops are shown but not warned about. RT-safe.
+  virtual bool drops_by_design() const noexcept { return false; }
 
   // Safe from any thread. RT-safe.
   virtual SinkHealth health() const noexcept = 0;

@@ -1,5 +1,6 @@
 #include "outputs/recording/recorder.hpp"
 
+#include <algorithm>
 #include <ctime>
 
 #include <fmt/format.h>
@@ -191,11 +192,41 @@ std::string safe_part(std::string_view text) {
 
 }  // namespace
 
-std::filesystem::path new_take_path(const std::filesystem::path& directory, const formats::RecordingHeader& slate) {
-  std::string stem;
-  for (const std::string* field : {&slate.scene, &slate.shot, &slate.take})
-    if (!field->empty()) stem += (stem.empty() ? "" : "_") + safe_part(*field);
-  return unique_path(directory, stem.empty() ? "take" : stem);
+namespace {
+
+// "<scene>_<shot>_" (the fields given), the file name's part before the take.
+std::string slate_prefix(const std::string& scene, const std::string& shot) {
+  std::string prefix;
+  for (const std::string* field : {&scene, &shot})
+    if (!field->empty()) prefix += safe_part(*field) + "_";
+  return prefix;
+}
+
+}  // namespace
+
+std::filesystem::path take_path(const std::filesystem::path& directory, const formats::RecordingHeader& slate) {
+  if (slate.take.empty()) throw Error("a take needs a name or number");
+  const std::filesystem::path path = directory / (slate_prefix(slate.scene, slate.shot) + safe_part(slate.take) + ".fcrec");
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec))
+    throw Error(fmt::format("scene \"{}\" shot \"{}\" take \"{}\" is already recorded in {}: give another take, or none "
+                            "for the next number ({})",
+                            slate.scene, slate.shot, slate.take, path.string(), next_take_number(directory, slate.scene, slate.shot)));
+  return path;
+}
+
+std::string next_take_number(const std::filesystem::path& directory, const std::string& scene, const std::string& shot) {
+  const std::string prefix = slate_prefix(scene, shot);
+  uint64_t largest = 0;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(directory, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (!name.starts_with(prefix) || !name.ends_with(".fcrec")) continue;
+    const std::string_view number = std::string_view(name).substr(prefix.size(), name.size() - prefix.size() - 6);
+    if (number.empty() || number.size() > 9 || number.find_first_not_of("0123456789") != std::string_view::npos) continue;
+    largest = std::max<uint64_t>(largest, std::stoull(std::string(number)));
+  }
+  return std::to_string(largest + 1);
 }
 
 std::filesystem::path new_recording_path(const std::filesystem::path& directory) {

@@ -87,8 +87,12 @@ class Recorder final : public OutputSink {
 // "facecapd-20240131-142501.fcrec" (local time), made unique with -2, -3, ... if taken.
 std::filesystem::path new_recording_path(const std::filesystem::path& directory);
 // A take's file from its slate: "<scene>_<shot>_<take>.fcrec" (the fields given, each
-// reduced to letters, digits, '.', '-' and at most 64 bytes; other bytes become '-'),
-// made unique with -2, -3, ... if taken.
-std::filesystem::path new_take_path(const std::filesystem::path& directory, const formats::RecordingHeader& slate);
+// reduced to letters, digits, '.', '-' and at most 64 bytes; other bytes become '-').
+// A slate is never reused: throws Error, naming the file and the next free take number,
+// when that file exists, and when the take is empty.
+std::filesystem::path take_path(const std::filesystem::path& directory, const formats::RecordingHeader& slate);
+// The next take number of a scene and shot: one more than the largest take number among
+// directory's "<scene>_<shot>_<number>.fcrec" files; "1" when there is none.
+std::string next_take_number(const std::filesystem::path& directory, const std::string& scene, const std::string& shot);
 
 }  // namespace facecap::outputs

@@ -93,7 +93,7 @@ TakeCalibration calibrate_take(const Rig& rig, const std::vector<std::string>& l
   auto run = [&] {
     std::vector<uint8_t> present;
     if (t.count > 1) {
-      t.positions = average_positions(frames, t.first, t.count, t.frame, t.stable_slots, present);
+      t.positions = average_positions(frames, t.first, t.count, t.frame, t.stable_slots, o.neutral.min_presence, present);
     } else {
       const MarkerFrame& f = frames[t.frame];
       t.positions.resize(3, Eigen::Index(f.markers.size()));
