@@ -1,11 +1,13 @@
 // FBX rigs: the ICT face written by a real DCC tool (Blender, driven headless by
 // tests/make_ict_fbx.py at test time), read through assimp and welded back to the
 // artist's vertices; solving a real take on it matches solving on the OBJ rig.
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <set>
+#include <sstream>
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
@@ -176,34 +178,69 @@ TEST_CASE("an FBX of the ICT face written by Blender loads as a rig of 6,706 wel
         std::string::npos);
 }
 
-TEST_CASE("solving JawMoCap on the Blender FBX of ICT matches solving on the OBJ rig to 1e-6 in weights", "[fbx][data]") {
+// The ICT OBJs with every coordinate rounded to float32, as Blender holds them: the
+// reference that tells the FBX path's own error from float32's.
+fs::path float32_ict(const fs::path& ict, const fs::path& dir) {
+  fs::create_directories(dir);
+  for (const auto& entry : fs::directory_iterator(ict)) {
+    if (entry.path().extension() != ".obj") continue;
+    std::istringstream in(test::slurp(entry.path()));
+    std::string text;
+    for (std::string line; std::getline(in, line);) {
+      if (line.starts_with("v ")) {
+        std::istringstream v(line.substr(2));
+        double x = 0, y = 0, z = 0;
+        v >> x >> y >> z;
+        line = fmt::format("v {:.9g} {:.9g} {:.9g}", double(float(x)), double(float(y)), double(float(z)));
+      }
+      text += line + "\n";
+    }
+    test::write_text(dir / entry.path().filename(), text);
+  }
+  return dir;
+}
+
+TEST_CASE("solving JawMoCap on the Blender FBX of ICT matches solving on the OBJ rig as closely as float32 geometry "
+          "allows", "[fbx][data]") {
   const fs::path fbx = blender_ict_fbx();
   if (fbx.empty()) return;
   FACECAP_REQUIRE_SHARED_DATA(jaw, "markers/animface/JawMoCap.trc");
   const fs::path dir = test::scratch_dir("fbx-solve");
+  const fs::path ict = test::shared_data("ict-face");
+  // Each rig calibrated on the take and solved, as an operator would.
   std::vector<std::vector<SolvedFrame>> solves;
-  for (const std::string rig : {test::shared_data("ict-face").string(), fbx.string()}) {
-    const std::string name = fs::path(rig).stem().string();
+  for (const fs::path& rig : {ict, fbx, float32_ict(ict, dir / "ict_float32")}) {
+    const std::string name = rig.stem().string();
     const std::string profile = (dir / (name + ".toml")).string(), fcrec = (dir / (name + ".fcrec")).string();
-    Run r = run_facecap(dir, {"calibrate", "--rig", rig, "--take", jaw.string(), "-o", profile});
+    Run r = run_facecap(dir, {"calibrate", "--rig", rig.string(), "--take", jaw.string(), "-o", profile});
     INFO(r.out << r.err);
     REQUIRE(r.exit_code == 0);
-    r = run_facecap(dir, {"solve", "--rig", rig, "--calib", profile, "--take", jaw.string(), "-o", fcrec, "-q"});
+    r = run_facecap(dir, {"solve", "--rig", rig.string(), "--calib", profile, "--take", jaw.string(), "-o", fcrec, "-q"});
     REQUIRE(r.exit_code == 0);
     const formats::RecordingReader reader(fcrec);
     solves.emplace_back(reader.solved_frame_count());
     for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) reader.read_solved_frame(i, solves.back()[i]);
   }
-  REQUIRE(solves[0].size() == solves[1].size());
   REQUIRE(solves[0].size() > 900);
-  double worst = 0, largest = 0;
-  for (std::size_t f = 0; f < solves[0].size(); ++f) {
-    worst = std::max(worst, double((solves[0][f].weights - solves[1][f].weights).cwiseAbs().maxCoeff()));
-    largest = std::max(largest, double(solves[0][f].weights.maxCoeff()));
-  }
-  WARN("JawMoCap, " << solves[0].size() << " frames: largest weight difference FBX vs OBJ rig " << worst);
-  CHECK(worst < 1e-6);
+  auto largest_difference = [&](const std::vector<SolvedFrame>& a, const std::vector<SolvedFrame>& b) {
+    REQUIRE(a.size() == b.size());
+    double worst = 0;
+    for (std::size_t f = 0; f < a.size(); ++f)
+      worst = std::max(worst, double((a[f].weights - b[f].weights).cwiseAbs().maxCoeff()));
+    return worst;
+  };
+  double largest = 0;
+  for (const auto& frame : solves[0]) largest = std::max(largest, double(frame.weights.maxCoeff()));
+  const double fbx_vs_obj = largest_difference(solves[1], solves[0]);
+  const double float32_vs_obj = largest_difference(solves[2], solves[0]);
+  WARN("JawMoCap, " << solves[0].size() << " frames, largest weight difference from the OBJ rig: the Blender FBX "
+                    << fbx_vs_obj << ", the OBJs rounded to float32 " << float32_vs_obj);
   CHECK(largest > 0.3);  // the jaw opens: not a comparison of zeros
+  // Blender keeps positions as float32 (7 digits); rounding the OBJs alone moves the
+  // weights by about 1e-5, so 1e-6 is out of reach of any float32 file. The FBX path adds
+  // no error of its own beyond that: within twice the rounding's and 5e-5.
+  CHECK(fbx_vs_obj < 5e-5);
+  CHECK(fbx_vs_obj < 2 * float32_vs_obj);
 }
 
 TEST_CASE("bad FBX files are refused naming the file and what is wrong", "[fbx]") {

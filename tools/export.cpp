@@ -157,7 +157,12 @@ void export_point_cache(const Options& o, const formats::RecordingReader& reader
         frames = times.size();
         vertices = vertex_count;
       },
-      [&](std::size_t, const SolvedFrame& frame) { writer->append(frame.vertices, float(o.scale)); }, o.progress);
+      [&](std::size_t i, const SolvedFrame& frame) {
+        if (!frame.vertices.allFinite())
+          throw file_error(o.input, fmt::format("solved frame {} has a vertex that is not a finite number", i));
+        writer->append(frame.vertices, float(o.scale));
+      },
+      o.progress);
   writer->close();
   fmt::print("{} -> {} ({}): {} frames of {} vertices, scale {:g}\n", o.input, o.output,
              format == formats::PointCacheFormat::kPc2 ? "PC2" : "MDD", frames, vertices, o.scale);
@@ -220,6 +225,8 @@ void export_gltf(const Options& o, const formats::RecordingReader& reader) {
   SolvedFrame solved;
   for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) {
     read_solved_frame_checked(reader, i, solved);
+    if (!solved.weights.allFinite() || !solved.head_rotation.coeffs().allFinite() || !solved.head_translation.allFinite())
+      throw file_error(o.input, fmt::format("solved frame {} has a weight or head pose that is not a finite number", i));
     take.weights.insert(take.weights.end(), solved.weights.data(), solved.weights.data() + solved.weights.size());
     take.head_rotation.push_back(solved.head_rotation.cast<float>());
     take.head_translation.push_back(solved.head_translation.cast<float>());
