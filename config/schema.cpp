@@ -175,7 +175,7 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(rig.path), .default_value = std::string("builtin"),
        .names_input_file = true,
        .description = "The rig to solve: \"builtin\" (the synthetic face), an OBJ directory (ICT FaceKit layout or "
-                      "with rig.toml), a .toml manifest, or a .gltf/.glb file."},
+                      "with rig.toml), a .toml manifest, a .gltf/.glb or an .fbx file."},
       {FACECAP_KEY(rig.cache), .default_value = true,
        .description = "Keep a binary cache of parsed rigs ($FACECAP_CACHE_DIR, else ~/.cache/facecap) so that "
                       "restarts load the rig in milliseconds."},

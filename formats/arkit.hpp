@@ -58,6 +58,8 @@ class ArkitWeights {
  public:
   // Not RT-safe.
   explicit ArkitWeights(std::span<const std::string> rig_shape_names);
+  // From an explicit binding: per ARKit shape, the rig shapes that realise it (a name map).
+  explicit ArkitWeights(std::array<std::vector<std::size_t>, kArkitShapeCount> binding) : binding_(std::move(binding)) {}
   // out[a] for ARKit shape a (kArkitShapes order) from the rig's weights (rig shape
   // order, as many as the rig has shapes). RT-safe.
   void map(std::span<const float> rig_weights, std::span<float, kArkitShapeCount> out) const noexcept;

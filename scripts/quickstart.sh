@@ -15,7 +15,7 @@ shift || true
 packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libsuitesparse-dev libqhull-dev libnanoflann-dev
-  libtomlplusplus-dev libtinygltf-dev nlohmann-json3-dev
+  libtomlplusplus-dev libtinygltf-dev libassimp-dev nlohmann-json3-dev
   libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev libdtl-dev libpcap-dev
   catch2 libbenchmark-dev
   libusb-1.0-0-dev libhidapi-dev libopencv-dev linux-libc-dev  # the usb, hid and v4l2 drivers
@@ -59,9 +59,11 @@ case "$mode" in
     exec "$build_dir/tools/facecap" daemon-demo "$@"
     ;;
   test)
-    # The tests' npm peers (tests/peers: the osc package that decodes the VMC output), and
-    # Debian's chromium, which the dashboard's browser test drives headless.
-    packages+=(chromium)
+    # The tests' npm peers (tests/peers: osc decodes the VMC output, gltf-validator and
+    # three check exported glTF), Debian's chromium, which the dashboard's browser test
+    # drives headless, and blender, which writes the FBX rig the FBX tests load
+    # (tests/make_ict_fbx.py; about 45 s to install on the 2-core CI machine).
+    packages+=(chromium blender)
     install_packages
     (cd "$here/tests/peers" && npm ci --no-audit --no-fund --loglevel=error)
     build

@@ -13,6 +13,7 @@
 #include "core/toml_reader.hpp"
 #include "core/units.hpp"
 #include "solver/builtin_face.hpp"
+#include "solver/fbx_rig.hpp"
 #include "solver/gltf_rig.hpp"
 #include "solver/obj_mesh.hpp"
 #include "solver/rig_cache.hpp"
@@ -211,15 +212,16 @@ Rig load_rig(const std::string& spec, const RigLoadOptions& options, RigLoadRepo
   if (!fs::exists(path)) throw file_error(spec, "no such file or directory");
 
   const std::string ext = path.extension().string();
-  if (ext == ".gltf" || ext == ".glb") {
-    const RigCacheKey key = make_rig_cache_key("gltf", {path});
+  const bool fbx = is_fbx_path(path);
+  if (ext == ".gltf" || ext == ".glb" || fbx) {
+    const RigCacheKey key = make_rig_cache_key(fbx ? "fbx" : "gltf", {path});
     if (options.use_cache) {
       if (auto cached = read_rig_cache(key, options.cache_dir, &rep.cache_file)) {
         rep.from_cache = true;
         return finish(std::move(*cached));
       }
     }
-    Rig rig = load_gltf_rig(path.string());
+    Rig rig = fbx ? load_fbx_rig(path.string()) : load_gltf_rig(path.string());
     rig.source = fs::absolute(path).string();
     if (options.use_cache) rep.cache_file = write_rig_cache(key, rig, options.cache_dir);
     return finish(std::move(rig));
@@ -229,7 +231,7 @@ Rig load_rig(const std::string& spec, const RigLoadOptions& options, RigLoadRepo
   if (fs::is_directory(path)) files = scan_obj_directory(path);
   else if (ext == ".toml") files = read_manifest(path);
   else if (ext == ".obj") throw file_error(spec, "a single OBJ is not a rig: give its directory (neutral plus one OBJ per shape)");
-  else throw file_error(spec, "unknown rig format: expected a directory of OBJ files, a .toml manifest, .gltf or .glb");
+  else throw file_error(spec, "unknown rig format: expected a directory of OBJ files, a .toml manifest, .gltf, .glb or .fbx");
 
   const RigCacheKey key = make_rig_cache_key("obj", rig_inputs(files));
   if (options.use_cache) {

@@ -1,7 +1,7 @@
 #pragma once
 // A blendshape rig: neutral mesh x0 (N vertices, T triangles) and M shapes stored as
-// deltas B = [b_i - x0]. Loaded from OBJ sets, a TOML manifest, glTF morph targets, the
-// binary cache, or generated (the built-in face). Loading is never real-time.
+// deltas B = [b_i - x0]. Loaded from OBJ sets, a TOML manifest, glTF morph targets, FBX
+// blendshape channels, the binary cache, or generated (the built-in face). Loading is never real-time.
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -24,6 +24,10 @@ struct Rig {
   // rotation), rather than being an artist's linear blend: the solver's kByRig settings
   // follow (SolverParams).
   bool hinged = false;
+  // For a rig read from a file that splits vertices at UV and normal seams (FBX through
+  // assimp): per vertex of that file's mesh, in its order, the rig vertex it was welded
+  // into. Empty when the rig's vertices are the file's.
+  std::vector<int> file_vertex_of;
 
   Eigen::Index vertex_count() const { return neutral.cols(); }
   Eigen::Index triangle_count() const { return triangles.cols(); }
@@ -89,7 +93,7 @@ struct RigManifest {
 RigManifest parse_rig_manifest(std::string_view text, const std::filesystem::path& manifest);
 
 // Loads "builtin", an OBJ directory (ICT layout or with rig.toml), a .toml manifest,
-// or a .gltf/.glb file. Throws Error naming the file and line on malformed input.
+// a .gltf/.glb or an .fbx file. Throws Error naming the file and line on malformed input.
 Rig load_rig(const std::string& spec, const RigLoadOptions& options = {},
              RigLoadReport* report = nullptr);
 

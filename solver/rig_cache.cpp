@@ -107,6 +107,8 @@ std::vector<char> serialize_rig(const Rig& rig, RigCacheKey key) {
   w.value<uint64_t>(rig.shape_names.size());
   for (const auto& n : rig.shape_names) w.string(n);
   w.raw(rig.deltas.data(), sizeof(double) * std::size_t(rig.deltas.size()));
+  w.value<uint64_t>(rig.file_vertex_of.size());
+  w.raw(rig.file_vertex_of.data(), sizeof(int) * rig.file_vertex_of.size());
 
   Fnv1a64 checksum;
   checksum.add(w.bytes().data(), w.bytes().size());
@@ -166,11 +168,17 @@ Rig deserialize_rig(const std::vector<char>& bytes, RigCacheKey expected_key, co
                 ErrorLocation{.file = name});
   rig.deltas.resize(3 * Eigen::Index(n), Eigen::Index(m));
   r.raw(rig.deltas.data(), sizeof(double) * std::size_t(rig.deltas.size()));
+  rig.file_vertex_of.resize(r.count(sizeof(int)));
+  r.raw(rig.file_vertex_of.data(), sizeof(int) * rig.file_vertex_of.size());
   if (!r.at_end()) throw offset_error(name, int64_t(bytes.size()), "trailing bytes after the rig");
   // The solver indexes vertices by these without checks: a cache is trusted no further
   // than the files it replaces.
   if (rig.triangles.size() > 0 && (rig.triangles.minCoeff() < 0 || rig.triangles.maxCoeff() >= Eigen::Index(n)))
     throw Error(fmt::format("a triangle indexes a vertex outside 0..{}", Eigen::Index(n) - 1), ErrorLocation{.file = name});
+  for (const int v : rig.file_vertex_of)
+    if (v < 0 || v >= Eigen::Index(n))
+      throw Error(fmt::format("the file's vertex map names vertex {} outside 0..{}", v, Eigen::Index(n) - 1),
+                  ErrorLocation{.file = name});
   if (!rig.neutral.allFinite() || !rig.deltas.allFinite())
     throw Error("vertex positions are not all finite", ErrorLocation{.file = name});
   return rig;

@@ -12,7 +12,7 @@
 
 namespace facecap {
 
-inline constexpr uint32_t kRigCacheVersion = 2;  // 2: Rig::hinged
+inline constexpr uint32_t kRigCacheVersion = 3;  // 2: Rig::hinged; 3: Rig::file_vertex_of
 
 struct RigCacheKey {
   uint64_t value = 0;

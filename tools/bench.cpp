@@ -254,7 +254,7 @@ void run_bench(const Options& o) {
 void add_bench_command(CLI::App& app, int& exit_code) {
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand("bench", "Time every selected solver on the same frames (single thread)");
-  cmd->add_option("--rig", o->rig, "builtin, an OBJ directory, a rig.toml manifest, or a .gltf/.glb file")->required();
+  cmd->add_option("--rig", o->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--weights", o->weights, "Live Link Face CSV driving the rig (default: the built-in motion)")->check(CLI::ExistingFile);
   cmd->add_option("--markers", o->markers, "Markers spread over the face")->capture_default_str()->check(CLI::PositiveNumber);
   cmd->add_option("--frames", o->frames, "Frames to solve (default: all of the CSV, or 600 of the built-in motion)")

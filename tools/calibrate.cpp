@@ -222,7 +222,7 @@ void run_calibrate(const Options& o, bool frame_given) {
 void add_calibrate_command(CLI::App& app, int& exit_code) {
   auto opts = std::make_shared<Options>();
   auto* cmd = app.add_subcommand("calibrate", "Calibrate an actor's markers to a rig from a neutral frame of a take");
-  cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, or a .gltf/.glb file")->required();
+  cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--take", opts->take, "Marker take (.trc, .c3d, .fcrec)")->required()->check(CLI::ExistingFile);
   auto* frame = cmd->add_option("--frame", opts->frame, "Calibrate on this frame number (as numbered in the file)");
   auto* autoneutral = cmd->add_flag("--auto-neutral", opts->auto_neutral,

@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   facecap::tools::add_inspect_rig_command(app, exit_code);
   facecap::tools::add_inspect_command(app, exit_code);
   facecap::tools::add_convert_command(app, exit_code);
+  facecap::tools::add_export_command(app, exit_code);
   facecap::tools::add_synth_command(app, exit_code);
   facecap::tools::add_bench_command(app, exit_code);
   facecap::tools::add_calibrate_command(app, exit_code);

@@ -126,7 +126,7 @@ void run_solve(const Options& o) {
 void add_solve_command(CLI::App& app, int& exit_code) {
   auto opts = std::make_shared<Options>();
   auto* cmd = app.add_subcommand("solve", "Solve a calibrated take offline to a Live Link Face CSV or a .fcrec recording");
-  cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, or a .gltf/.glb file")->required();
+  cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--calib", opts->calib, "Calibration profile (facecap calibrate) or hand-written calibration file; "
                                           "default: the recording's own, when the take is a recording")
       ->check(CLI::ExistingFile);

@@ -196,7 +196,7 @@ void run_synth(const Options& o) {
 void add_synth_command(CLI::App& app, int& exit_code) {
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand("synth", "Write a synthetic marker take and its ground truth from a rig and weight curves");
-  cmd->add_option("--rig", o->rig, "builtin, an OBJ directory, a rig.toml manifest, or a .gltf/.glb file")->required();
+  cmd->add_option("--rig", o->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--weights", o->weights, "Live Link Face CSV driving the rig (default: the built-in motion)")->check(CLI::ExistingFile);
   auto* markers = cmd->add_option("--markers", o->markers, "Markers spread over the face")->capture_default_str()->check(CLI::PositiveNumber);
   cmd->add_option("--marker-vertices", o->marker_vertices, "Markers on these vertex indices instead (comma-separated)")

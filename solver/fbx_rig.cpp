@@ -1,0 +1,165 @@
+#include "solver/fbx_rig.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <set>
+#include <string_view>
+
+#include <assimp/Importer.hpp>
+#include <assimp/mesh.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+#include <fmt/format.h>
+
+#include "core/error.hpp"
+#include "core/io.hpp"
+
+namespace facecap {
+namespace {
+
+// A mesh node's transform to the scene root: where the artist placed the mesh.
+bool find_mesh_transform(const aiNode& node, unsigned mesh, const aiMatrix4x4& parent, aiMatrix4x4& out) {
+  const aiMatrix4x4 here = parent * node.mTransformation;
+  for (unsigned i = 0; i < node.mNumMeshes; ++i)
+    if (node.mMeshes[i] == mesh) {
+      out = here;
+      return true;
+    }
+  for (unsigned c = 0; c < node.mNumChildren; ++c)
+    if (node.mChildren[c] && find_mesh_transform(*node.mChildren[c], mesh, here, out)) return true;
+  return false;
+}
+
+Rig rig_from_scene(const aiScene& scene, const std::string& name, FbxContents* contents) {
+  FbxContents found;
+  const aiMesh* rig_mesh = nullptr;
+  for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
+    const aiMesh* mesh = scene.mMeshes[m];
+    if (!mesh) continue;
+    found.meshes.push_back({mesh->mName.C_Str(), mesh->mNumVertices, mesh->mNumFaces, mesh->mNumAnimMeshes});
+    if (!rig_mesh && mesh->mNumAnimMeshes > 0 && mesh->mNumVertices > 0) {
+      rig_mesh = mesh;
+      found.rig_mesh = found.meshes.size() - 1;
+    }
+  }
+  if (!rig_mesh)
+    throw file_error(name, scene.mNumMeshes == 0 ? "no mesh" : fmt::format("none of its {} meshes has blendshape channels",
+                                                                             scene.mNumMeshes));
+  const aiMesh& mesh = *rig_mesh;
+  const std::string mesh_name = fmt::format("mesh '{}'", mesh.mName.C_Str());
+  aiMatrix4x4 to_scene;
+  if (scene.mRootNode) find_mesh_transform(*scene.mRootNode, unsigned(found.rig_mesh), aiMatrix4x4(), to_scene);
+
+  const std::size_t corners = mesh.mNumVertices;
+  const std::size_t shape_count = mesh.mNumAnimMeshes;
+  std::vector<std::string> names;
+  std::set<std::string> seen;
+  for (std::size_t s = 0; s < shape_count; ++s) {
+    const aiAnimMesh* shape = mesh.mAnimMeshes[s];
+    if (!shape || !shape->mVertices || shape->mNumVertices != corners)
+      throw file_error(name, fmt::format("{}: blendshape channel {} has {} vertices, the mesh {}", mesh_name, s,
+                                         shape ? shape->mNumVertices : 0, corners));
+    std::string channel = shape->mName.C_Str();
+    if (channel.empty()) channel = fmt::format("shape{}", s);
+    if (!seen.insert(channel).second)
+      throw file_error(name, fmt::format("{}: blendshape channel name '{}' appears twice", mesh_name, channel));
+    names.push_back(std::move(channel));
+  }
+
+  // Weld: a corner joins the vertex of an earlier corner with the same position in the
+  // neutral and in every shape (bit for bit: corners of one FBX control point carry the
+  // same numbers), so distinct vertices that touch in the neutral stay apart.
+  auto position = [&](std::size_t shape, std::size_t corner) -> const aiVector3D& {
+    return shape == 0 ? mesh.mVertices[corner] : mesh.mAnimMeshes[shape - 1]->mVertices[corner];
+  };
+  auto key_of = [&](std::size_t corner) {
+    std::vector<float> key(3 * (shape_count + 1));
+    for (std::size_t s = 0; s <= shape_count; ++s) {
+      const aiVector3D& p = position(s, corner);
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        throw file_error(name, fmt::format("{}: vertex {} of {} is not a finite number", mesh_name, corner,
+                                           s == 0 ? std::string("the neutral") : "channel '" + names[s - 1] + "'"));
+      key[3 * s] = p.x + 0.0f;  // + 0: -0 and 0 are one position
+      key[3 * s + 1] = p.y + 0.0f;
+      key[3 * s + 2] = p.z + 0.0f;
+    }
+    return key;
+  };
+  std::map<std::vector<float>, int> vertex_of_key;
+  Rig rig;
+  rig.file_vertex_of.resize(corners);
+  std::vector<std::size_t> first_corner;
+  for (std::size_t c = 0; c < corners; ++c) {
+    const auto [it, added] = vertex_of_key.emplace(key_of(c), int(first_corner.size()));
+    if (added) first_corner.push_back(c);
+    rig.file_vertex_of[c] = it->second;
+  }
+  const auto n = Eigen::Index(first_corner.size());
+  auto to_rig = [&](const aiVector3D& p) {
+    const aiVector3D q = to_scene * p;
+    return Eigen::Vector3d(q.x, q.y, q.z);
+  };
+  rig.neutral.resize(3, n);
+  rig.deltas.resize(3 * n, Eigen::Index(shape_count));
+  for (Eigen::Index v = 0; v < n; ++v) {
+    const std::size_t c = first_corner[std::size_t(v)];
+    rig.neutral.col(v) = to_rig(mesh.mVertices[c]);
+    for (std::size_t s = 0; s < shape_count; ++s)
+      rig.deltas.col(Eigen::Index(s)).segment<3>(3 * v) = to_rig(mesh.mAnimMeshes[s]->mVertices[c]) - rig.neutral.col(v);
+  }
+  std::vector<int> triangles;
+  for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
+    const aiFace& face = mesh.mFaces[f];
+    if (face.mNumIndices < 3) continue;  // points and lines are not surface
+    for (unsigned k = 0; k < face.mNumIndices; ++k)
+      if (face.mIndices[k] >= corners)
+        throw file_error(name, fmt::format("{}: face {} uses vertex {} of {}", mesh_name, f, face.mIndices[k], corners));
+    for (unsigned k = 1; k + 1 < face.mNumIndices; ++k)
+      for (unsigned corner : {face.mIndices[0], face.mIndices[k], face.mIndices[k + 1]})
+        triangles.push_back(rig.file_vertex_of[corner]);
+  }
+  if (triangles.empty()) throw file_error(name, fmt::format("{} has no faces", mesh_name));
+  rig.triangles = Eigen::Map<const Eigen::Matrix3Xi>(triangles.data(), 3, Eigen::Index(triangles.size() / 3));
+  rig.shape_names = std::move(names);
+  rig.name = mesh.mName.length > 0 ? mesh.mName.C_Str() : name;
+  found.vertices_before_weld = corners;
+  found.vertices_after_weld = std::size_t(n);
+  if (contents) *contents = std::move(found);
+  return rig;
+}
+
+// assimp would read any format it knows from these bytes; a rig.path ending in .fbx must
+// be an FBX (binary, or ASCII with its header block).
+bool looks_like_fbx(std::span<const char> bytes) {
+  constexpr std::string_view kBinaryMagic = "Kaydara FBX Binary";
+  const std::string_view head(bytes.data(), std::min<std::size_t>(bytes.size(), 4096));
+  return head.starts_with(kBinaryMagic) || head.find("FBXHeaderExtension") != std::string_view::npos;
+}
+
+}  // namespace
+
+bool is_fbx_path(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return ext == ".fbx";
+}
+
+Rig load_fbx_rig(const std::string& path, FbxContents* contents) {
+  const std::vector<char> bytes = read_file_bytes(path);
+  return parse_fbx_rig(bytes, path, contents);
+}
+
+Rig parse_fbx_rig(std::span<const char> bytes, const std::string& name, FbxContents* contents) {
+  if (bytes.empty()) throw file_error(name, "empty file");
+  if (!looks_like_fbx(bytes))
+    throw file_error(name, "not an FBX file (neither the binary 'Kaydara FBX Binary' header nor an ASCII FBXHeaderExtension)");
+  Assimp::Importer importer;
+  const aiScene* scene = importer.ReadFileFromMemory(bytes.data(), bytes.size(), aiProcess_ValidateDataStructure, "fbx");
+  if (!scene) throw file_error(name, fmt::format("assimp cannot read it: {}", importer.GetErrorString()));
+  return rig_from_scene(*scene, name, contents);
+}
+
+}  // namespace facecap
