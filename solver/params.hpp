@@ -73,6 +73,15 @@ struct SolverParams {
   // takes. A solve stopped at the cap keeps its last feasible iterate and is flagged
   // kSolvedQpIterationCap.
   int weight_qp_iteration_cap = 0;
+  // The fold stage (docs/solver.md "Folds"): a triangle the solve flips against the
+  // linear blend of the same weights, or creases across an edge more than
+  // fold_crease_degrees beyond that blend's bend there, counts as folded; its vertices
+  // are pinned to the linear blend, at most fold_max_pins a frame (ICT's stress corpus
+  // needs up to 146), and a marker pinning a fold the pins cannot undo is released for
+  // the frame; 0: measure only, the paper's solve. A frame still folded is flagged
+  // kSolvedFolded.
+  int fold_max_pins = 256;
+  double fold_crease_degrees = 90.0;
 };
 
 }  // namespace facecap
