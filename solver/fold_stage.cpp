@@ -40,25 +40,24 @@ const FoldReport& FoldStage::measure_again(const Eigen::Matrix3Xd& vertices) noe
   return mark_fold_vertices();
 }
 
-void FoldStage::begin_frame() noexcept {
-  pins_ = 0;
-  if (++frame_stamp_ == 0) {  // wrapped: forget every old stamp
-    std::fill(pin_stamp_.begin(), pin_stamp_.end(), 0u);
-    frame_stamp_ = 1;
-  }
-}
+void FoldStage::begin_frame() noexcept { pins_ = 0; }
 
-// A pinned vertex gains beta e_v e_v^T in A0 and beta e_v (x0 + B w)_v^T in the
+// Each call is a round: a corner still on a fold is pinned again (its hold adds up), once
+// per round. A pinned vertex gains beta e_v e_v^T in A0 and beta e_v (x0 + B w)_v^T in the
 // right-hand side, as a collision pin: A0^-1 e_v from the collision stage's precomputed
 // columns where the vertex has one, else back-substituted here (a folded triangle is
 // rare; a frame's cost is bounded by fold_max_pins).
 uint32_t FoldStage::add_pins(PinUpdate& update) noexcept {
   const SolverModel& m = model_;
   uint32_t added = 0;
+  if (++pin_stamp_now_ == 0) {  // wrapped: forget every old stamp
+    std::fill(pin_stamp_.begin(), pin_stamp_.end(), 0u);
+    pin_stamp_now_ = 1;
+  }
   for (const int t : detector_.folded_triangles())
     for (int j = 0; j < 3; ++j) {
       const int v = m.rig.triangles(j, t);
-      if (pin_stamp_[std::size_t(v)] == frame_stamp_ || pins_ == pin_capacity_) continue;
+      if (pin_stamp_[std::size_t(v)] == pin_stamp_now_ || pins_ == pin_capacity_) continue;
       const Eigen::Vector3d target = reference_.col(v);
       const int c = m.pin_columns_precomputed() ? m.collision.vertex_index[std::size_t(v)] : -1;
       bool ok;
@@ -72,7 +71,7 @@ uint32_t FoldStage::add_pins(PinUpdate& update) noexcept {
         ok = update.add({v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), z.data(), kPinWeight * m.params.beta, target);
       }
       if (!ok) return added;
-      pin_stamp_[std::size_t(v)] = frame_stamp_;
+      pin_stamp_[std::size_t(v)] = pin_stamp_now_;
       ++pins_;
       ++added;
     }

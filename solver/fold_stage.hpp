@@ -34,7 +34,8 @@ class FoldStage {
   const FoldReport& measure_again(const Eigen::Matrix3Xd& vertices) noexcept;
 
   // Pins the vertices of the triangles the last measure() found folded to the linear
-  // blend, each vertex once per frame, while capacity lasts. Returns the pins added.
+  // blend, each vertex once per call (a corner pinned in an earlier round and still on a
+  // fold is pinned again: its hold adds up), while capacity lasts. Returns the pins added.
   // Real-time safe.
   uint32_t add_pins(PinUpdate& update) noexcept;
   // Forgets this frame's pins (call once per frame before add_pins). Real-time safe.
@@ -55,8 +56,8 @@ class FoldStage {
   Eigen::Index pins_ = 0;  // this frame's
   Eigen::MatrixXd pin_columns_;  // A0^-1 e_v of pins outside the precomputed collision columns
   Eigen::VectorXd pin_work_;
-  uint32_t frame_stamp_ = 0;
-  std::vector<uint32_t> pin_stamp_;  // per vertex: the frame it was last pinned
+  uint32_t pin_stamp_now_ = 0;        // this round's
+  std::vector<uint32_t> pin_stamp_;  // per vertex: the round it was last pinned
   uint32_t measure_stamp_ = 0;
   std::vector<uint32_t> fold_vertex_stamp_;  // per vertex: the measure that found it on a fold
 

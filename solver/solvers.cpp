@@ -163,19 +163,21 @@ class PoissonSolver final : public FaceSolver {
     if (collided.pins > 0 && !pins_.apply(rhs_, out.vertices)) out.status |= kSolvedSingularCorrection;
 
     // Folds (timed with the collisions: both are pins to the linear blend): the folded
-    // triangles' corners pinned to the linear blend, then measured again. Where no new
-    // corner is left to pin, a marker pinning a corner of a fold that remains pulls the
-    // skin through itself (a far pin, a swapped label): it is released for this frame.
+    // triangles' corners pinned to the linear blend, then measured again, round by round
+    // (a corner still on a fold is pinned again). From round kReleaseRound, or when
+    // capacity is spent, a marker pinning a corner of a fold that remains pulls the skin
+    // through itself (a far pin, a swapped label): it is released for this frame.
     out.folds = folds_.measure(active_.data(), out.vertices);
     folds_.begin_frame();
     bool released = false;
     for (int round = 0; round < kFoldRounds && out.folds.folded > 0 && folds_.pin_capacity() > 0; ++round) {
       const uint32_t added = folds_.add_pins(pins_);
       out.fold_pins += added;
-      if (added == 0) {
-        if (released) break;
+      if (!released && (added == 0 || round == kReleaseRound)) {
         released = true;
-        if (release_folding_markers(targets, present, out) == 0) break;
+        if (release_folding_markers(targets, present, out) == 0 && added == 0) break;
+      } else if (added == 0) {
+        break;
       }
       if (!pins_.apply(rhs_, out.vertices)) out.status |= kSolvedSingularCorrection;
       out.folds = folds_.measure_again(out.vertices);
@@ -205,8 +207,8 @@ class PoissonSolver final : public FaceSolver {
   }
 
   // Pinning a folded triangle can fold a neighbour it pulls: up to this many rounds of
-  // pins and measures.
-  static constexpr int kFoldRounds = 8;
+  // pins and measures, markers released from the kReleaseRound'th on.
+  static constexpr int kFoldRounds = 8, kReleaseRound = 4;
 
   CollisionStage collisions_;
   FoldStage folds_;
