@@ -65,19 +65,19 @@ const FoldReport& FoldDetector::measure(const Eigen::Matrix3Xd& solved, const Ei
     folded_[std::size_t(t)] = solved_normals_.col(t).dot(reference_normals_.col(t)) < 0.0;
   }
   // A crease past crease_radians_ needs the solve's normals more than crease_radians_
-  // apart; for the default 90 degrees that is a negative dot product, so the angles are
-  // only taken where one is.
-  const double crease_cos = std::cos(crease_radians_);
+  // apart, tested without square roots (dot < cos |n0| |n1|; for the default 90 degrees a
+  // negative dot product); the angles are only taken where it holds.
+  const double crease_cos = std::cos(crease_radians_), crease_cos2 = crease_cos * crease_cos;
   auto angle = [](const Eigen::Vector3d& n0, const Eigen::Vector3d& n1) {
     const double norms = std::sqrt(n0.squaredNorm() * n1.squaredNorm());
     return norms > 0.0 ? std::acos(std::clamp(n0.dot(n1) / norms, -1.0, 1.0)) : 0.0;
   };
   for (const auto& [t0, t1] : interior_edges_) {
-    const double dot = solved_normals_.col(t0).dot(solved_normals_.col(t1));
-    if (dot >= crease_cos * solved_normals_.col(t0).norm() * solved_normals_.col(t1).norm()) continue;
-    if (angle(solved_normals_.col(t0), solved_normals_.col(t1)) -
-            angle(reference_normals_.col(t0), reference_normals_.col(t1)) <= crease_radians_)
-      continue;
+    const auto n0 = solved_normals_.col(t0), n1 = solved_normals_.col(t1);
+    const double dot = n0.dot(n1), dot2_bound = crease_cos2 * n0.squaredNorm() * n1.squaredNorm();
+    const bool apart = crease_cos >= 0.0 ? (dot < 0.0 || dot * dot < dot2_bound) : (dot < 0.0 && dot * dot > dot2_bound);
+    if (!apart) continue;
+    if (angle(n0, n1) - angle(reference_normals_.col(t0), reference_normals_.col(t1)) <= crease_radians_) continue;
     folded_[std::size_t(t0)] = folded_[std::size_t(t1)] = 1;
   }
   for (Eigen::Index t = 0; t < triangle_count_; ++t) {
@@ -86,9 +86,15 @@ const FoldReport& FoldDetector::measure(const Eigen::Matrix3Xd& solved, const Ei
     ++report_.folded_by_region[regions_[std::size_t(t)]];
     report_.flipped += solved_normals_.col(t).dot(reference_normals_.col(t)) < 0.0;
   }
+  // | |e| - |e_ref| | = |e^2 - e_ref^2| / (|e| + |e_ref|) <= |e^2 - e_ref^2| / max(|e|, |e_ref|):
+  // an edge whose bound is within the largest so far is passed over without a square root.
   double stretch = 0.0;
-  for (const auto& [a, b] : edges_)
-    stretch = std::max(stretch, std::abs((solved.col(a) - solved.col(b)).norm() - (reference.col(a) - reference.col(b)).norm()));
+  for (const auto& [a, b] : edges_) {
+    const double solved2 = (solved.col(a) - solved.col(b)).squaredNorm(), reference2 = (reference.col(a) - reference.col(b)).squaredNorm();
+    const double difference = std::abs(solved2 - reference2);
+    if (difference * difference <= stretch * stretch * std::max(solved2, reference2)) continue;
+    stretch = std::max(stretch, std::abs(std::sqrt(solved2) - std::sqrt(reference2)));
+  }
   report_.max_edge_stretch = stretch;
   return report_;
 }
