@@ -9,7 +9,7 @@ namespace facecap {
 
 FoldStage::FoldStage(const SolverModel& model) : model_(model) {
   const SolverModel& m = model_;
-  detector_.configure(m.rig.triangles, triangle_regions(m.rig), m.params.fold_crease_degrees * (3.14159265358979323846 / 180.0));
+  detector_.configure(m.rig.triangles, triangle_regions(m.rig), m.params.fold_crease_degrees);
   reference_.resize(3, m.vertex_count());
   pin_capacity_ = std::min<Eigen::Index>(m.vertex_count(), m.params.fold_max_pins);
   pin_columns_.resize(m.vertex_count(), pin_capacity_);

@@ -139,7 +139,7 @@ TEST_CASE("the fold metric finds a flipped triangle, a crease past the threshold
   CHECK(folds.measure(creased, creased).folded == 0);  // the reference creased alike: no fold
   CHECK(folds.measure(bent, g.vertices).folded == 0);  // 60 degrees: below the default 90
   FoldDetector sharp;
-  sharp.configure(g.triangles, {}, 45.0 * std::numbers::pi / 180.0);
+  sharp.configure(g.triangles, {}, 45.0);
   CHECK(sharp.measure(bent, g.vertices).folded == 8);
 }
 

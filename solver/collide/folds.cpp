@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numbers>
 
 #include <Eigen/Geometry>
 
@@ -32,11 +33,11 @@ std::vector<uint8_t> triangle_regions(const Rig& rig) {
   return out;
 }
 
-void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_radians) {
+void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees) {
   triangles_ = triangles;
   triangle_count_ = triangles.cols();
   regions_ = regions.empty() ? std::vector<uint8_t>(std::size_t(triangle_count_), kRegionElsewhere) : std::move(regions);
-  crease_radians_ = crease_radians;
+  crease_radians_ = crease_degrees * std::numbers::pi / 180.0;
   // Each edge once, and the pairs of triangles that share one.
   std::map<std::pair<int, int>, int> first_triangle;
   edges_.clear();

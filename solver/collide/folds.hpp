@@ -37,14 +37,11 @@ struct FoldReport {
 
 class FoldDetector {
  public:
-  // A crease counts when the angle between the normals across an edge exceeds the
-  // reference's by more than this (radians). 90 degrees: the skin doubles back on itself.
-  static constexpr double kDefaultCreaseRadians = 1.5707963267948966;
-
-  // triangles: 3 x T; regions: T (triangle_regions), or empty for all elsewhere.
-  // Allocates; not real-time.
-  void configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions,
-                 double crease_radians = kDefaultCreaseRadians);
+  // triangles: 3 x T; regions: T (triangle_regions), or empty for all elsewhere. A crease
+  // counts when the angle between the normals across an edge exceeds the reference's by
+  // more than crease_degrees (SolverParams::fold_crease_degrees; 90: the skin doubles
+  // back on itself). Allocates; not real-time.
+  void configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees = 90.0);
   bool configured() const noexcept { return triangle_count_ > 0; }
 
   // Measures `solved` against `reference` (both 3 x N). Zero-area triangles (either mesh)
