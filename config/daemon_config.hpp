@@ -34,6 +34,11 @@ struct RigSection {
   bool cache = true;
 };
 
+// calibration.marker_consistency_mm by default (rig mm): about half a brow's marker
+// spacing, well above the residual spread between neighbours on clean takes
+// (docs/alignment.md "Label swaps").
+inline constexpr double kDefaultMarkerConsistencyMm = 10.0;
+
 struct CalibrationSection {
   std::string file;
   std::string profiles_directory;
@@ -43,6 +48,7 @@ struct CalibrationSection {
   bool label_markers = false;
   double max_marker_speed_mm_s = 0.0;
   double neutral_min_presence = 0.0;
+  double marker_consistency_mm = 0.0;
 };
 
 // The solver's parameters as the solver takes them (their initialisers are the defaults),

@@ -209,6 +209,13 @@ const std::vector<KeySpec>& schema_rows() {
                       "costs one frame. The fastest marker in the real takes tried (AnimFace, 60 Hz) moved 229 mm/s; "
                       "a 10 cm jump in one frame is 6000 mm/s at 60 Hz. 0 turns the check off."},
 
+      {FACECAP_KEY(calibration.marker_consistency_mm), .default_value = kDefaultMarkerConsistencyMm, .unit = "rig mm", .min = 0, .max = 1000,
+       .reload = Reload::kRebuild,
+       .description = "Each face marker's target is compared with its neighbours' (against where the rig puts them "
+                      "under the last frame's weights); one further than this from their median is left out of the "
+                      "frame, and two that trade places are swapped back; such a frame is flagged "
+                      "inconsistent_marker. Catches label swaps that glide too slowly for max_marker_speed_mm_s. 0 "
+                      "turns the check off."},
       {FACECAP_KEY(calibration.label_markers), .default_value = false, .reload = Reload::kRebuild,
        .description = "Label every frame afresh: its points go to the labeller, which matches them to the "
                       "calibration's markers (tracking them from frame to frame, re-acquiring the set from the "
@@ -253,6 +260,15 @@ const std::vector<KeySpec>& schema_rows() {
                       "and mouth's openings stay free); 0 leaves it free, so that a pinned solve can carry the "
                       "markers' motion out to it. -1: the rig's choice, 0.003, and 0 for a hinged rig (the built-in "
                       "face, whose jaw swings its edge)."},
+      {FACECAP_KEY(solver.fold_max_pins), .default_value = int64_t{kSolverDefaults.fold_max_pins}, .unit = "vertices", .min = 0, .max = 1024,
+       .reload = Reload::kRebuild,
+       .description = "Vertices of triangles the non-linear solve folded (flipped, or creased past fold_crease_degrees, "
+                      "against the rig's linear blend of the same weights) pinned to that blend per frame at most; 0 "
+                      "only measures. A frame still folded is flagged folded."},
+      {FACECAP_KEY(solver.fold_crease_degrees), .default_value = kSolverDefaults.fold_crease_degrees, .unit = "degrees", .min = 10, .max = 180,
+       .reload = Reload::kRebuild,
+       .description = "A crease counts as a fold when the normals across an edge turn this much more than in the "
+                      "rig's linear blend of the same weights."},
       {FACECAP_KEY(solver.active_weight), .default_value = kSolverDefaults.active_weight, .min = 0, .max = 0.1, .reload = Reload::kRebuild,
        .description = "Weights below this are left out of the non-linear blend (Eq. 4), for speed."},
       {FACECAP_KEY(solver.negligible_displacement_mm), .default_value = kSolverDefaults.negligible_displacement_mm, .unit = "mm",

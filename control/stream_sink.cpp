@@ -124,7 +124,9 @@ json frame_message(const StreamSink::Entry& entry, const StreamSchema& schema, b
         {"head_held", (f.flags & kSolvedHeadPoseHeld) != 0},
         {"face_held", (f.flags & kSolvedTooFewMarkers) != 0},
         {"residual_p95_mm", p95},
-        {"residual_max_mm", max}}},
+        {"residual_max_mm", max},
+        {"folded_triangles", f.folded_triangles},
+        {"max_edge_stretch_mm", f.max_edge_stretch_mm}}},
       {"solve_us", double(f.solve_end_ns - f.solve_start_ns) * 1e-3},
       {"stage_us", std::move(stage_us)},
   };

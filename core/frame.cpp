@@ -28,6 +28,8 @@ void copy_solved_frame(const SolvedFrame& from, SolvedFrame& to) noexcept {
   to.collision_constraints = from.collision_constraints;
   to.markers_used = from.markers_used;
   to.flags = from.flags;
+  to.folded_triangles = from.folded_triangles;
+  to.max_edge_stretch_mm = from.max_edge_stretch_mm;
 }
 
 std::string_view solve_stage_name(SolveStage stage) noexcept {
@@ -48,7 +50,7 @@ std::string_view solve_stage_name(SolveStage stage) noexcept {
 std::string_view solved_flag_name(std::size_t bit) noexcept {
   static constexpr std::string_view kNames[kSolvedFlagCount] = {
       "head_pose_held", "too_few_markers", "qp_iteration_cap", "pins_beyond_capacity", "singular_correction",
-      "implausible_marker"};
+      "implausible_marker", "folded", "inconsistent_marker"};
   return bit < kSolvedFlagCount ? kNames[bit] : "?";
 }
 

@@ -89,8 +89,10 @@ enum SolvedFlags : uint32_t {
   kSolvedPinsBeyondCapacity = 1u << 3,  // the collision stage needed more pins than collision_max_pins
   kSolvedSingularCorrection = 1u << 4,  // a low-rank pin correction was singular: solved without it
   kSolvedImplausibleMarker = 1u << 5,   // a marker moved implausibly fast (or was not finite): left out of this frame
+  kSolvedFolded = 1u << 6,              // triangles folded against the linear blend of the same weights remain
+  kSolvedInconsistentMarker = 1u << 7,  // a marker disagreed with its face neighbours (a label swap): left out of this frame
 };
-inline constexpr std::size_t kSolvedFlagCount = 6;
+inline constexpr std::size_t kSolvedFlagCount = 8;
 // "head_pose_held", "too_few_markers", ... for bit 0, 1, ...; "?" beyond. RT-safe.
 std::string_view solved_flag_name(std::size_t bit) noexcept;
 
@@ -110,6 +112,10 @@ struct SolvedFrame {
   uint32_t markers_used = 0;      // face markers the solve pinned
   uint32_t markers_expected = 0;  // face markers the calibration binds
   uint32_t flags = 0;
+  // The fold metric of this frame's solve against the rig's linear blend of the same
+  // weights (SolveResult::folds): folded triangles, the largest edge stretch in rig mm.
+  uint32_t folded_triangles = 0;
+  float max_edge_stretch_mm = 0.0f;
   // Operator telemetry per source marker slot (MarkerFrame::markers order): the marker's
   // target in rig space (head frame, rig units) and the fit residual, the distance in mm
   // from the solved surface point it is bound to. NaN for slots missing this frame or not

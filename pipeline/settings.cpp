@@ -23,6 +23,7 @@ SolveSettings solve_settings(const config::DaemonConfig& config, SolveContext co
   settings.mapper.stabilise_head = config.calibration.stabilise_head;
   settings.label_markers = config.calibration.label_markers;
   settings.mapper.max_marker_speed_mm_s = config.calibration.max_marker_speed_mm_s;
+  settings.marker_consistency_mm = config.calibration.marker_consistency_mm;
   const config::FilterSection& filter = config.filter;
   settings.filter.targets = filter_mode_in(filter.mode, context) == config::FilterMode::kOn;
   settings.filter.weights = settings.filter.targets && filter.weights;
@@ -41,7 +42,7 @@ CalibrationSpec calibration_spec(const config::DaemonConfig& config) {
 bool is_solve_setting(std::string_view key_path) {
   return key_path.starts_with("solver.") || key_path.starts_with("filter.") || key_path == "calibration.stabilise_head" ||
          key_path == "calibration.label_markers" ||
-         key_path == "calibration.max_marker_speed_mm_s";
+         key_path == "calibration.max_marker_speed_mm_s" || key_path == "calibration.marker_consistency_mm";
 }
 
 std::string solve_settings_toml(const config::DaemonConfig& config_as_given, SolveContext context) {

@@ -55,6 +55,8 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
       vertex_count_(rig.vertex_count()),
       source_slots_(Eigen::Index(source.labels.size())) {
   label_markers_ = settings.label_markers;
+  if (settings.marker_consistency_mm > 0.0)
+    consistency_.emplace(solver_->model(), settings.marker_consistency_mm / rig_mm_per_unit_);
   if (settings.filter.targets) {
     target_filter_.emplace(make_target_filter(settings.filter, mapper_.marker_count(), rig_mm_per_unit_));
     if (settings.filter.weights) {
@@ -113,6 +115,11 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   }
   const int64_t checked_ns = monotonic_now_ns();
   mapper_.process(*frame, mapped_);
+  bool inconsistent = false;
+  if (consistency_) {  // against the previous frame's weights (the solver's warm start, still in result_)
+    const MarkerConsistency::Result checked = consistency_->check(mapped_.targets, mapped_.present, result_.weights);
+    inconsistent = checked.dropped + checked.unswapped > 0;
+  }
   if (target_filter_) target_filter_->filter(mapped_.targets, mapped_.present, markers.source_time_ns);
   const int64_t mapped_ns = monotonic_now_ns();
   solver_->solve(mapped_.targets, mapped_.present, result_);
@@ -133,8 +140,10 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.markers_used = result_.markers_used;
   out.markers_expected = uint32_t(bindings_.size());
   out.collision_constraints = result_.collision_constraints;
+  out.folded_triangles = result_.folds.folded;
+  out.max_edge_stretch_mm = float(result_.folds.max_edge_stretch * rig_mm_per_unit_);
   out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | (mapped_.markers_implausible > 0 ? kSolvedImplausibleMarker : 0u) |
-              result_.status;
+              (inconsistent ? kSolvedInconsistentMarker : 0u) | result_.status;
   record_fit_residuals(out);
   out.solve_end_ns = monotonic_now_ns();
 }

@@ -12,7 +12,9 @@
 #include <string_view>
 #include <vector>
 
+#include "config/daemon_config.hpp"
 #include "core/frame.hpp"
+#include "pipeline/marker_consistency.hpp"
 #include "pipeline/marker_mapper.hpp"
 #include "pipeline/temporal_filter.hpp"
 #include "solver/align/label.hpp"
@@ -56,6 +58,10 @@ struct SolveSettings {
   // labels they came with, are matched to the calibration's markers, so that a face is
   // solved from an unlabelled point cloud. Implies the check.
   bool label_markers = false;
+  // Each face marker checked against its neighbours before it pins (MarkerConsistency):
+  // one further than this (rig mm) from what they say is left out of the frame, a
+  // swapped pair is swapped back. 0: off.
+  double marker_consistency_mm = config::kDefaultMarkerConsistencyMm;
   FilterSettings filter;
 };
 
@@ -104,6 +110,7 @@ class SolvePipeline {
   MarkerFrame checked_;  // the frame after the label check or labelling, sized at construction
   std::vector<Eigen::Vector3d> points_;  // label_markers: a frame's present points, sized to its slots
   MappedFrame mapped_;
+  std::optional<MarkerConsistency> consistency_;
   std::optional<OneEuroFilter> target_filter_, weight_filter_;
   Eigen::VectorXd filtered_weights_;  // M, with the weight filter
   SolveResult result_;

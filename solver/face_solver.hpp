@@ -15,6 +15,7 @@
 #include <Eigen/Core>
 
 #include "core/frame.hpp"
+#include "solver/collide/folds.hpp"
 #include "solver/params.hpp"
 #include "solver/rig.hpp"
 
@@ -40,9 +41,14 @@ struct SolveResult {
   uint32_t markers_used = 0;
   uint32_t collision_pairs = 0;        // colliding triangle pairs found
   uint32_t collision_constraints = 0;  // vertices pinned to the linear blend
+  uint32_t fold_pins = 0;              // vertices of folded triangles pinned to the linear blend
+  uint32_t markers_released = 0;       // present markers whose pins a fold released this frame
+  // The fold metric against the linear blend of the same weights after the fold stage
+  // (nonlinear, dt; zero for linear and meshik).
+  FoldReport folds;
   // SolvedFlags (core/frame.hpp) this solve raised: kSolvedTooFewMarkers (the previous
   // result kept), kSolvedQpIterationCap, kSolvedPinsBeyondCapacity,
-  // kSolvedSingularCorrection. 0 for a normal frame.
+  // kSolvedSingularCorrection, kSolvedFolded. 0 for a normal frame.
   uint32_t status = 0;
 };
 

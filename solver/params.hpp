@@ -97,6 +97,15 @@ struct SolverParams {
   // The kernels the model's solvers run; a path the CPU lacks is refused when the model
   // is built.
   KernelPath kernels = KernelPath::kAuto;
+  // The fold stage (docs/solver.md "Folds"): a triangle the solve flips against the
+  // linear blend of the same weights, or creases across an edge more than
+  // fold_crease_degrees beyond that blend's bend there, counts as folded; its vertices
+  // are pinned to the linear blend, at most fold_max_pins a frame (ICT's stress corpus
+  // needs up to 146), and a marker pinning a fold the pins cannot undo is released for
+  // the frame; 0: measure only, the paper's solve. A frame still folded is flagged
+  // kSolvedFolded.
+  int fold_max_pins = 256;
+  double fold_crease_degrees = 90.0;
 };
 
 }  // namespace facecap

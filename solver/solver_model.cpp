@@ -39,6 +39,10 @@ void validate(const Rig& rig, const std::vector<MarkerBinding>& markers, const S
   if (markers.empty()) throw Error("solver: no markers to solve from");
   if (params.collision_max_pins < 0 || params.collision_max_pins > 1024)
     throw Error(fmt::format("solver: collision_max_pins {} is not in [0, 1024]", params.collision_max_pins));
+  if (params.fold_max_pins < 0 || params.fold_max_pins > 1024)
+    throw Error(fmt::format("solver: fold_max_pins {} is not in [0, 1024]", params.fold_max_pins));
+  if (!(params.fold_crease_degrees >= 10 && params.fold_crease_degrees <= 180))
+    throw Error(fmt::format("solver: fold_crease_degrees {} is not in [10, 180]", params.fold_crease_degrees));
   if (params.weight_refinements < 0)
     throw Error(fmt::format("solver: weight_refinements {} must be >= 0, or {} for the rig's choice", params.weight_refinements, kByRig));
   if (params.weight_qp_iteration_cap < 0)

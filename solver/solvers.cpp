@@ -8,6 +8,7 @@
 #include "solver/blend_terms.hpp"
 #include "solver/collision_stage.hpp"
 #include "solver/face_solver.hpp"
+#include "solver/fold_stage.hpp"
 #include "solver/meshik.hpp"
 #include "solver/pin_update.hpp"
 #include "solver/solver_model.hpp"
@@ -36,7 +37,8 @@ class StageClock {
 // previous result and flag it; returns whether the frame is to be solved.
 bool begin_solve(const WeightsStage& weights, const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present,
                  SolveResult& out) noexcept {
-  out.collision_pairs = out.collision_constraints = 0;
+  out.collision_pairs = out.collision_constraints = out.fold_pins = out.markers_released = 0;
+  out.folds = {};
   out.status = weights.usable(present, targets) ? 0u : uint32_t(kSolvedTooFewMarkers);
   return out.status == 0;
 }
@@ -100,7 +102,8 @@ class PoissonSolver final : public FaceSolver {
         weights_(*model_, kind == TriangleBlend::Kind::kNonlinear),
         blend_(*model_, kind),
         collisions_(*model_),
-        pins_(model_->vertex_count(), model_->marker_count() + collisions_.pin_capacity()),
+        folds_(*model_),
+        pins_(model_->vertex_count(), model_->marker_count() + collisions_.pin_capacity() + folds_.pin_capacity()),
         active_(std::size_t(model_->shape_count())),
         rhs_(3, model_->vertex_count()),
         work_(4, model_->vertex_count()) {}
@@ -123,13 +126,13 @@ class PoissonSolver final : public FaceSolver {
                           std::span<const uint8_t> present, SolveResult& out) noexcept override {
     StageClock clock(out);
     out.status = 0;
-    out.collision_pairs = out.collision_constraints = 0;
+    out.collision_pairs = out.collision_constraints = out.fold_pins = out.markers_released = 0;
     out.weights = weights;
     solve_mesh(targets, present, out, clock);
   }
 
  private:
-  // Eq. 4, Eq. 5 and collisions for out.weights.
+  // Eq. 4, Eq. 5, collisions and folds for out.weights.
   void solve_mesh(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out,
                   StageClock& clock) noexcept {
     const SolverModel& m = *model_;
@@ -160,14 +163,58 @@ class PoissonSolver final : public FaceSolver {
     out.collision_constraints = collided.pins;
     if (collided.beyond_capacity) out.status |= kSolvedPinsBeyondCapacity;
     if (collided.pins > 0 && !pins_.apply(rhs_, out.vertices)) out.status |= kSolvedSingularCorrection;
+
+    // Folds (timed with the collisions: both are pins to the linear blend): the folded
+    // triangles' corners pinned to the linear blend, then measured again, round by round
+    // (a corner still on a fold is pinned again). From round kReleaseRound, or when
+    // capacity is spent, a marker pinning a corner of a fold that remains pulls the skin
+    // through itself (a far pin, a swapped label): it is released for this frame.
+    out.folds = folds_.measure(active_.data(), out.vertices);
+    folds_.begin_frame();
+    bool released = false;
+    for (int round = 0; round < kFoldRounds && out.folds.folded > 0 && folds_.pin_capacity() > 0; ++round) {
+      const uint32_t added = folds_.add_pins(pins_);
+      out.fold_pins += added;
+      if (!released && (added == 0 || round == kReleaseRound)) {
+        released = true;
+        if (release_folding_markers(targets, present, out) == 0 && added == 0) break;
+      } else if (added == 0) {
+        break;
+      }
+      if (!pins_.apply(rhs_, out.vertices)) out.status |= kSolvedSingularCorrection;
+      out.folds = folds_.measure_again(out.vertices);
+    }
+    if (out.folds.folded > 0) out.status |= kSolvedFolded;
     clock.lap(SolveStage::kCollide);
     clock.finish();
   }
 
   WeightsStage weights_;
   TriangleBlend blend_;
+  // Removes the pin of each present marker bound to a corner of a folded triangle (the
+  // low-rank change of a dropout, its target taken back out of the right-hand side).
+  // Returns the markers released. Real-time safe.
+  uint32_t release_folding_markers(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept {
+    const SolverModel& m = *model_;
+    uint32_t released = 0;
+    for (Eigen::Index k = 0; k < m.marker_count(); ++k) {
+      const auto& b = m.markers[std::size_t(k)];
+      if (!present[std::size_t(k)] || !targets.col(k).allFinite()) continue;
+      if (!folds_.on_fold(b.vertices[0]) && !folds_.on_fold(b.vertices[1]) && !folds_.on_fold(b.vertices[2])) continue;
+      if (!pins_.add(b.vertices, b.barycentric, m.poisson.marker_solution.col(k).data(), -m.params.beta, targets.col(k))) break;
+      ++released;
+    }
+    out.markers_released += released;
+    return released;
+  }
+
+  // Pinning a folded triangle can fold a neighbour it pulls: up to this many rounds of
+  // pins and measures, markers released from the kReleaseRound'th on.
+  static constexpr int kFoldRounds = 8, kReleaseRound = 4;
+
   CollisionStage collisions_;
-  PinUpdate pins_;             // this frame's missing markers, then its collision pins
+  FoldStage folds_;
+  PinUpdate pins_;             // this frame's missing markers, then its collision and fold pins
   std::vector<float> active_;  // per shape: its weight, 0 if inactive
   Eigen::Matrix3Xd rhs_;       // 3 x N: the right-hand side, then y = A0^-1 r
   Eigen::Matrix4Xd work_;      // back-substitution scratch

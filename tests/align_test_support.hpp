@@ -119,6 +119,14 @@ struct HeadRigTakeOptions {
   double face_scale = 1.0;
   double head_rig_mm = 40.0;
   int head_markers = 4;
+  // Per head marker, its distance off the skin (empty: head_rig_mm for every one).
+  std::vector<double> head_offsets_mm;
+  // The last this many head markers sit on a headband above the face's top edge instead
+  // of over the forehead (head_offsets_mm still says how far forward of the skin).
+  int headband_markers = 0;
+  // The first head marker wobbles on its mount by this much (mm, a slow sway in the head's
+  // frame): rigid with the rest but not exactly.
+  double wobble_mm = 0.0;
   double ghost_fraction = 0.01;
   double noise_mm = 0.2;
   int rest_frames = 60;
@@ -203,9 +211,17 @@ inline HeadRigTake make_head_rig_take(const Rig& rig, std::vector<MarkerBinding>
       frame.markers.push_back(m);
     };
     for (const auto& b : t.layout) add(layout_point(b, pose), true);
-    for (int v : head_vertices) {
-      const Eigen::Vector3d skin = ((rig.neutral.col(v) - centre) * o.face_scale) + centre;
-      add(skin + normal.col(v).normalized() * (o.head_rig_mm / o.rig_mm_per_unit), true);
+    for (std::size_t h = 0; h < head_vertices.size(); ++h) {
+      const int v = head_vertices[h];
+      Eigen::Vector3d skin = ((rig.neutral.col(v) - centre) * o.face_scale) + centre;
+      if (int(h) >= o.head_markers - o.headband_markers)  // on the band: above the face's top edge
+        skin.y() = centre.y() + (box.max.y() - centre.y()) * o.face_scale + 25.0 / o.rig_mm_per_unit;
+      const double offset_mm = o.head_offsets_mm.empty() ? o.head_rig_mm : o.head_offsets_mm[h];
+      Eigen::Vector3d point = skin + normal.col(v).normalized() * (offset_mm / o.rig_mm_per_unit);
+      if (h == 0 && o.wobble_mm > 0.0)
+        point += Eigen::Vector3d(std::sin(2.0 * std::numbers::pi * 0.7 * f / o.rate_hz), std::cos(2.0 * std::numbers::pi * 0.4 * f / o.rate_hz), 0.0) *
+                 (o.wobble_mm / o.rig_mm_per_unit);
+      add(point, true);
     }
     add(centre + Eigen::Vector3d(g(rng), g(rng), g(rng)) * (30.0 / o.rig_mm_per_unit), u(rng) < o.ghost_fraction);
     t.frames.push_back(std::move(frame));

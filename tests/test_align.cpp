@@ -172,6 +172,25 @@ TEST_CASE("A take with a head rig 40 mm off the skin and a 1 percent ghost slot 
                                                                                                    << " mm from the truth");
 }
 
+// Unlike the rig above: markers at different distances off the skin, two on a headband
+// above the face, one wobbling on its mount (issue 29: a real rig found by rigidity, not by
+// looking like the synthetic one).
+TEST_CASE("A head rig of 3 to 6 markers 30 to 50 mm off the skin, on a headband and wobbling, is found and never bound") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const std::vector<std::vector<double>> rigs = {{30, 50, 40}, {35, 45, 30, 50}, {30, 38, 46, 50, 42, 34}};
+  unsigned seed = 40;
+  for (const auto& offsets : rigs) {
+    test::HeadRigTakeOptions o;
+    o.seed = seed++;
+    o.head_markers = int(offsets.size());
+    o.head_offsets_mm = offsets;
+    o.headband_markers = int(offsets.size()) / 2;
+    o.wobble_mm = 0.8;
+    INFO(offsets.size() << " head markers");
+    test::check_head_rig_calibration(rig, test::builtin_marker_layout(), o);
+  }
+}
+
 TEST_CASE("Plain ICP converges wrong from 30 to 50 degree turns where hull then surface ICP does not") {
   const Rig& rig = BuiltinFace::instance().rig();
   const auto layout = test::builtin_marker_layout();

@@ -114,6 +114,24 @@ TEST_CASE("ICT takes with a head rig 40 mm off the skin and a 1 percent ghost sl
   WARN("ICT face, head rig 40 mm off the skin, ghost slot, faces 0.8-1.25x: worst bound point " << worst << " mm from the truth");
 }
 
+TEST_CASE("An ICT take with a head rig of 4 to 6 markers 30 to 50 mm off, on a headband and wobbling, finds it and never binds it",
+          "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  const Rig& rig = ict_rig(ict);
+  const auto layout = spread_marker_layout(rig, 40);
+  unsigned seed = 50;
+  for (const std::vector<double>& offsets : {std::vector<double>{35, 45, 30, 50}, std::vector<double>{30, 38, 46, 50, 42, 34}}) {
+    test::HeadRigTakeOptions o;
+    o.seed = seed++;
+    o.head_markers = int(offsets.size());
+    o.head_offsets_mm = offsets;
+    o.headband_markers = 2;
+    o.wobble_mm = 0.8;
+    INFO(offsets.size() << " head markers");
+    test::check_head_rig_calibration(rig, layout, o);
+  }
+}
+
 TEST_CASE("AnimFace labels are recovered from unlabelled shuffled points in at least 99 percent of frames", "[data]") {
   FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");

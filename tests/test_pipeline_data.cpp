@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include <catch2/catch.hpp>
+#include <fmt/format.h>
 
 #include "formats/take.hpp"
 #include "pipeline/calibration.hpp"
@@ -13,6 +14,7 @@
 #include "pipeline/source_units.hpp"
 #include "solver/rig.hpp"
 #include "tests/labelling_test_support.hpp"
+#include "tools/label_swap.hpp"
 #include "tests/test_support.hpp"
 
 using namespace facecap;
@@ -127,4 +129,52 @@ TEST_CASE("JawMoCap starting with two lip labels swapped is corrected by the lab
   e.swap_a = slot("Mouth_DownL"), e.swap_b = slot("Mouth_Down"), e.swap_from = 0;
   const std::vector<bool> right = test::labelled_frames_right(s.rig, s.calibration, s.take.labels, frames, s.take.units, e, false);
   CHECK(std::count(right.begin(), right.end(), true) == 300);
+}
+
+namespace {
+
+// Frames of `take` the nonlinear pipeline (facecapd's defaults, marker_consistency_mm as
+// given) solves torn: a triangle folded against the linear blend of the same weights, or an
+// edge stretched by more than 20 mm against it (the issue's torn brow: 68 mm).
+struct TornCount {
+  int torn = 0, flagged_inconsistent = 0;
+  double worst_stretch_mm = 0;
+};
+TornCount torn_frames(const JawTake& s, const formats::MarkerTake& take, double consistency_mm) {
+  pipeline::SolveSettings settings;
+  settings.marker_consistency_mm = consistency_mm;
+  pipeline::SolvePipeline solve(s.rig, s.calibration, {take.labels, take.units}, settings);
+  SolvedFrame out = solve.make_solved_frame(false);
+  TornCount count;
+  for (const MarkerFrame& frame : take.frames) {
+    solve.process(frame, out);
+    count.torn += out.folded_triangles > 0 || out.max_edge_stretch_mm > 20.0f;
+    count.flagged_inconsistent += (out.flags & kSolvedInconsistentMarker) != 0;
+    count.worst_stretch_mm = std::max(count.worst_stretch_mm, double(out.max_edge_stretch_mm));
+  }
+  return count;
+}
+
+}  // namespace
+
+TEST_CASE("JawMoCap with label swaps injected (slow and fast, neighbours and not) solves without torn frames", "[data]") {
+  FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
+  FACECAP_REQUIRE_SHARED_DATA(jaw, "markers/animface/JawMoCap.trc");
+  const JawTake& s = jaw_take(ict, jaw);
+  formats::MarkerTake take = s.take;
+  take.frames.resize(900);
+  const double on = pipeline::SolveSettings{}.marker_consistency_mm;
+  REQUIRE(on > 0.0);  // the check is on by default
+  const TornCount clean = torn_frames(s, take, on);
+  for (const std::string spec : {"Leyebrow_M:Leyebrow_Inside:200:40:6", "Mouth_DownL:Mouth_Down:400:30:0",
+                                 "Leye_Up:Rcheek_up:600:20:3", "Reyebrow_M:Reyebrow_Outside:750:60:0"})
+    tools::inject_label_swap(take, tools::parse_label_swap(spec));
+  const TornCount before = torn_frames(s, take, 0.0), after = torn_frames(s, take, on);
+  WARN(fmt::format("JawMoCap, 900 frames, four swaps injected: torn frames without the consistency check {} (worst "
+                   "stretch {:.1f} mm), with it {} ({:.1f} mm; {} frames flagged inconsistent_marker); the clean take {} "
+                   "({} flagged)", before.torn, before.worst_stretch_mm, after.torn, after.worst_stretch_mm,
+                   after.flagged_inconsistent, clean.torn, clean.flagged_inconsistent));
+  CHECK(before.torn > 0);
+  CHECK(after.torn == 0);
+  CHECK(clean.torn == 0);
 }

@@ -6,18 +6,24 @@
 #include <chrono>
 #include <cstdio>
 #include <ctime>
+#include <optional>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
 #include "core/frame.hpp"
+#include "core/time.hpp"
 #include "solver/blend_terms.hpp"
+#include "solver/fold_stage.hpp"
 #include "solver/kernels/kernels.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/alloc_counter.hpp"
+#include "pipeline/settings.hpp"
 #include "tools/commands.hpp"
+#include "tools/solve_config.hpp"
+#include "tools/stress.hpp"
 #include "tools/tool_support.hpp"
 
 namespace facecap::tools {
@@ -28,8 +34,11 @@ struct Options {
   int markers = 60;
   long frames = -1;
   long meshik_frames = 20;
-  std::string kernels = "auto";
+  std::string kernels;  // empty: the configuration's solver.kernels
   bool json = false;
+  bool stress = false;
+  std::string worst_dir, pose;
+  SolveConfigOptions settings;
 };
 
 struct Percentiles {
@@ -95,7 +104,7 @@ bool reported_stage(SolverMethod method, SolveStage stage, const std::vector<dou
   return std::any_of(times.begin(), times.end(), [](double t) { return t > 0; });
 }
 
-void run_bench(const Options& o) {
+void run_bench(const Options& o, const SolverParams& params) {
   using Clock = std::chrono::steady_clock;
   const auto solver_list = select_solvers(o.solvers);
   RigLoadReport load;
@@ -107,10 +116,10 @@ void run_bench(const Options& o) {
   const auto layout = spread_marker_layout(rig, o.markers);
   const Eigen::Index K = Eigen::Index(layout.size());
 
-  SolverParams params;
-  params.kernels = kKernelPaths.parse(o.kernels).value();
+  SolverParams solver_params = params;
+  if (!o.kernels.empty()) solver_params.kernels = kKernelPaths.parse(o.kernels).value();
   const auto build_start = Clock::now();
-  const auto model = build_solver_model(rig, layout, params);
+  const auto model = build_solver_model(rig, layout, solver_params);
   const double build_s = std::chrono::duration<double>(Clock::now() - build_start).count();
 
   // Markers from the pose the weights really produce (articulated for the built-in face).
@@ -155,8 +164,13 @@ void run_bench(const Options& o) {
     const std::size_t frames = !solver_method_is_realtime(method) ? std::min<std::size_t>(F, std::size_t(std::max(1L, o.meshik_frames))) : F;
     std::vector<double> total_us(frames), cpu_us(frames);
     std::vector<std::vector<double>> stage_us(kSolveStageCount, std::vector<double>(frames));
-    std::vector<double> collision_pairs(frames), collision_pins(frames), blend_bytes(frames);
+    std::vector<double> collision_pairs(frames), collision_pins(frames), blend_bytes(frames), fold_measure_us(frames),
+        fold_pins(frames);
+    // The fold stage's measurement (x0 + B w and the fold metric) timed on its own, on
+    // the solved mesh: the part of the collide stage every Poisson frame pays.
+    std::optional<FoldStage> fold_measure;
     std::vector<float> active(std::size_t(rig.shape_count()));
+    if (method == SolverMethod::kNonlinear || method == SolverMethod::kDt) fold_measure.emplace(*model);
     uint64_t allocations = 0;
     std::size_t held = 0;
     solver->reset();
@@ -180,6 +194,12 @@ void run_bench(const Options& o) {
         if (active[std::size_t(s)] != 0.0f) blend_bytes[f] += shape_bytes[std::size_t(s)];
       collision_pairs[f] = result.collision_pairs;
       collision_pins[f] = result.collision_constraints;
+      fold_pins[f] = result.fold_pins;
+      if (fold_measure) {
+        const int64_t start = monotonic_now_ns();
+        fold_measure->measure(active.data(), result.vertices);
+        fold_measure_us[f] = double(monotonic_now_ns() - start) * 1e-3;
+      }
     }
     double sum_us = 0;
     for (double t : total_us) sum_us += t;
@@ -214,6 +234,12 @@ void run_bench(const Options& o) {
         floor_text += fmt::format("{} {:.1f} ({:.1f}x)  ", stage_name, floor_us, median / floor_us);
       }
       floor_lines.push_back(fmt::format("{:<10} {}blend reads {:.2f} MB a frame", name, floor_text, blend_mb));
+    }
+    if (fold_measure) {
+      const Percentiles measure = summarise(fold_measure_us), pins = summarise(fold_pins);
+      entry["folds"] = {{"measure_us", {{"median", measure.median}, {"p99", measure.p99}}},
+                        {"pins", {{"median", pins.median}, {"p99", pins.p99}}}};
+      stage_text += fmt::format("  (folds: measure {:.1f}, pins {:.0f})", measure.median, pins.median);
     }
     if (reported_stage(method, SolveStage::kCollide, stage_us[std::size_t(SolveStage::kCollide)])) {
       const Percentiles pairs = summarise(collision_pairs), pins = summarise(collision_pins);
@@ -264,16 +290,31 @@ void add_bench_command(CLI::App& app, int& exit_code) {
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
   cmd->add_option("--kernels", o->kernels,
-                  "Which compiled kernels solve: auto (the widest this CPU runs), avx512, avx2 or portable")
-      ->capture_default_str()
+                  "Which compiled kernels solve: auto (the widest this CPU runs), avx512, avx2 or portable "
+                  "(the same as --set solver.kernels=...)")
       ->check(CLI::IsMember([] {
         std::vector<std::string> names;
         for (const auto& name : kKernelPaths.names()) names.emplace_back(name);
         return names;
       }()));
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
+  cmd->add_flag("--stress", o->stress,
+                "Solve the stress corpus (docs/solver.md \"Folds\") instead of timing frames: folded poses per solver");
+  cmd->add_option("--worst-dir", o->worst_dir, "With --stress: write each solver's worst pose there as OBJ (and its linear blend)");
+  cmd->add_option("--pose", o->pose, "With --stress and --worst-dir: write this pose (by name) instead of the worst");
+  add_solve_config_options(*cmd, o->settings);
   cmd->callback([o, &exit_code] {
-    run_bench(*o);
+    const SolverParams params =
+        pipeline::solve_settings(load_solve_config(o->settings).values, pipeline::SolveContext::kOffline).params;
+    if (o->stress) {
+      StressOptions s{.rig = o->rig, .solvers = o->solvers == "all" ? "nonlinear,dt,linear" : o->solvers,
+                      .markers = o->markers, .params = params, .worst_dir = o->worst_dir, .pose = o->pose};
+      const nlohmann::json report = run_stress(s);
+      if (o->json) std::puts(report.dump(2).c_str());
+      else print_stress(report);
+    } else {
+      run_bench(*o, params);
+    }
     exit_code = 0;
   });
 }

@@ -15,6 +15,7 @@
 #include "core/error.hpp"
 #include "core/units.hpp"
 #include "formats/take.hpp"
+#include "solver/collide/folds.hpp"
 #include "solver/collide/metrics.hpp"
 #include "solver/solver_model.hpp"
 #include "tools/commands.hpp"
@@ -37,6 +38,7 @@ struct Options {
   int offline_every = 200;
   int max_frames = 0;
   bool progress = false;
+  std::vector<std::string> swaps;
   SolveConfigOptions settings;
 };
 
@@ -80,6 +82,8 @@ struct SolverRun {
   double jitter_sum_mm = 0;
   uint64_t jitter_samples = 0;
   int64_t intersections = 0, flipped = 0, frames_with_intersections = 0;
+  int64_t folded_frames = 0, folded_triangles = 0;  // against the linear blend of the solved weights
+  double max_edge_stretch_mm = 0;
   std::size_t held = 0;
 };
 
@@ -151,6 +155,9 @@ void run_eval(const Options& o, const SolverParams& params) {
     return count;
   };
 
+  FoldDetector folds;
+  folds.configure(rig.triangles, triangle_regions(rig), model->params.fold_crease_degrees);
+
   Eigen::Matrix3Xd targets(3, K), truth_pose_now(3, rig.vertex_count());
   std::vector<uint8_t> present(static_cast<std::size_t>(K));
   int64_t truth_intersections = 0;
@@ -183,6 +190,10 @@ void run_eval(const Options& o, const SolverParams& params) {
       run.intersections += pairs;
       run.frames_with_intersections += pairs > 0;
       run.flipped += count_flipped_triangles(rig.triangles, rig.neutral, run.result.vertices);
+      const FoldReport& fold = folds.measure(run.result.vertices, rig.linear_blend(run.result.weights));
+      run.folded_frames += fold.folded > 0;
+      run.folded_triangles += fold.folded;
+      run.max_edge_stretch_mm = std::max(run.max_edge_stretch_mm, fold.max_edge_stretch * mm_per_rig);
     }
   }
 
@@ -201,6 +212,9 @@ void run_eval(const Options& o, const SolverParams& params) {
     entry["intersections"] = run.intersections;
     entry["frames_with_intersections"] = run.frames_with_intersections;
     entry["flipped_triangles"] = run.flipped;
+    entry["folds"] = {{"folded_frames", run.folded_frames},
+                      {"folded_triangles", run.folded_triangles},
+                      {"max_edge_stretch_mm", run.max_edge_stretch_mm}};
     entry["held_frames"] = run.held;
     report["solvers"][run.name] = entry;
   }
@@ -214,12 +228,12 @@ void run_eval(const Options& o, const SolverParams& params) {
              truth.head_motion ? "on" : "off");
   fmt::print("intersecting triangle pairs (not intersecting at rest; {} do) in the truth itself: {} over all frames\n\n",
              rest_pairs.size(), truth_intersections);
-  fmt::print("{:<10} {:>14} {:>13} {:>10} {:>14} {:>9} {:>6}\n", "solver", "error mean mm", "error p95 mm", "jitter mm",
-             "intersections", "flipped", "held");
+  fmt::print("{:<10} {:>14} {:>13} {:>10} {:>14} {:>9} {:>14} {:>12} {:>6}\n", "solver", "error mean mm", "error p95 mm",
+             "jitter mm", "intersections", "flipped", "folded frames", "stretch mm", "held");
   for (const auto& run : runs)
-    fmt::print("{:<10} {:>14.4f} {:>13.3f} {:>10.4f} {:>14} {:>9} {:>6}\n", run.name, run.errors.mean(),
+    fmt::print("{:<10} {:>14.4f} {:>13.3f} {:>10.4f} {:>14} {:>9} {:>14} {:>12.2f} {:>6}\n", run.name, run.errors.mean(),
                run.errors.percentile(95.0), run.jitter_samples ? run.jitter_sum_mm / double(run.jitter_samples) : 0.0,
-               run.intersections, run.flipped, run.held);
+               run.intersections, run.flipped, run.folded_frames, run.max_edge_stretch_mm, run.held);
 }
 
 }  // namespace
@@ -242,6 +256,10 @@ void add_eval_command(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"mm", "cm", "m"}))
       ->needs(calib);
   cmd->add_option("--max-frames", o->max_frames, "With --calib: only the first N frames (0: all)")->needs(calib);
+  cmd->add_option("--inject-swap", o->swaps,
+                  "With --calib: two markers trade labels, FIRST:SECOND:START:FRAMES[:GLIDE] (gliding over GLIDE frames at "
+                  "each end); repeatable")
+      ->needs(calib);
   cmd->add_flag("--progress", o->progress, "With --calib: progress on stderr (default: on a terminal)")->needs(calib);
   cmd->add_option("--solver", o->solvers, "all, or a comma-separated list of solvers")->capture_default_str();
   cmd->add_option("--rig-units", o->rig_units_override, "The rig's units when they cannot be guessed: mm, cm or m");
@@ -265,6 +283,7 @@ void add_eval_command(CLI::App& app, int& exit_code) {
       t.max_frames = o->max_frames;
       t.progress = o->progress;
       t.settings = settings;
+      for (const std::string& spec : o->swaps) t.swaps.push_back(parse_label_swap(spec));
       const auto report = evaluate_take(t);
       if (o->json) std::puts(report.dump(2).c_str());
       else print_take_evaluation(report);

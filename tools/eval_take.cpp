@@ -14,6 +14,7 @@
 #include "pipeline/marker_mapper.hpp"
 #include "pipeline/solve_pipeline.hpp"
 #include "pipeline/source_units.hpp"
+#include "solver/collide/folds.hpp"
 #include "solver/collide/metrics.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
@@ -43,48 +44,56 @@ struct Summary {
   }
 };
 
-// Where a flipped triangle or a crossing pair is: the lips and the eyelids fold in many
-// rigs' own shapes (ICT's mouthClose alone flips 416 triangles), elsewhere they should not.
-enum Region : uint8_t { kLips, kEyelids, kElsewhere, kRegionCount };
-constexpr const char* kRegionNames[kRegionCount] = {"lips", "eyelids", "elsewhere"};
-
-// Per triangle: lips when a vertex is moved by mouthRollLower or mouthRollUpper, eyelids
-// when by eyeBlink_L or eyeBlink_R, at least 30% of that shape's largest vertex motion.
-// A rig without those shapes has every triangle elsewhere.
-std::vector<uint8_t> triangle_regions(const Rig& rig) {
-  std::vector<uint8_t> vertex(std::size_t(rig.vertex_count()), kElsewhere);
-  auto mark = [&](std::initializer_list<const char*> shapes, Region region) {
-    for (const char* name : shapes) {
-      const auto s = rig.shape_index(name);
-      if (!s) continue;
-      const Eigen::Map<const Eigen::Matrix3Xd> d(rig.deltas.col(*s).data(), 3, rig.vertex_count());
-      const Eigen::VectorXd motion = d.colwise().norm().transpose();
-      const double cutoff = 0.3 * motion.maxCoeff();
-      for (Eigen::Index v = 0; v < rig.vertex_count(); ++v)
-        if (motion[v] > 0.0 && motion[v] >= cutoff) vertex[std::size_t(v)] = std::min<uint8_t>(vertex[std::size_t(v)], region);
-    }
-  };
-  mark({"mouthRollLower", "mouthRollUpper"}, kLips);
-  mark({"eyeBlink_L", "eyeBlink_R"}, kEyelids);
-  std::vector<uint8_t> out(std::size_t(rig.triangle_count()), kElsewhere);
-  for (Eigen::Index t = 0; t < rig.triangle_count(); ++t)
-    for (int j = 0; j < 3; ++j) out[std::size_t(t)] = std::min(out[std::size_t(t)], vertex[std::size_t(rig.triangles(j, t))]);
-  return out;
-}
-
 // Flips or crossings per region, split into those the rig's own linear blend of the same
 // weights already has and those the solve adds.
 struct RegionCounts {
-  std::array<int64_t, kRegionCount> in_rig_blend{}, added_by_solve{};
+  std::array<int64_t, kFaceRegionCount> in_rig_blend{}, added_by_solve{};
   nlohmann::json json(int64_t frames) const {
     nlohmann::json j = nlohmann::json::object();
     const double n = double(std::max<int64_t>(frames, 1));
-    for (int r = 0; r < kRegionCount; ++r)
-      j[kRegionNames[r]] = {{"in_rig_blend", double(in_rig_blend[std::size_t(r)]) / n},
+    for (int r = 0; r < kFaceRegionCount; ++r)
+      j[kFaceRegionNames[r]] = {{"in_rig_blend", double(in_rig_blend[std::size_t(r)]) / n},
                             {"added_by_solve", double(added_by_solve[std::size_t(r)]) / n}};
     return j;
   }
   int64_t added() const { return added_by_solve[0] + added_by_solve[1] + added_by_solve[2]; }
+};
+
+// The fold metric (solver/collide/folds.hpp) over a take's frames: frames with a folded
+// triangle, folded triangles per region, the largest edge stretch, and the worst frames.
+struct FoldTally {
+  int64_t frames = 0, folded_frames = 0, flagged_frames = 0;
+  std::array<int64_t, kFaceRegionCount> folded_by_region{};
+  Summary stretch_mm;
+  int64_t stretched_frames = 0;  // edge stretched by more than kTornMm
+  std::vector<std::pair<uint32_t, int64_t>> worst;  // (folded triangles, frame), the most folded first
+  static constexpr double kTornMm = 20.0;  // an edge stretched this much is a torn face (rig mm)
+
+  void add(const FoldReport& r, double rig_mm, int64_t frame, bool flagged) {
+    ++frames;
+    folded_frames += r.folded > 0;
+    flagged_frames += flagged;
+    for (int g = 0; g < kFaceRegionCount; ++g) folded_by_region[std::size_t(g)] += r.folded_by_region[std::size_t(g)];
+    stretch_mm.add(r.max_edge_stretch * rig_mm);
+    stretched_frames += r.max_edge_stretch * rig_mm > kTornMm;
+    if (r.folded > 0) {
+      worst.push_back({r.folded, frame});
+      std::sort(worst.begin(), worst.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+      if (worst.size() > 5) worst.pop_back();
+    }
+  }
+  nlohmann::json json() {
+    nlohmann::json regions = nlohmann::json::object(), worst_frames = nlohmann::json::array();
+    for (int g = 0; g < kFaceRegionCount; ++g) regions[kFaceRegionNames[g]] = folded_by_region[std::size_t(g)];
+    for (const auto& [count, frame] : worst) worst_frames.push_back({{"frame", frame}, {"folded_triangles", count}});
+    return {{"frames", frames},
+            {"folded_frames", folded_frames},
+            {"flagged_frames", flagged_frames},
+            {"folded_triangles_by_region", regions},
+            {"max_edge_stretch_mm", {{"max", stretch_mm.percentile(100)}, {"p95", stretch_mm.percentile(95)}}},
+            {"frames_stretched_over_20mm", stretched_frames},
+            {"worst_frames", worst_frames}};
+  }
 };
 
 struct SolverRun {
@@ -112,6 +121,14 @@ struct SolverRun {
   int64_t intersections = 0, intersection_frames = 0, flipped = 0, flipped_frames = 0, checked_frames = 0;
   RegionCounts flipped_by_region, intersections_by_region;  // per checked frame once divided
   int held = 0;
+  // The label consistency check with this solver's previous weights, and the targets it
+  // leaves (calibration.marker_consistency_mm > 0).
+  std::optional<pipeline::MarkerConsistency> consistency;
+  Eigen::Matrix3Xd targets;
+  std::vector<uint8_t> present;
+  int64_t inconsistent_frames = 0, markers_dropped = 0, pairs_unswapped = 0;
+  // The fold metric against the linear blend of the same weights, every solved frame.
+  FoldTally folds;
 };
 
 // The delay d (seconds) that best explains the filtered values (targets: one column per
@@ -149,8 +166,9 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   const align::Calibration cal = pipeline::load_calibration({.file = o.calib}, rig);
   // The rig's units as calibrated, unless overridden.
   const double rig_mm = o.rig_units.empty() ? cal.rig_mm_per_unit : rig_mm_per_unit(rig, o.rig_units);
-  const formats::MarkerTake take = formats::read_take(o.take);
+  formats::MarkerTake take = formats::read_take(o.take);
   if (take.frames.empty()) throw file_error(o.take, "the take has no frames");
+  for (const LabelSwap& swap : o.swaps) inject_label_swap(take, swap);
   const std::size_t F = o.max_frames > 0 ? std::min<std::size_t>(take.frames.size(), std::size_t(o.max_frames)) : take.frames.size();
 
   pipeline::require_plausible_units(take, o.units, cal, o.take);
@@ -176,6 +194,8 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     for (std::size_t i = 0; i < face_markers.size(); ++i) run.held_out.push_back(make_solver(method, model));
     run.heldout_by_marker.resize(face_markers.size());
     run.held_result = run.full->make_result();
+    if (o.settings.marker_consistency_mm > 0.0)
+      run.consistency.emplace(*model, o.settings.marker_consistency_mm / cal.rig_mm_per_unit);
     if (o.settings.filter.weights) run.weight_filter.emplace(pipeline::make_weight_filter(o.settings.filter, run.result.weights.size()));
     runs.push_back(std::move(run));
   }
@@ -193,6 +213,8 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     return out;
   };
   const std::vector<uint8_t> region = triangle_regions(rig);
+  FoldDetector folds;
+  folds.configure(rig.triangles, region, model->params.fold_crease_degrees);
   auto mapped = mapper.make_output();
   // With the filter on, the solvers see filtered targets; fit and held-out error are measured
   // against the unfiltered ones, so that the lag the filter adds counts as error.
@@ -223,10 +245,20 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
     for (auto& run : runs) {
       const bool run_sample = run.offline ? f % std::size_t(o.offline_every) == 0 : sample;
       if (run.offline && !run_sample) continue;
+      run.targets = mapped.targets;
+      run.present = mapped.present;
+      if (run.consistency) {
+        const auto checked = run.consistency->check(run.targets, run.present, run.result.weights);
+        run.inconsistent_frames += checked.dropped + checked.unswapped > 0;
+        run.markers_dropped += checked.dropped;
+        run.pairs_unswapped += checked.unswapped;
+      }
       const auto t0 = std::chrono::steady_clock::now();
-      run.full->solve(mapped.targets, mapped.present, run.result);
+      run.full->solve(run.targets, run.present, run.result);
       run.solve_ms.add(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
       run.held += (run.result.status & kSolvedTooFewMarkers) != 0;
+      run.folds.add(folds.measure(run.result.vertices, rig.linear_blend(run.result.weights)), rig_mm, int64_t(f),
+                    (run.result.status & kSolvedFolded) != 0);
       for (Eigen::Index k = 0; k < K; ++k)
         if (mapped.present[std::size_t(k)])
           run.fit_mm.add((binding_point(bindings[std::size_t(k)], run.result.vertices) - raw_targets.col(k)).norm() * rig_mm);
@@ -271,9 +303,9 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
       for (std::size_t i = 0; i < face_markers.size(); ++i) {
         const int k = face_markers[i];
         if (!mapped.present[std::size_t(k)]) continue;
-        std::copy(mapped.present.begin(), mapped.present.end(), present.begin());
+        std::copy(run.present.begin(), run.present.end(), present.begin());
         present[std::size_t(k)] = 0;
-        run.held_out[i]->solve(mapped.targets, present, run.held_result);
+        run.held_out[i]->solve(run.targets, present, run.held_result);
         if (run.held_result.status & kSolvedTooFewMarkers) continue;
         const double error = (binding_point(bindings[std::size_t(k)], run.held_result.vertices) - raw_targets.col(k)).norm() * rig_mm;
         run.heldout_mm.add(error);
@@ -295,6 +327,10 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
                  {"weight_refinements", model->params.weight_refinements},
                  {"boundary_hold", model->params.boundary_hold}};
   j["frames"] = F;
+  nlohmann::json swaps = nlohmann::json::array();
+  for (const LabelSwap& swap : o.swaps)
+    swaps.push_back({{"first", swap.first}, {"second", swap.second}, {"start", swap.start}, {"frames", swap.frames}, {"glide", swap.glide}});
+  j["injected_swaps"] = swaps;
   j["markers"] = K;
   std::vector<std::string> face_labels, stable_labels;
   for (int k : face_markers) face_labels.push_back(cal.markers[std::size_t(k)].label);
@@ -346,6 +382,11 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
                                   {"frames_with", run.flipped_frames},
                                   {"added_by_solve_per_checked_frame", double(run.flipped_by_region.added()) / double(std::max<int64_t>(run.checked_frames, 1))},
                                   {"per_checked_frame_by_region", run.flipped_by_region.json(run.checked_frames)}}},
+                     {"folds", run.folds.json()},
+                     {"marker_consistency", run.consistency ? nlohmann::json{{"frames_with_inconsistent_markers", run.inconsistent_frames},
+                                                                             {"markers_dropped", run.markers_dropped},
+                                                                             {"pairs_swapped_back", run.pairs_unswapped}}
+                                                            : nlohmann::json(nullptr)},
                      {"checked_frames", run.checked_frames},
                      {"frames_solved", run.frames_solved},
                      {"solve_ms", run.solve_ms.json()},
@@ -384,11 +425,20 @@ void print_take_evaluation(const nlohmann::json& j) {
     fmt::print("{:<10} weights sent out: jitter {:.5f} (mean |second difference|){}\n", name, s["weight_jitter"]["mean"].get<double>(),
                s["weight_filter_lag_ms"].is_null() ? "" : fmt::format(", the weight filter's lag {:.0f} ms", s["weight_filter_lag_ms"].get<double>()));
   }
+  fmt::print("\nfolds against the rig's linear blend of the same weights, every solved frame:\n");
+  for (const auto& [name, s] : j["solvers"].items()) {
+    const auto& f = s["folds"];
+    fmt::print("{:<10} folded frames {} of {}, lips {} eyelids {} elsewhere {} triangles; edge stretch max {:.2f} mm, "
+               "p95 {:.2f} mm, frames over 20 mm {}\n", name, f["folded_frames"].get<int64_t>(), f["frames"].get<int64_t>(),
+               f["folded_triangles_by_region"]["lips"].get<int64_t>(), f["folded_triangles_by_region"]["eyelids"].get<int64_t>(),
+               f["folded_triangles_by_region"]["elsewhere"].get<int64_t>(), f["max_edge_stretch_mm"]["max"].get<double>(),
+               f["max_edge_stretch_mm"]["p95"].get<double>(), f["frames_stretched_over_20mm"].get<int64_t>());
+  }
   fmt::print("\nper checked frame, added by the solve (already in the rig's linear blend of the same weights):\n");
   for (const auto& [name, s] : j["solvers"].items()) {
     std::string line;
     for (const char* what : {"flipped", "intersections"})
-      for (const char* region : kRegionNames) {
+      for (const char* region : kFaceRegionNames) {
         const auto& r = s[what]["per_checked_frame_by_region"][region];
         line += fmt::format("  {} {} {:.1f} ({:.1f})", what, region, r["added_by_solve"].get<double>(), r["in_rig_blend"].get<double>());
       }

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "pipeline/solve_pipeline.hpp"
+#include "tools/label_swap.hpp"
 
 namespace facecap::tools {
 
@@ -18,6 +19,7 @@ struct TakeEvalOptions {
   int max_frames = 0;      // 0: the whole take
   bool progress = false;
   pipeline::SolveSettings settings;  // the solver parameters and mapping (the method comes from `solvers`)
+  std::vector<LabelSwap> swaps;      // injected into the take before it is solved
 };
 
 // Throws Error on unusable input. Returns the JSON report.

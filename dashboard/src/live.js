@@ -46,6 +46,7 @@ function onFrame(frame) {
   $('roll').textContent = fmt(roll);
   const t = frame.telemetry;
   $('markers-used').textContent = `${t.markers_used} / ${t.markers_expected}`;
+  $('folded').title = `this frame: ${t.folded_triangles ?? 0} folded triangles, largest edge stretch ${fmt(t.max_edge_stretch_mm ?? 0, 1)} mm`;
 }
 
 // The calibration's markers missing over the last window, by region, and the noisiest.
@@ -85,6 +86,7 @@ function onStatus(s) {
   $('held').textContent = String((flagged.head_pose_held ?? 0) + (flagged.too_few_markers ?? 0));
   $('held').title = `head pose held ${flagged.head_pose_held ?? 0}, face held ${flagged.too_few_markers ?? 0} (since the start); ` +
     `this window: head ${fmt(w.head_held_fraction * 100)}%, face ${fmt(w.face_held_fraction * 100)}%`;
+  $('folded').textContent = `${flagged.folded ?? 0} / ${flagged.inconsistent_marker ?? 0}`;
   $('missed').textContent = String(s.totals.missed_deadlines);
   $('missed').title = `${w.missed_deadlines} in the last ${fmt(w.seconds)} s`;
   $('latency').textContent = `${fmt(w.latency_ms.p50, 2)} / ${fmt(w.latency_ms.p99, 2)}`;

@@ -28,28 +28,72 @@ namespace {
 
 bool contains(const std::vector<int>& v, int x) { return std::find(v.begin(), v.end(), x) != v.end(); }
 
-// Step 5: bound markers far off the fitted face whose distances to the stable markers vary
-// little more than the stable markers' own.
+// Step 5: head markers. A head rig is rigid: the distances between its markers stay
+// constant over the take, however far it sits from the skin. Candidates are the bound
+// markers farther than head_marker_mm off the fitted face. Two or more candidates whose
+// pairwise distance deviations are all within head_rigidity_mm of the take's most rigid
+// pair (the noise floor) are a rig, judged among themselves: the stable markers may hold
+// face markers, whose expressions would hide the rig's rigidity. A candidate whose median
+// deviation to that rig is within head_wobble_mm (a marker on a loose stalk) joins it. A
+// lone candidate is judged against the stable markers: its median deviation to them at
+// most theirs plus head_rigidity_mm.
 std::vector<int> find_head_markers(std::span<const MarkerFrame> frames, const std::vector<std::string>& labels,
-                                   const TakeCalibration& t, const TakeCalibrationOptions& o) {
+                                   const std::vector<uint8_t>& frequent, const TakeCalibration& t,
+                                   const TakeCalibrationOptions& o) {
   const Calibration& c = t.calibration;
   const double take_mm = c.take_mm_per_unit;
+  std::vector<int> candidates;
+  for (const auto& m : c.markers) {
+    if (m.residual_mm * c.face_size_ratio() < o.head_marker_mm) continue;
+    candidates.push_back(int(std::find(labels.begin(), labels.end(), m.label) - labels.begin()));
+  }
+  if (candidates.empty()) return {};
+  double floor = std::numeric_limits<double>::infinity();
+  for (std::size_t a = 0; a < frequent.size(); ++a)
+    for (std::size_t b = a + 1; b < frequent.size(); ++b)
+      if (frequent[a] && frequent[b]) floor = std::min(floor, distance_deviation(frames, int(a), int(b)) * take_mm);
+  const std::size_t n = candidates.size();
+  std::vector<double> deviation(n * n, 0.0);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t j = i + 1; j < n; ++j)
+      deviation[i * n + j] = deviation[j * n + i] = distance_deviation(frames, candidates[i], candidates[j]) * take_mm;
+  const double rigid = floor + o.head_rigidity_mm;
+  // The largest set of candidates rigid pair by pair: grown greedily from each seed (a
+  // take holds a handful of candidates).
+  std::vector<std::size_t> rig_set;
+  for (std::size_t seed = 0; seed < n; ++seed) {
+    std::vector<std::size_t> set{seed};
+    for (std::size_t i = 0; i < n; ++i)
+      if (i != seed && std::all_of(set.begin(), set.end(), [&](std::size_t j) { return deviation[i * n + j] <= rigid; }))
+        set.push_back(i);
+    if (set.size() > rig_set.size()) rig_set = set;
+  }
+  std::vector<int> found;
+  if (rig_set.size() >= 2) {
+    for (std::size_t i = 0; i < n; ++i) {
+      std::vector<double> to_rig;
+      for (const std::size_t j : rig_set)
+        if (j != i) to_rig.push_back(deviation[i * n + j]);
+      std::nth_element(to_rig.begin(), to_rig.begin() + std::ptrdiff_t(to_rig.size() / 2), to_rig.end());
+      const bool in_rig = std::find(rig_set.begin(), rig_set.end(), i) != rig_set.end();
+      if (in_rig || to_rig[to_rig.size() / 2] <= o.head_wobble_mm) found.push_back(candidates[i]);
+    }
+    std::sort(found.begin(), found.end());
+    return found;
+  }
   double own = 0;
   int pairs = 0;
   for (std::size_t i = 0; i < t.stable_slots.size(); ++i)
     for (std::size_t j = i + 1; j < t.stable_slots.size(); ++j)
       own += distance_deviation(frames, t.stable_slots[i], t.stable_slots[j]) * take_mm, ++pairs;
   own /= std::max(pairs, 1);
-  std::vector<int> found;
-  for (const auto& m : c.markers) {
-    if (m.residual_mm * c.face_size_ratio() < o.head_marker_mm) continue;
-    const int slot = int(std::find(labels.begin(), labels.end(), m.label) - labels.begin());
-    std::vector<double> deviation;
+  for (const int slot : candidates) {
+    std::vector<double> to_stable;
     for (int s : t.stable_slots)
-      if (s != slot) deviation.push_back(distance_deviation(frames, slot, s) * take_mm);
-    if (deviation.size() < 3) continue;
-    std::nth_element(deviation.begin(), deviation.begin() + std::ptrdiff_t(deviation.size() / 2), deviation.end());
-    if (deviation[deviation.size() / 2] <= own + o.head_rigidity_mm) found.push_back(slot);
+      if (s != slot) to_stable.push_back(distance_deviation(frames, slot, s) * take_mm);
+    if (to_stable.size() < 3) continue;
+    std::nth_element(to_stable.begin(), to_stable.begin() + std::ptrdiff_t(to_stable.size() / 2), to_stable.end());
+    if (to_stable[to_stable.size() / 2] <= own + o.head_rigidity_mm) found.push_back(slot);
   }
   return found;
 }
@@ -120,7 +164,7 @@ TakeCalibration calibrate_take(const Rig& rig, const std::vector<std::string>& l
   };
   run();
   if (o.find_head_markers) {
-    t.found_head_slots = find_head_markers(frames, labels, t, o);
+    t.found_head_slots = find_head_markers(frames, labels, frequent, t, o);
     if (!t.found_head_slots.empty()) {
       t.head_slots.insert(t.head_slots.end(), t.found_head_slots.begin(), t.found_head_slots.end());
       run();

@@ -7,8 +7,9 @@
 //   3. the mean of a still stretch around it, head motion removed (average_positions);
 //   4. calibrate() on that mean, head markers left out of the fit;
 //   5. head markers found: bound markers farther than head_marker_mm (actor mm) from the
-//      fitted face and rigid with the stable markers (a headband, a cap, a helmet) become
-//      head markers (head pose only, never bound), then step 4 again without them;
+//      fitted face that are rigid with one another (a headband, a cap, a helmet; a lone
+//      one: rigid with the stable markers) become head markers (head pose only, never
+//      bound), then step 4 again without them;
 //   6. final stable markers: the same search restricted to the markers the rig's shapes
 //      move least at their bound points (a jaw moves rigidly too, but it is not the
 //      skull) and the head markers, then steps 3-4 again with them when they changed;
@@ -37,7 +38,8 @@ struct TakeCalibrationOptions {
   std::vector<int> head_slots;           // given head markers: head pose only, never bound
   bool find_head_markers = true;         // step 5
   double head_marker_mm = 20.0;          // actor mm off the fitted face, beyond any face marker on real takes (AnimFace: 13)
-  double head_rigidity_mm = 0.5;         // a head marker's distance deviation to the stable markers may exceed theirs by this
+  double head_rigidity_mm = 0.5;         // a rig's pairwise distance deviation may exceed the take's most rigid pair's by this
+  double head_wobble_mm = 2.0;           // a candidate's median deviation to a rig found, for it to join (a loose marker)
 };
 
 struct TakeCalibration {

@@ -1,0 +1,70 @@
+#pragma once
+// The fold metric (docs/solver.md "Folds"): the triangles a solve folded relative to a
+// reference mesh of the same weights, the rig's linear blend x0 + B w. A triangle is
+// folded when its normal points against the reference's (flipped), or when an edge it
+// shares bends more than a threshold beyond the reference's bend there (a crease the
+// shapes do not have: crumpled eyelids, mouth corners). Also the largest change of an
+// edge's length against the reference (a torn, stretched patch), and the folded count per
+// face region. Lifecycle: configure (allocates) -> measure() per frame (real-time safe).
+#include <array>
+#include <cstdint>
+#include <span>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace facecap {
+
+struct Rig;
+
+// Where on the face a triangle is: the lips and the eyelids are where folds and crossings
+// happen (ICT's mouthClose alone flips 416 triangles against the neutral).
+enum FaceRegion : uint8_t { kRegionLips, kRegionEyelids, kRegionElsewhere, kFaceRegionCount };
+inline constexpr const char* kFaceRegionNames[kFaceRegionCount] = {"lips", "eyelids", "elsewhere"};
+
+// Per triangle (T): lips when a vertex is moved by mouthRollLower or mouthRollUpper,
+// eyelids when by eyeBlink_L or eyeBlink_R, at least 30% of that shape's largest vertex
+// motion. A rig without those shapes has every triangle elsewhere. Allocates.
+std::vector<uint8_t> triangle_regions(const Rig& rig);
+
+struct FoldReport {
+  uint32_t folded = 0;   // triangles flipped or creased against the reference
+  uint32_t flipped = 0;  // of those, flipped
+  std::array<uint32_t, kFaceRegionCount> folded_by_region{};
+  double max_edge_stretch = 0.0;  // rig units: the largest | |e| - |e_ref| | over edges
+};
+
+class FoldDetector {
+ public:
+  // triangles: 3 x T; regions: T (triangle_regions), or empty for all elsewhere. A crease
+  // counts when the angle between the normals across an edge exceeds the reference's by
+  // more than crease_degrees (SolverParams::fold_crease_degrees; 90: the skin doubles
+  // back on itself). Allocates; not real-time.
+  void configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees = 90.0);
+  bool configured() const noexcept { return triangle_count_ > 0; }
+
+  // Measures `solved` against `reference` (both 3 x N). Zero-area triangles (either mesh)
+  // are not counted as flipped. Real-time safe.
+  const FoldReport& measure(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept;
+
+  // After measure(): per triangle, 1 if folded; the folded triangles, ascending.
+  std::span<const uint8_t> folded_flags() const noexcept { return folded_; }
+  std::span<const int> folded_triangles() const noexcept { return {folded_list_.data(), std::size_t(report_.folded)}; }
+  const FoldReport& report() const noexcept { return report_; }
+  const Eigen::Matrix3Xi& triangles() const noexcept { return triangles_; }
+
+ private:
+  Eigen::Matrix3Xi triangles_;
+  Eigen::Index triangle_count_ = 0;
+  std::vector<uint8_t> regions_;
+  std::vector<std::pair<int, int>> interior_edges_;  // triangles sharing an edge
+  std::vector<std::pair<int, int>> edges_;           // every edge once: (vertex, vertex)
+  double crease_radians_ = 0.0;
+  Eigen::Matrix3Xd solved_normals_, reference_normals_;  // per triangle, not normalised
+  std::vector<uint8_t> folded_;
+  std::vector<int> folded_list_;
+  FoldReport report_;
+};
+
+}  // namespace facecap
