@@ -189,8 +189,6 @@ class PoissonSolver final : public FaceSolver {
     clock.finish();
   }
 
-  WeightsStage weights_;
-  TriangleBlend blend_;
   // Removes the pin of each present marker bound to a corner of a folded triangle (the
   // low-rank change of a dropout, its target taken back out of the right-hand side).
   // Returns the markers released. Real-time safe.
@@ -212,6 +210,8 @@ class PoissonSolver final : public FaceSolver {
   // pins and measures, markers released from the kReleaseRound'th on.
   static constexpr int kFoldRounds = 8, kReleaseRound = 4;
 
+  WeightsStage weights_;
+  TriangleBlend blend_;
   CollisionStage collisions_;
   FoldStage folds_;
   PinUpdate pins_;             // this frame's missing markers, then its collision and fold pins
