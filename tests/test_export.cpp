@@ -473,7 +473,7 @@ TEST_CASE("export refuses what it cannot write, naming the file and why", "[expo
   test::write_text(dir / "take.trc", "not a recording\n");
   Run r = run_facecap(dir, {"export", (dir / "take.trc").string(), (dir / "out.glb").string()});
   CHECK(r.exit_code == 1);
-  CHECK(r.err.find("export reads a .fcrec recording") != std::string::npos);
+  CHECK(r.err.find("take.trc: a glTF is written from a .fcrec recording's solved frames") != std::string::npos);
   const fs::path fcrec = write_renamed_recording(dir, {"a", "b"}, false);
   r = run_facecap(dir, {"export", fcrec.string(), (dir / "out.fbx").string()});
   CHECK(r.exit_code == 1);

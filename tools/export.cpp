@@ -50,9 +50,11 @@ struct Options {
   std::optional<std::size_t> frame;
 };
 
-formats::RecordingReader open_recording(const std::string& input) {
+// `what` names the output in the error for an input that is not a recording ("a glTF").
+formats::RecordingReader open_recording(const std::string& input, const char* what) {
   if (formats::detect_file_format(input) != formats::TakeFormat::kRecording)
-    throw file_error(input, "export reads a .fcrec recording (facecapd's, or facecap solve -o take.fcrec)");
+    throw file_error(input, fmt::format("{} is written from a .fcrec recording's solved frames (facecapd's, or facecap "
+                                        "solve -o take.fcrec)", what));
   formats::RecordingReader reader(input);
   if (const std::string damage = reader.damage_summary(); !damage.empty())
     fmt::print(stderr, "facecap: warning: {}: damaged: {}; exporting the frames read\n", input, damage);
@@ -248,7 +250,8 @@ void export_gltf(const Options& o, const formats::RecordingReader& reader) {
 }  // namespace
 
 void export_weights_csv(const WeightsCsvOptions& o) {
-  const formats::RecordingReader reader = open_recording(o.input);
+  const formats::RecordingReader reader =
+      open_recording(o.input.string(), o.rig_names ? "a CSV of the rig's shapes" : "a Live Link Face CSV");
   require_solved_frames(reader);
   const auto& names = reader.header().shape_names;
   ProgressBar bar(fmt::format("writing {}", o.output.filename().string()), o.progress);
@@ -354,16 +357,16 @@ void add_export_command(CLI::App& app, int& exit_code) {
                             .progress = o.progress});
         break;
       case ExportKind::kGltf:
-        export_gltf(o, open_recording(o.input));
+        export_gltf(o, open_recording(o.input, "a glTF"));
         break;
       case ExportKind::kPc2:
-        export_point_cache(o, open_recording(o.input), formats::PointCacheFormat::kPc2);
+        export_point_cache(o, open_recording(o.input, "a PC2 point cache"), formats::PointCacheFormat::kPc2);
         break;
       case ExportKind::kMdd:
-        export_point_cache(o, open_recording(o.input), formats::PointCacheFormat::kMdd);
+        export_point_cache(o, open_recording(o.input, "an MDD point cache"), formats::PointCacheFormat::kMdd);
         break;
       case ExportKind::kObj:
-        export_obj_frame(o, open_recording(o.input));
+        export_obj_frame(o, open_recording(o.input, "an OBJ frame"));
         break;
     }
     exit_code = 0;
