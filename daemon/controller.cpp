@@ -14,7 +14,6 @@
 #include "pipeline/capture_calibration.hpp"
 #include "pipeline/recording_header.hpp"
 #include "pipeline/settings.hpp"
-#include "solver/align/profile.hpp"
 
 namespace facecap::daemon {
 namespace fs = std::filesystem;

@@ -6,6 +6,7 @@
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "core/units.hpp"
 #include "formats/take.hpp"
@@ -333,8 +334,8 @@ TEST_CASE("JawMoCap solved with defaults leaves the shapes its markers cannot ob
   CHECK(over_two_percent == 0);
 }
 
-TEST_CASE("on-box calibration of an AnimFace take with two markers dropping out 5 percent of the time keeps the residuals "
-          "within 10 percent of the whole take's",
+TEST_CASE("on-box calibration of an AnimFace take with two markers dropping out 5 percent of the time succeeds, its residuals "
+          "at most 10 percent above the whole take's",
           "[data]") {
   FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
@@ -356,10 +357,16 @@ TEST_CASE("on-box calibration of an AnimFace take with two markers dropping out 
       if (drop(random)) f.markers[k].flags |= kMarkerMissing, ++missing;
   INFO(missing << " marker samples removed from " << dropped.frames.size() << " frames");
   const pipeline::CaptureCalibration tolerant = pipeline::calibrate_capture(rig, dropped, "JawMoCap.trc", 0.8);
-  WARN(fmt::format("JawMoCap: residual median {:.3f} mm, max {:.3f} mm; with {} and {} dropping 5%: median {:.3f}, max {:.3f}",
-                   whole.residual_median_mm, whole.residual_max_mm, take.labels[dropping[0]], take.labels[dropping[1]],
-                   tolerant.residual_median_mm, tolerant.residual_max_mm));
+  WARN(fmt::format("JawMoCap: residual median {:.3f} mm, max {:.3f} mm (neutral frame {}, stable {}); with {} and {} dropping "
+                   "5%: median {:.3f}, max {:.3f} (neutral frame {}, stable {})",
+                   whole.residual_median_mm, whole.residual_max_mm, whole.result.frame,
+                   fmt::join(whole.result.calibration.stable_markers, " "), take.labels[dropping[0]], take.labels[dropping[1]],
+                   tolerant.residual_median_mm, tolerant.residual_max_mm, tolerant.result.frame,
+                   fmt::join(tolerant.result.calibration.stable_markers, " ")));
   CHECK(tolerant.result.calibration.markers.size() == whole.result.calibration.markers.size());
-  CHECK(tolerant.residual_median_mm == Approx(whole.residual_median_mm).epsilon(0.1));
-  CHECK(tolerant.residual_max_mm == Approx(whole.residual_max_mm).epsilon(0.1));
+  // Which still stretch wins can change with the dropouts (their scores are close), and
+  // this actor's residuals to the ICT face depend on the expression held there: the
+  // dropouts must not make the calibration worse by more than 10%.
+  CHECK(tolerant.residual_median_mm <= 1.1 * whole.residual_median_mm);
+  CHECK(tolerant.residual_max_mm <= 1.1 * whole.residual_max_mm);
 }

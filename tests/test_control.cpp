@@ -2,6 +2,7 @@
 // then facecapd in-process on the sim with the API on: status, Prometheus metrics checked
 // by promtool, takes, markers-only takes, calibration on the box, actor swaps, the
 // WebSocket stream; the capture-quality state of the issue's motivating failure; --version.
+#include <algorithm>
 #include <cstdio>
 #include <regex>
 #include <thread>
@@ -422,13 +423,17 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   CHECK(calibrated["residual_mm"]["median"].get<double>() < 1.0);
   // The sim's 48 face markers and 2 of its 4 headband markers are bound: the two above the
   // brow (58-62 mm off the face) are found as head markers, the two at temple height sit
-  // within 10 mm of the built-in face, where a skin marker could be: their residuals stand
-  // out, and the answer warns that they move with the head.
+  // within 10 mm of the built-in face, where a skin marker could be. H1's residual (about
+  // 10 mm) stands out, and the answer warns that it moves with the head; H3 sits within
+  // about 1 mm of the face, as a skin marker could. (A capture whose stillest stretch is
+  // not at rest has face markers warned about too.)
   CHECK(calibrated["markers_in_source"] == 50);
   INFO(calibrated.dump(1));
   const std::vector<std::string> warnings = calibrated["warnings"];
-  CHECK(warnings.size() == 2);
-  for (const auto& w : warnings) CHECK_THAT(w, Contains("marker 'H") && Contains("likely on a head rig"));
+  CHECK(std::count_if(warnings.begin(), warnings.end(), [](const std::string& w) {
+          return w.starts_with("marker 'H1'") && w.find("likely on a head rig") != std::string::npos;
+        }) == 1);
+  CHECK(std::none_of(warnings.begin(), warnings.end(), [](const std::string& w) { return w.starts_with("marker 'H3'"); }));
   CHECK(fs::exists(dir / "profiles" / "alice.toml"));
   CHECK(calibrated["backup"].is_null());
   CHECK_THAT(post(client, "/calibrate", {{"seconds", 1.0}, {"save", "alice"}}, 409)["error"].get<std::string>(),

@@ -278,8 +278,8 @@ TEST_CASE("the fixed-rate loop stays on its deadline grid and counts what it ski
   CHECK(k.late_start_misses.load() < k.missed_deadlines.load() / 2);
 }
 
-TEST_CASE("on-box calibration of the default sim (0.5 percent dropouts) succeeds with residuals within 10 percent of the sim "
-          "without dropouts") {
+TEST_CASE("on-box calibration of the default sim (0.5 percent dropouts) succeeds, its residuals at most 10 percent above the "
+          "sim's without dropouts") {
   // The capture the control API's POST /calibrate records: 3 s of the sim at 120 Hz.
   const fs::path dir = test::scratch_dir("calibrate-dropouts");
   const config::DaemonConfig defaults = config::default_config();
@@ -304,7 +304,7 @@ TEST_CASE("on-box calibration of the default sim (0.5 percent dropouts) succeeds
   // The median (about 0.1 mm) is the sim's noise averaged over the stretch, which differs
   // between the two runs: the dropouts must not make it worse by more than 10%.
   CHECK(dropped.residual_median_mm <= 1.1 * clean.residual_median_mm);
-  CHECK(dropped.residual_max_mm == Approx(clean.residual_max_mm).epsilon(0.1));
+  CHECK(dropped.residual_max_mm <= 1.1 * clean.residual_max_mm);
 }
 
 TEST_CASE("a real take with its mouth markers gone reads bad, naming them; the same take whole reads good", "[data]") {

@@ -57,6 +57,7 @@ function showMarkers(markers) {
   $('missing-markers').textContent = missing.length
     ? [...byRegion].map(([region, labels]) => `${region}: ${labels.join(', ')}`).join('\n')
     : 'none';
+  $('missing-markers').classList.toggle('missing', missing.length > 0);
   document.body.dataset.missingMarkers = missing.map((m) => m.label).join(',');
   const noisy = markers.filter((m) => m.noise_mm !== null).sort((a, b) => b.noise_mm - a.noise_mm).slice(0, 3);
   $('noisiest-markers').textContent = noisy.map((m) => `${m.label} ${fmt(m.noise_mm, 2)} mm`).join(', ') || '-';

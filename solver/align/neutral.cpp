@@ -109,11 +109,16 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
       std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
       median(c, k) = values[values.size() / 2];
     }
+  // Any marker off rest counts. A marker missing in a frame counts with its distance where
+  // it was last seen, so that a dropout does not make a frame look more neutral.
+  std::vector<double> last_distance(K, 0.0);
   for (std::size_t f = 0; f < F; ++f) {
     if (!ok[f]) continue;
-    double largest = 0.0;  // any marker off rest counts
-    for (Eigen::Index k = 0; k < Eigen::Index(K); ++k)
-      if (const double d = (shape[f].col(k) - median.col(k)).norm(); std::isfinite(d)) largest = std::max(largest, d);
+    double largest = 0.0;
+    for (Eigen::Index k = 0; k < Eigen::Index(K); ++k) {
+      if (const double d = (shape[f].col(k) - median.col(k)).norm(); std::isfinite(d)) last_distance[std::size_t(k)] = d;
+      largest = std::max(largest, last_distance[std::size_t(k)]);
+    }
     distance[f] = largest * mm;
   }
   // A stretch qualifies when every frame's head pose fits and each (mostly present) marker is
