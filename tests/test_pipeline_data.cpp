@@ -32,7 +32,7 @@ struct JawTake {
 const JawTake& jaw_take(const std::filesystem::path& ict, const std::filesystem::path& jaw) {
   static const JawTake scene = [&] {
     JawTake s{load_rig(ict.string()), formats::read_take(jaw), {}};
-    s.calibration = pipeline::calibrate_capture(s.rig, s.take, "JawMoCap.trc").result.calibration;
+    s.calibration = pipeline::calibrate_capture(s.rig, s.take, "JawMoCap.trc", 0.8).result.calibration;  // calibration.neutral_min_presence
     return s;
   }();
   return scene;
