@@ -131,6 +131,8 @@ TEST_CASE("dt with small ICT FaceKit weights equals the mix of single-shape solv
   const auto layout = spread_marker_layout(rig, 60);
   SolverParams params;
   params.collision_region = CollisionRegion::kNone;
+  params.negligible_displacement_mm = 0.0;  // every small weight blended: the mix must be exact
+  params.fold_max_pins = 0;                 // the blend alone
   const auto model = build_solver_model(rig, layout, params);
   auto solver = make_solver(SolverMethod::kDt, model);
   SolveResult out = solver->make_result();
@@ -366,8 +368,11 @@ TEST_CASE("whole-face collision handling solves its pins per frame and removes t
 // handling, for the lip-pose tests below.
 struct LipPoseSolves {
   using Pose = std::vector<std::pair<const char*, double>>;
-  explicit LipPoseSolves(const Rig& rig_, const SolverParams& params = {})
+  // The collision stage alone: the fold stage, which also undoes crossings, is off in both
+  // (test_folds covers it).
+  explicit LipPoseSolves(const Rig& rig_, SolverParams params = {})
       : rig(rig_), layout(spread_marker_layout(rig, 60)) {
+    params.fold_max_pins = 0;
     SolverParams without = params;
     without.collision_region = CollisionRegion::kNone;
     model = build_solver_model(rig, layout, params);
