@@ -47,7 +47,8 @@ TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth a
   REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
   CHECK(notify.messages.front().find("READY=1") != std::string::npos);  // nothing before READY
   // The built-in face is hinged: the solver settings left to the rig are its choice, said at start.
-  CHECK(d.log().find("weight refinements 2, outer edge hold 0)") != std::string::npos);
+  CHECK(d.log().find("weight refinements 2, outer edge hold 0, ") != std::string::npos);
+  CHECK(d.log().find(fmt::format("{} kernels on a CPU with", kKernelPaths.name(kernels::best_path()))) != std::string::npos);
 
   client::Subscriber reader(shm);  // exists once READY is sent
   CHECK(reader.writer_pid() == d.pid());

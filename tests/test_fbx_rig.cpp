@@ -233,14 +233,18 @@ TEST_CASE("solving JawMoCap on the Blender FBX of ICT matches solving on the OBJ
   for (const auto& frame : solves[0]) largest = std::max(largest, double(frame.weights.maxCoeff()));
   const double fbx_vs_obj = largest_difference(solves[1], solves[0]);
   const double float32_vs_obj = largest_difference(solves[2], solves[0]);
+  const double fbx_vs_float32 = largest_difference(solves[1], solves[2]);
   WARN("JawMoCap, " << solves[0].size() << " frames, largest weight difference from the OBJ rig: the Blender FBX "
-                    << fbx_vs_obj << ", the OBJs rounded to float32 " << float32_vs_obj);
+                    << fbx_vs_obj << ", the OBJs rounded to float32 " << float32_vs_obj
+                    << "; the FBX from the float32 OBJs " << fbx_vs_float32);
   CHECK(largest > 0.3);  // the jaw opens: not a comparison of zeros
-  // Blender keeps positions as float32 (7 digits); rounding the OBJs alone moves the
-  // weights by about 1e-5, so 1e-6 is out of reach of any float32 file. The FBX path adds
-  // no error of its own beyond that: within twice the rounding's and 5e-5.
-  CHECK(fbx_vs_obj < 5e-5);
-  CHECK(fbx_vs_obj < 2 * float32_vs_obj);
+  // Blender keeps positions as float32 (7 digits), so 1e-6 from the double OBJ rig is out of
+  // reach of any float32 file: rounding the OBJs alone moves the weights (1.3e-5 before the
+  // calibration's and solve's per-frame decisions of issues 29 and 30, 0.037 since: they
+  // amplify it, docs/rigs.md). The FBX path adds no error of its own: it solves as the
+  // same geometry read from OBJ files.
+  CHECK(fbx_vs_float32 < 5e-5);
+  CHECK(fbx_vs_obj <= float32_vs_obj * 1.01 + 5e-5);
 }
 
 TEST_CASE("bad FBX files are refused naming the file and what is wrong", "[fbx]") {
