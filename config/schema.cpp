@@ -209,13 +209,14 @@ const std::vector<KeySpec>& schema_rows() {
                       "costs one frame. The fastest marker in the real takes tried (AnimFace, 60 Hz) moved 229 mm/s; "
                       "a 10 cm jump in one frame is 6000 mm/s at 60 Hz. 0 turns the check off."},
 
-      {FACECAP_KEY(calibration.marker_consistency_mm), .default_value = kDefaultMarkerConsistencyMm, .unit = "rig mm", .min = 0, .max = 1000,
+      {FACECAP_KEY(calibration.marker_consistency_mm), .default_value = 0.0, .unit = "rig mm", .min = 0, .max = 1000,
        .reload = Reload::kRebuild,
        .description = "Each face marker's target is compared with its neighbours' (against where the rig puts them "
                       "under the last frame's weights); one further than this from their median is left out of the "
                       "frame, and two that trade places are swapped back; such a frame is flagged "
                       "inconsistent_marker. Catches label swaps that glide too slowly for max_marker_speed_mm_s. 0 "
-                      "turns the check off."},
+                      "(the default, until the check is cheap enough for the loop) turns it off; 10 is the suggested "
+                      "value."},
       {FACECAP_KEY(calibration.label_markers), .default_value = false, .reload = Reload::kRebuild,
        .description = "Label every frame afresh: its points go to the labeller, which matches them to the "
                       "calibration's markers (tracking them from frame to frame, re-acquiring the set from the "

@@ -61,7 +61,7 @@ struct SolveSettings {
   // Each face marker checked against its neighbours before it pins (MarkerConsistency):
   // one further than this (rig mm) from what they say is left out of the frame, a
   // swapped pair is swapped back. 0: off.
-  double marker_consistency_mm = config::kDefaultMarkerConsistencyMm;
+  double marker_consistency_mm = 0.0;  // off (config::kSuggestedMarkerConsistencyMm turns it on)
   FilterSettings filter;
 };
 

@@ -70,9 +70,9 @@ struct SolverParams {
   double active_weight = 1e-4;      // weights below this are left out of T(w)
   // A shape whose weight moves no vertex by more than this (its weight times its largest
   // displacement) is left out of T(w) and x0 + B w for that frame; its weight is still
-  // solved and sent. Such shapes cost the blend's memory traffic and change nothing
-  // measurable (docs/solver.md, "Kernels").
-  double negligible_displacement_mm = 0.01;
+  // solved and sent. Off by default: at 0.01 mm facecapd missed the built-in face's 120 Hz
+  // (the fold and collision stages then did more; docs/solver.md, "Kernels").
+  double negligible_displacement_mm = 0.0;
   // The two settings below default to kByRig: the rig's own choice, by whether its shapes
   // swing parts about hinges as a real jaw does (Rig::hinged: the built-in face) or are an
   // artist's linear blend (ICT, ARKit and MetaHuman heads). build_solver_model decides.

@@ -163,7 +163,7 @@ TEST_CASE("JawMoCap with label swaps injected (slow and fast, neighbours and not
   const JawTake& s = jaw_take(ict, jaw);
   formats::MarkerTake take = s.take;
   take.frames.resize(900);
-  const double on = pipeline::SolveSettings{}.marker_consistency_mm;
+  const double on = config::kSuggestedMarkerConsistencyMm;
   REQUIRE(on > 0.0);  // the check is on by default
   const TornCount clean = torn_frames(s, take, on);
   for (const std::string spec : {"Leyebrow_M:Leyebrow_Inside:200:40:6", "Mouth_DownL:Mouth_Down:400:30:0",
