@@ -65,8 +65,9 @@ struct SolverParams {
   // How far the collision stage's box-overlap pairs stay valid: the tree is traversed
   // again only once a lip vertex has moved farther than this since the last traversal
   // (solver/collide/collider.hpp); 0 traverses every frame. Results do not depend on it,
-  // only the time.
-  double collision_skin_mm = 0.0;  // off by default: at 0.15 mm the built-in face missed 120 Hz (to be understood)
+  // only the time. Off by default: at 0.15 mm facecapd missed the built-in face's 120 Hz
+  // (docs/solver.md, "Kernels").
+  double collision_skin_mm = 0.0;
   double active_weight = 1e-4;      // weights below this are left out of T(w)
   // A shape whose weight moves no vertex by more than this (its weight times its largest
   // displacement) is left out of T(w) and x0 + B w for that frame; its weight is still
