@@ -65,7 +65,8 @@ nlohmann::json status_json(const StatusReport& r) {
       {"totals",
        {{"ticks", r.ticks}, {"frames_solved", r.frames_solved}, {"idle_ticks", r.idle_ticks},
         {"missed_deadlines", r.missed_deadlines}, {"late_start_misses", r.late_start_misses},
-        {"skipped_ticks", r.skipped_ticks}, {"pipeline_swaps", r.pipeline_swaps}, {"swap_misses", r.swap_misses},
+        {"skipped_ticks", r.skipped_ticks}, {"fold_deadline_stops", r.fold_deadline_stops},
+        {"pipeline_swaps", r.pipeline_swaps}, {"swap_misses", r.swap_misses},
         {"reloads_accepted", r.reloads_accepted}, {"reloads_rejected", r.reloads_rejected},
         {"quality_changes", r.quality_changes}, {"flagged_frames", flagged}}},
       {"outputs", outputs},
@@ -134,6 +135,8 @@ std::string metrics_text(const StatusReport& r) {
   e.counter("facecap_late_start_misses_total", "Missed deadlines of ticks that started late.",
             double(r.late_start_misses));
   e.counter("facecap_skipped_ticks_total", "Ticks given up to get back on the deadline grid.", double(r.skipped_ticks));
+  e.counter("facecap_fold_deadline_stops_total", "Solved frames whose fold stage stopped at the tick's deadline.",
+            double(r.fold_deadline_stops));
   e.counter("facecap_pipeline_swaps_total", "Solve pipelines swapped in (reloads, actors, calibrations).",
             double(r.pipeline_swaps));
   e.counter("facecap_swap_misses_total", "Missed deadlines of the ticks that swapped in a pipeline and the tick after.",

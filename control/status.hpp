@@ -76,7 +76,7 @@ struct StatusReport {
   std::vector<MarkerReport> markers;  // the calibration's face markers
   // Since the start.
   uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed_deadlines = 0, late_start_misses = 0,
-           skipped_ticks = 0, pipeline_swaps = 0, swap_misses = 0, reloads_accepted = 0, reloads_rejected = 0,
+           skipped_ticks = 0, fold_deadline_stops = 0, pipeline_swaps = 0, swap_misses = 0, reloads_accepted = 0, reloads_rejected = 0,
            quality_changes = 0;
   std::vector<std::pair<std::string, uint64_t>> flagged_frames;  // per status bit
   std::vector<OutputReport> outputs;

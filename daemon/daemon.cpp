@@ -92,7 +92,7 @@ std::string check_rig_and_calibration(const config::DaemonConfig& config) {
 struct Daemon::Sample {
   int64_t time_ns = 0;
   int64_t cpu_ns = 0;
-  uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed = 0, late_start = 0, skipped = 0;
+  uint64_t ticks = 0, frames_solved = 0, idle_ticks = 0, missed = 0, late_start = 0, skipped = 0, fold_deadline_stops = 0;
   drivers::SourceHealth source;
   uint64_t outputs_dropped = 0;
   std::array<uint64_t, kSolvedFlagCount> flagged{};
@@ -259,6 +259,7 @@ Daemon::Sample Daemon::take_sample() const {
   s.missed = counters.missed_deadlines.load();
   s.late_start = counters.late_start_misses.load();
   s.skipped = counters.skipped_ticks.load();
+  s.fold_deadline_stops = counters.fold_deadline_stops.load();
   s.source = source_->health();
   for (const auto& sink : sinks_)
     if (!sink->drops_by_design()) s.outputs_dropped += sink->health().dropped;
@@ -281,6 +282,7 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
   f.missed_deadlines = to.missed - from.missed;
   f.late_start_misses = to.late_start - from.late_start;
   f.skipped_ticks = to.skipped - from.skipped;
+  f.fold_deadline_stops = to.fold_deadline_stops - from.fold_deadline_stops;
   f.solved_fps = f.seconds > 0 ? double(f.frames_solved) / f.seconds : 0.0;
   const LatencyHistogram::Snapshot latency = to.latency.since(from.latency);
   f.latency_p50_ns = latency.quantile_ns(0.50);
@@ -628,6 +630,9 @@ void Daemon::shutdown(const std::string& reason) {
                run.missed_deadlines, run.late_start_misses, run.skipped_ticks, run.cpu_percent);
   if (const std::string chain = latency_chain_text(run); !chain.empty()) spdlog::info("latency {}", chain);
   if (const std::string flagged = flagged_text(run); !flagged.empty()) spdlog::info("frames flagged: {}", flagged);
+  if (run.fold_deadline_stops > 0)
+    spdlog::info("{} frames' fold stage stopped at the deadline (the rest of their folds left flagged)",
+                 run.fold_deadline_stops);
   write_stats_file(run);
   if (takes_ && !takes_->file().empty()) recording_file_ = takes_->file();
   controller_.reset();  // waits for work in flight; replies go to the I/O thread, still running
@@ -723,6 +728,7 @@ void Daemon::publish_status(int64_t now_ns) {
   r.missed_deadlines = now.missed;
   r.late_start_misses = now.late_start;
   r.skipped_ticks = now.skipped;
+  r.fold_deadline_stops = now.fold_deadline_stops;
   r.pipeline_swaps = counters.pipeline_swaps.load();
   r.swap_misses = counters.swap_misses.load();
   r.reloads_accepted = reloads_accepted();
@@ -761,6 +767,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["missed_deadlines"] = f.missed_deadlines;
   j["late_start_misses"] = f.late_start_misses;
   j["skipped_ticks"] = f.skipped_ticks;
+  j["fold_deadline_stops"] = f.fold_deadline_stops;
   j["max_wake_late_ms"] = ms(loop_->counters().max_wake_late_ns.load());
   j["max_tick_ms"] = ms(loop_->counters().max_tick_ns.load());
   j["latency_ms"] = {{"p50", ms(f.latency_p50_ns)}, {"p99", ms(f.latency_p99_ns)}, {"max", ms(f.latency_max_ns)}};

@@ -54,6 +54,7 @@ struct Figures {
   uint64_t missed_deadlines = 0;
   uint64_t late_start_misses = 0;  // of the missed deadlines: work within a period, started late
   uint64_t skipped_ticks = 0;
+  uint64_t fold_deadline_stops = 0;  // frames whose fold stage stopped at the deadline
   double solved_fps = 0.0;
   int64_t latency_p50_ns = 0;  // source frame received -> slot published
   int64_t latency_p99_ns = 0;

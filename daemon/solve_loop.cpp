@@ -158,8 +158,11 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
       *slot = marker_frame_;  // fits its storage: no allocation
       sampled_markers_.commit_push();
     }
+  // At a fixed rate the solve should leave the tick's last quarter for the outputs.
+  pipeline_->set_deadline(options_.lockstep ? 0 : now_ns + period_ns_ - period_ns_ / 4);
   pipeline_->process(marker_frame_, solved_frame_);
   const int64_t solved_ns = monotonic_now_ns();
+  if (pipeline_->result().fold_stopped_at_deadline) add(counters_.fold_deadline_stops);
   record_stage(LoopStage::kSolve, solved_ns - taken_ns);
   for (std::size_t s = 0; s < kSolveStageCount; ++s) {
     auto& total = counters_.solver_stage_total_ns[s];

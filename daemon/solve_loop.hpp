@@ -58,6 +58,9 @@ struct LoopCounters {
   // they started late, the thread not running when due (another task or the hypervisor
   // held its CPU). The others ran longer than a period.
   std::atomic<uint64_t> late_start_misses{0};
+  // Frames whose fold stage stopped before a round that would have run past the
+  // solve's share of the tick (FaceSolver::set_deadline).
+  std::atomic<uint64_t> fold_deadline_stops{0};
   std::atomic<uint64_t> skipped_ticks{0};       // ticks given up to get back on the grid
   std::atomic<int64_t> max_wake_late_ns{0};     // worst wake-up after a deadline
   std::atomic<int64_t> max_tick_ns{0};          // longest tick, wake-up to the end of its work

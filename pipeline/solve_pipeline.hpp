@@ -82,6 +82,9 @@ class SolvePipeline {
   // wanted). Not RT-safe.
   SolvedFrame make_solved_frame(bool with_vertices) const;
 
+  // When the next process() should end (monotonic_now_ns; 0: none): FaceSolver::set_deadline.
+  // RT-safe.
+  void set_deadline(int64_t deadline_ns) noexcept { solver_->set_deadline(deadline_ns); }
   // What a loop prefetches ahead of a frame (FaceSolver::streamed_memory). RT-safe.
   std::span<const std::span<const std::byte>> streamed_memory() const noexcept { return solver_->streamed_memory(); }
   const MarkerMapper& mapper() const noexcept { return mapper_; }

@@ -87,9 +87,7 @@ inline void CollisionStage::pin(int v, PinUpdate& update, Result& result) noexce
     update.add(v, m.poisson.pin_solution.column(c), m.poisson.pin_solution.scale[std::size_t(c)], m.params.beta, reference(v));
   } else {
     auto z = pin_columns_.col(Eigen::Index(result.pins));
-    z.setZero();
-    z[v] = 1.0;
-    m.poisson.factor->solve_in_place(z, pin_work_);
+    m.poisson.factor->solve_unit(v, z, pin_work_);
     update.add({v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), z.data(), m.params.beta, reference(v));
   }
   ++result.pins;

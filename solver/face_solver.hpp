@@ -43,6 +43,9 @@ struct SolveResult {
   uint32_t collision_constraints = 0;  // vertices pinned to the linear blend
   uint32_t fold_pins = 0;              // vertices of folded triangles pinned to the linear blend
   uint32_t markers_released = 0;       // present markers whose pins a fold released this frame
+  // The fold stage stopped before the next round for the deadline set_deadline() gave
+  // (what it had not undone stays folded and flagged).
+  bool fold_stopped_at_deadline = false;
   // The fold metric against the linear blend of the same weights after the fold stage
   // (nonlinear, dt; zero for linear and meshik).
   FoldReport folds;
@@ -70,6 +73,11 @@ class FaceSolver {
 
   // Forgets the warm start (previous weights). Real-time safe.
   virtual void reset() noexcept = 0;
+  // The time (monotonic_now_ns) the next solves should end by, 0 for none (offline:
+  // every stage runs to the end). Only the fold stage's rounds, which a badly folded
+  // frame can repeat for milliseconds, heed it: a round is not started when the longest
+  // recent round would end past it. Real-time safe.
+  void set_deadline(int64_t deadline_ns) noexcept { deadline_ns_ = deadline_ns; }
 
   // The model memory each solve streams through that is too large to stay cached
   // between paced frames (the blend's terms), in the order it is read: a loop that
@@ -83,6 +91,7 @@ class FaceSolver {
  protected:
   explicit FaceSolver(std::shared_ptr<const SolverModel> model) : model_(std::move(model)) {}
   std::shared_ptr<const SolverModel> model_;
+  int64_t deadline_ns_ = 0;
 };
 
 // Precomputes deformation gradients, the factorisation and the collision structure.

@@ -14,6 +14,9 @@ FoldStage::FoldStage(const SolverModel& model)
   reference_.resize(3, m.vertex_count());
   pin_capacity_ = std::min<Eigen::Index>(m.vertex_count(), m.params.fold_max_pins);
   pin_columns_.resize(m.vertex_count(), pin_capacity_);
+  column_vertex_.assign(std::size_t(pin_capacity_), -1);
+  vertex_column_.assign(std::size_t(m.vertex_count()), -1);
+  column_used_frame_.assign(std::size_t(pin_capacity_), 0);
   pin_work_.resize(m.vertex_count());
   pin_stamp_.assign(std::size_t(m.vertex_count()), 0);
   fold_vertex_stamp_.assign(std::size_t(m.vertex_count()), 0);
@@ -39,13 +42,32 @@ const FoldReport& FoldStage::measure_again(const Eigen::Matrix3Xd& vertices) noe
   return mark_fold_vertices();
 }
 
-void FoldStage::begin_frame() noexcept { pins_ = 0; }
+void FoldStage::begin_frame() noexcept {
+  pins_ = 0;
+  ++frame_;
+}
+
+const double* FoldStage::pin_column(int v) noexcept {
+  int slot = vertex_column_[std::size_t(v)];
+  if (slot < 0) {
+    // A frame pins at most pin_capacity_ vertices, so some slot is not this frame's.
+    slot = 0;
+    for (int c = 1; c < int(pin_capacity_); ++c)
+      if (column_used_frame_[std::size_t(c)] < column_used_frame_[std::size_t(slot)]) slot = c;
+    if (const int old = column_vertex_[std::size_t(slot)]; old >= 0) vertex_column_[std::size_t(old)] = -1;
+    model_.poisson.factor->solve_unit(v, pin_columns_.col(slot), pin_work_);
+    column_vertex_[std::size_t(slot)] = v;
+    vertex_column_[std::size_t(v)] = slot;
+  }
+  column_used_frame_[std::size_t(slot)] = frame_;
+  return pin_columns_.col(slot).data();
+}
 
 // Each call is a round: a corner still on a fold is pinned again (its hold adds up), once
 // per round. A pinned vertex gains beta e_v e_v^T in A0 and beta e_v (x0 + B w)_v^T in the
 // right-hand side, as a collision pin: A0^-1 e_v from the collision stage's precomputed
-// columns where the vertex has one, else back-substituted here (a folded triangle is
-// rare; a frame's cost is bounded by fold_max_pins).
+// columns where the vertex has one, else from pin_column(): back-substituted once and
+// kept while it is used (a frame's cost is bounded by fold_max_pins).
 uint32_t FoldStage::add_pins(PinUpdate& update) noexcept {
   const SolverModel& m = model_;
   uint32_t added = 0;
@@ -63,11 +85,7 @@ uint32_t FoldStage::add_pins(PinUpdate& update) noexcept {
       if (c >= 0) {
         ok = update.add(v, m.poisson.pin_solution.column(c), m.poisson.pin_solution.scale[std::size_t(c)], kPinWeight * m.params.beta, target);
       } else {
-        auto z = pin_columns_.col(pins_);
-        z.setZero();
-        z[v] = 1.0;
-        m.poisson.factor->solve_in_place(z, pin_work_);
-        ok = update.add({v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), z.data(), kPinWeight * m.params.beta, target);
+        ok = update.add({v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), pin_column(v), kPinWeight * m.params.beta, target);
       }
       if (!ok) return added;
       pin_stamp_[std::size_t(v)] = pin_stamp_now_;

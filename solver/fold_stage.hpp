@@ -56,7 +56,15 @@ class FoldStage {
   Eigen::Matrix3Xd reference_;  // 3 x N: this frame's x0 + B w
   Eigen::Index pin_capacity_ = 0;
   Eigen::Index pins_ = 0;  // this frame's
-  Eigen::MatrixXd pin_columns_;  // A0^-1 e_v of pins outside the precomputed collision columns
+  // A0^-1 e_v of pinned vertices outside the precomputed collision columns, kept across
+  // frames (folds recur at the same eyelids and mouth corners, and each new column is a
+  // whole back-substitution): slot -> vertex, vertex -> slot, and the frame that last used
+  // each slot (the least recently used one not in this frame's pins is replaced).
+  Eigen::MatrixXd pin_columns_;
+  std::vector<int> column_vertex_;
+  std::vector<int> vertex_column_;
+  std::vector<uint64_t> column_used_frame_;
+  uint64_t frame_ = 0;
   Eigen::VectorXd pin_work_;
   uint32_t pin_stamp_now_ = 0;        // this round's
   std::vector<uint32_t> pin_stamp_;  // per vertex: the round it was last pinned
@@ -64,6 +72,8 @@ class FoldStage {
   std::vector<uint32_t> fold_vertex_stamp_;  // per vertex: the measure that found it on a fold
 
   const FoldReport& mark_fold_vertices() noexcept;
+  // A0^-1 e_v, from the cache or back-substituted into a free or stale slot. Real-time safe.
+  const double* pin_column(int v) noexcept;
 };
 
 }  // namespace facecap

@@ -1,6 +1,7 @@
 // The per-frame solvers: nonlinear (the paper), linear and dt, each a composition of the
 // stages (weights_stage, triangle_blend, pin_update, collision_stage), and make_solver.
 // Everything here after construction is real-time safe unless said otherwise.
+#include <algorithm>
 #include <memory>
 
 #include "core/error.hpp"
@@ -38,6 +39,7 @@ class StageClock {
 bool begin_solve(const WeightsStage& weights, const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present,
                  SolveResult& out) noexcept {
   out.collision_pairs = out.collision_constraints = out.fold_pins = out.markers_released = 0;
+  out.fold_stopped_at_deadline = false;
   out.folds = {};
   out.status = weights.usable(present, targets) ? 0u : uint32_t(kSolvedTooFewMarkers);
   return out.status == 0;
@@ -127,6 +129,7 @@ class PoissonSolver final : public FaceSolver {
     StageClock clock(out);
     out.status = 0;
     out.collision_pairs = out.collision_constraints = out.fold_pins = out.markers_released = 0;
+    out.fold_stopped_at_deadline = false;
     out.weights = weights;
     solve_mesh(targets, present, out, clock);
   }
@@ -173,6 +176,11 @@ class PoissonSolver final : public FaceSolver {
     folds_.begin_frame();
     bool released = false;
     for (int round = 0; round < kFoldRounds && out.folds.folded > 0 && folds_.pin_capacity() > 0; ++round) {
+      const int64_t round_start_ns = monotonic_now_ns();
+      if (deadline_ns_ != 0 && round_start_ns + longest_fold_round_ns_ > deadline_ns_) {
+        out.fold_stopped_at_deadline = true;
+        break;
+      }
       const uint32_t added = folds_.add_pins(pins_);
       out.fold_pins += added;
       if (!released && (added == 0 || round == kReleaseRound)) {
@@ -183,7 +191,9 @@ class PoissonSolver final : public FaceSolver {
       }
       if (!pins_.apply(rhs_, out.vertices)) out.status |= kSolvedSingularCorrection;
       out.folds = folds_.measure_again(out.vertices);
+      longest_fold_round_ns_ = std::max(longest_fold_round_ns_, monotonic_now_ns() - round_start_ns);
     }
+    longest_fold_round_ns_ -= longest_fold_round_ns_ / kFoldRoundDecay;
     if (out.folds.folded > 0) out.status |= kSolvedFolded;
     clock.lap(SolveStage::kCollide);
     clock.finish();
@@ -209,6 +219,11 @@ class PoissonSolver final : public FaceSolver {
   // Pinning a folded triangle can fold a neighbour it pulls: up to this many rounds of
   // pins and measures, markers released from the kReleaseRound'th on.
   static constexpr int kFoldRounds = 8, kReleaseRound = 4;
+  // What a fold round is expected to take, for the deadline: the longest recent one,
+  // forgotten by 1/kFoldRoundDecay a frame (a heavy fold once does not stop rounds for
+  // good).
+  static constexpr int64_t kFoldRoundDecay = 64;
+  int64_t longest_fold_round_ns_ = 0;
 
   WeightsStage weights_;
   TriangleBlend blend_;

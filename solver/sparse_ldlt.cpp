@@ -45,6 +45,8 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A, const kernels::Kern
   const auto* x = static_cast<const double*>(factor->x);
   const auto* perm = static_cast<const int*>(factor->Perm);
   perm_.assign(perm, perm + n_);
+  inverse_perm_.resize(std::size_t(n_));
+  for (Eigen::Index k = 0; k < n_; ++k) inverse_perm_[std::size_t(perm_[std::size_t(k)])] = int(k);
   col_start_.resize(std::size_t(n_) + 1);
   inv_diagonal_.resize(std::size_t(n_));
   short_rows_ = n_ <= 65536;
@@ -67,13 +69,17 @@ SparseLdlt::SparseLdlt(const Eigen::SparseMatrix<double>& A, const kernels::Kern
 
 namespace {
 
+// From factor row `first` on (rows before it are zero in P x), a column whose entry is
+// still zero is skipped: a unit right-hand side touches only its elimination-tree path.
 template <class Row>
 void solve_one(Eigen::Index n, const int* perm, const int* col_start, const Row* rows, const double* vals,
-               const double* inv_diagonal, Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) noexcept {
+               const double* inv_diagonal, Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work,
+               Eigen::Index first = 0) noexcept {
   double* w = work.data();
   for (Eigen::Index k = 0; k < n; ++k) w[k] = x[perm[k]];
-  for (Eigen::Index j = 0; j < n; ++j) {
+  for (Eigen::Index j = first; j < n; ++j) {
     const double y = w[j];
+    if (y == 0.0) continue;
     for (int k = col_start[j]; k < col_start[j + 1]; ++k) w[rows[k]] -= vals[k] * y;
   }
   for (Eigen::Index j = n - 1; j >= 0; --j) {
@@ -95,6 +101,16 @@ void SparseLdlt::solve_in_place(Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& 
     solve_one(n_, perm_.data(), col_start_.data(), row16_.data(), value_.data(), inv_diagonal_.data(), x, work);
   else
     solve_one(n_, perm_.data(), col_start_.data(), row32_.data(), value_.data(), inv_diagonal_.data(), x, work);
+}
+
+void SparseLdlt::solve_unit(Eigen::Index i, Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept {
+  x.setZero();
+  x[i] = 1.0;
+  const Eigen::Index first = inverse_perm_[std::size_t(i)];
+  if (short_rows_)
+    solve_one(n_, perm_.data(), col_start_.data(), row16_.data(), value_.data(), inv_diagonal_.data(), x, work, first);
+  else
+    solve_one(n_, perm_.data(), col_start_.data(), row32_.data(), value_.data(), inv_diagonal_.data(), x, work, first);
 }
 
 }  // namespace facecap

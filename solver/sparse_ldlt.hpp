@@ -30,10 +30,15 @@ class SparseLdlt {
   void solve_in_place(Eigen::Matrix3Xd& xyz, Eigen::Matrix4Xd& work) const noexcept;
   // x = A^-1 b for one right-hand side, in place; work has N entries. Real-time safe.
   void solve_in_place(Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept;
+  // x = A^-1 e_i, a column of the inverse: the forward substitution starts where e_i's
+  // one is and skips the zeros below it (a pin's column; much cheaper than a general
+  // solve). x and work have N entries. Real-time safe.
+  void solve_unit(Eigen::Index i, Eigen::Ref<Eigen::VectorXd> x, Eigen::VectorXd& work) const noexcept;
 
  private:
   Eigen::Index n_ = 0;
   std::vector<int> perm_;            // factor row i is A's row perm_[i]
+  std::vector<int> inverse_perm_;    // A's row r is factor row inverse_perm_[r]
   // Strictly-lower entries of the unit L, by column. Their rows are 16-bit when N allows
   // (short_rows_: a sixth fewer bytes streamed per solve), otherwise 32-bit.
   bool short_rows_ = true;

@@ -8,6 +8,7 @@
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 
+#include "core/time.hpp"
 #include "solver/builtin_face.hpp"
 #include "solver/collide/folds.hpp"
 #include "solver/face_solver.hpp"
@@ -150,4 +151,31 @@ TEST_CASE("the built-in face's stress corpus folds in the paper's solve and not 
 TEST_CASE("ICT FaceKit's stress corpus folds in the paper's solve and not with the fold stage", "[data]") {
   FACECAP_REQUIRE_SHARED_DATA(dir, "ict-face");
   check_corpus(load_rig(dir.string()));
+}
+
+TEST_CASE("a fold stage past its deadline starts no round and flags the fold; without a deadline it undoes it") {
+  const Rig& rig = BuiltinFace::instance().rig();
+  const auto layout = spread_marker_layout(rig, 60);
+  const auto model = build_solver_model(rig, layout);
+  auto solver = make_solver(SolverMethod::kNonlinear, model);
+  SolveResult out = solver->make_result();
+  const std::vector<uint8_t> present(layout.size(), 1);
+  // The first pose of the corpus the paper's solve folds (the unbounded stage undoes it).
+  for (const StressPose& pose : stress_corpus(rig, layout)) {
+    solver->set_deadline(0);
+    solver->solve_with_weights(pose.weights, pose.targets, present, out);
+    if (out.fold_pins == 0) continue;
+    INFO(pose.name << ": " << out.fold_pins << " fold pins without a deadline");
+    CHECK((out.status & kSolvedFolded) == 0);
+    CHECK_FALSE(out.fold_stopped_at_deadline);
+
+    solver->set_deadline(monotonic_now_ns() - 1);  // already passed
+    solver->solve_with_weights(pose.weights, pose.targets, present, out);
+    CHECK(out.fold_stopped_at_deadline);
+    CHECK(out.fold_pins == 0);
+    CHECK(out.folds.folded > 0);
+    CHECK((out.status & kSolvedFolded) != 0);
+    return;
+  }
+  FAIL("no pose of the built-in corpus needed fold pins");
 }

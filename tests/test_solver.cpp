@@ -545,6 +545,15 @@ TEST_CASE("SparseLdlt solves match Eigen's with 16-bit and 32-bit row indices") 
     Eigen::VectorXd one_work(n);
     factor.solve_in_place(one, one_work);
     CHECK((one - expected.row(1).transpose()).cwiseAbs().maxCoeff() < 1e-10);
+
+    // Columns of the inverse, the first, last and a middle row of A (the forward pass of
+    // solve_unit starts at the row's place in the fill-reducing order).
+    for (const Eigen::Index i : {Eigen::Index(0), n / 2, n - 1}) {
+      Eigen::VectorXd column(n);
+      factor.solve_unit(i, column, one_work);
+      const Eigen::VectorXd expected_column = reference.solve(Eigen::VectorXd::Unit(n, i));
+      CHECK((column - expected_column).cwiseAbs().maxCoeff() < 1e-10);
+    }
   }
 }
 
