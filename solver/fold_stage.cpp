@@ -34,11 +34,12 @@ const FoldReport& FoldStage::mark_fold_vertices() noexcept {
 
 const FoldReport& FoldStage::measure(const float* weights, const Eigen::Matrix3Xd& vertices) noexcept {
   blend_.all(weights, reference_);
-  return measure_again(vertices);
+  detector_.measure(vertices, reference_);
+  return mark_fold_vertices();
 }
 
 const FoldReport& FoldStage::measure_again(const Eigen::Matrix3Xd& vertices) noexcept {
-  detector_.measure(vertices, reference_);
+  detector_.measure_again(vertices, reference_);
   return mark_fold_vertices();
 }
 

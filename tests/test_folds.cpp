@@ -142,6 +142,19 @@ TEST_CASE("the fold metric finds a flipped triangle, a crease past the threshold
   FoldDetector sharp;
   sharp.configure(g.triangles, {}, 45.0);
   CHECK(sharp.measure(bent, g.vertices).folded == 8);
+
+  // measure_again against the reference of the last measure gives what measure gives.
+  for (FoldDetector* d : {&folds, &sharp}) {
+    d->measure(g.vertices, g.vertices);
+    for (const Eigen::Matrix3Xd* solved : std::initializer_list<const Eigen::Matrix3Xd*>{&flipped, &creased, &bent}) {
+      const FoldReport again = d->measure_again(*solved, g.vertices);
+      const FoldReport fresh = d->measure(*solved, g.vertices);
+      CHECK(again.folded == fresh.folded);
+      CHECK(again.flipped == fresh.flipped);
+      CHECK(again.folded_by_region == fresh.folded_by_region);
+      CHECK(again.max_edge_stretch == fresh.max_edge_stretch);
+    }
+  }
 }
 
 TEST_CASE("the built-in face's stress corpus folds in the paper's solve and not with the fold stage") {

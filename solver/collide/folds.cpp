@@ -58,11 +58,18 @@ void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint
 }
 
 const FoldReport& FoldDetector::measure(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept {
+  for (Eigen::Index t = 0; t < triangle_count_; ++t) {
+    const int a = triangles_(0, t), b = triangles_(1, t), c = triangles_(2, t);
+    reference_normals_.col(t) = (reference.col(b) - reference.col(a)).cross(reference.col(c) - reference.col(a));
+  }
+  return measure_again(solved, reference);
+}
+
+const FoldReport& FoldDetector::measure_again(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept {
   report_ = {};
   for (Eigen::Index t = 0; t < triangle_count_; ++t) {
     const int a = triangles_(0, t), b = triangles_(1, t), c = triangles_(2, t);
     solved_normals_.col(t) = (solved.col(b) - solved.col(a)).cross(solved.col(c) - solved.col(a));
-    reference_normals_.col(t) = (reference.col(b) - reference.col(a)).cross(reference.col(c) - reference.col(a));
     folded_[std::size_t(t)] = solved_normals_.col(t).dot(reference_normals_.col(t)) < 0.0;
   }
   // A crease past crease_radians_ needs the solve's normals more than crease_radians_
@@ -75,8 +82,11 @@ const FoldReport& FoldDetector::measure(const Eigen::Matrix3Xd& solved, const Ei
   };
   for (const auto& [t0, t1] : interior_edges_) {
     const auto n0 = solved_normals_.col(t0), n1 = solved_normals_.col(t1);
-    const double dot = n0.dot(n1), dot2_bound = crease_cos2 * n0.squaredNorm() * n1.squaredNorm();
-    const bool apart = crease_cos >= 0.0 ? (dot < 0.0 || dot * dot < dot2_bound) : (dot < 0.0 && dot * dot > dot2_bound);
+    const double dot = n0.dot(n1);
+    // At 90 degrees (the default) the bound is 0 and the norms are not needed.
+    auto dot2_bound = [&] { return crease_cos2 * n0.squaredNorm() * n1.squaredNorm(); };
+    const bool apart = crease_cos >= 0.0 ? (dot < 0.0 || (crease_cos2 > 0.0 && dot * dot < dot2_bound()))
+                                         : (dot < 0.0 && dot * dot > dot2_bound());
     if (!apart) continue;
     if (angle(n0, n1) - angle(reference_normals_.col(t0), reference_normals_.col(t1)) <= crease_radians_) continue;
     folded_[std::size_t(t0)] = folded_[std::size_t(t1)] = 1;

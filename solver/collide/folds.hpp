@@ -47,6 +47,9 @@ class FoldDetector {
   // Measures `solved` against `reference` (both 3 x N). Zero-area triangles (either mesh)
   // are not counted as flipped. Real-time safe.
   const FoldReport& measure(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept;
+  // measure() of another solve against the same reference as the last measure(): its
+  // normals are not computed again (the fold stage's rounds). Real-time safe.
+  const FoldReport& measure_again(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept;
 
   // After measure(): per triangle, 1 if folded; the folded triangles, ascending.
   std::span<const uint8_t> folded_flags() const noexcept { return folded_; }
