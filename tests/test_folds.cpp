@@ -3,6 +3,7 @@
 // solved without folds by the fold stage, where the paper's solve folds.
 #include <cmath>
 #include <map>
+#include <memory>
 #include <numbers>
 
 #include <catch2/catch.hpp>
@@ -47,12 +48,20 @@ struct CorpusCount {
   double max_stretch_mm = 0;
 };
 
+// A solver of `method` over 60 markers spread on the rig, the corpus's layout.
+struct CorpusSolver {
+  std::vector<MarkerBinding> layout;
+  std::unique_ptr<FaceSolver> solver;
+  CorpusSolver(const Rig& rig, SolverMethod method, const SolverParams& params = {})
+      : layout(spread_marker_layout(rig, 60)), solver(make_solver(method, build_solver_model(rig, layout, params))) {}
+};
+
 // The corpus solved with `params` by `method`, folds measured by a detector of its own
 // against the rig's linear blend.
 CorpusCount solve_corpus(const Rig& rig, SolverMethod method, const SolverParams& params) {
-  const auto layout = spread_marker_layout(rig, 60);
-  const auto model = build_solver_model(rig, layout, params);
-  auto solver = make_solver(method, model);
+  const CorpusSolver corpus(rig, method, params);
+  const auto& layout = corpus.layout;
+  const auto& solver = corpus.solver;
   SolveResult out = solver->make_result();
   FoldDetector folds;
   folds.configure(rig.triangles, triangle_regions(rig));
@@ -168,9 +177,9 @@ TEST_CASE("ICT FaceKit's stress corpus folds in the paper's solve and not with t
 
 TEST_CASE("a fold stage past its deadline starts no round and flags the fold; without a deadline it undoes it") {
   const Rig& rig = BuiltinFace::instance().rig();
-  const auto layout = spread_marker_layout(rig, 60);
-  const auto model = build_solver_model(rig, layout);
-  auto solver = make_solver(SolverMethod::kNonlinear, model);
+  const CorpusSolver corpus(rig, SolverMethod::kNonlinear);
+  const auto& layout = corpus.layout;
+  const auto& solver = corpus.solver;
   SolveResult out = solver->make_result();
   const std::vector<uint8_t> present(layout.size(), 1);
   // The first pose of the corpus the paper's solve folds (the unbounded stage undoes it).
