@@ -625,9 +625,12 @@ void Daemon::shutdown(const std::string& reason) {
   }
   const Figures run = figures_since_start();
   spdlog::info("run: {} frames solved in {:.1f} s ({:.1f} fps), latency p50 {:.2f} p99 {:.2f} max {:.2f} ms, "
-               "{} missed deadlines ({} started late, {} ticks skipped), CPU {:.0f}%", run.frames_solved, run.seconds,
-               run.solved_fps, ms(run.latency_p50_ns), ms(run.latency_p99_ns), ms(run.latency_max_ns),
-               run.missed_deadlines, run.late_start_misses, run.skipped_ticks, run.cpu_percent);
+               "{} missed deadlines ({} started late, {} ticks skipped), {} idle ticks, CPU {:.0f}%", run.frames_solved,
+               run.seconds, run.solved_fps, ms(run.latency_p50_ns), ms(run.latency_p99_ns), ms(run.latency_max_ns),
+               run.missed_deadlines, run.late_start_misses, run.skipped_ticks, run.idle_ticks, run.cpu_percent);
+  if (const int64_t margin = loop_->counters().max_jitter_margin_ns.load(); margin > 0)
+    spdlog::info("frames arrived late: the ticks waited up to {:.2f} ms longer for them than loop.phase_margin_us",
+                 ms(margin));
   if (const std::string chain = latency_chain_text(run); !chain.empty()) spdlog::info("latency {}", chain);
   if (const std::string flagged = flagged_text(run); !flagged.empty()) spdlog::info("frames flagged: {}", flagged);
   if (run.fold_deadline_stops > 0)
@@ -770,6 +773,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["fold_deadline_stops"] = f.fold_deadline_stops;
   j["max_wake_late_ms"] = ms(loop_->counters().max_wake_late_ns.load());
   j["max_tick_ms"] = ms(loop_->counters().max_tick_ns.load());
+  j["max_jitter_margin_ms"] = ms(loop_->counters().max_jitter_margin_ns.load());
   j["latency_ms"] = {{"p50", ms(f.latency_p50_ns)}, {"p99", ms(f.latency_p99_ns)}, {"max", ms(f.latency_max_ns)}};
   j["cpu_percent"] = f.cpu_percent;
   j["source"] = {{"description", source_->description()}, {"overwritten", f.source_overwritten},

@@ -11,10 +11,6 @@ namespace {
 
 // The first tick comes this long after start(): time for the source to get going.
 constexpr int64_t kStartDelayNs = 20 * kNsPerMs;
-// Phase lock: fraction of the measured phase error corrected per tick, and the largest
-// correction per tick as a fraction of the period (keeps the rate steady).
-constexpr double kPhaseGain = 0.1;
-constexpr int64_t kMaxPhaseStepDivisor = 16;
 // A source whose rate differs from the loop's by more than this is not phase-locked to.
 constexpr double kPhaseLockRateTolerance = 0.01;
 // Lockstep with nothing to do (replay ended, recorder queue full): re-check this often.
@@ -76,6 +72,7 @@ SolveLoop::SolveLoop(LoopOptions options, drivers::MarkerSource& source, std::un
       sinks_(std::move(sinks)),
       sink_timing_(sinks_.size()),
       period_ns_(int64_t(std::llround(double(kNsPerSecond) / options_.rate_hz))),
+      phase_follower_(period_ns_, options_.phase_margin_ns),
       marker_frame_(make_marker_frame(source.info().labels)),
       solved_frame_(pipeline_->make_solved_frame(any_wants_vertices(sinks_))),
       sampled_markers_(kSampledMarkerSlots, marker_frame_),
@@ -118,17 +115,6 @@ void SolveLoop::record_stage(LoopStage stage, int64_t ns) noexcept {
   auto& total = counters_.stage_total_ns[std::size_t(stage)];
   total.store(total.load(std::memory_order_relaxed) + ns, std::memory_order_relaxed);
   store_max(counters_.stage_max_ns[std::size_t(stage)], ns);
-}
-
-// Moves the next deadline so that ticks fall phase_margin after frames arrive: the
-// error is the wait beyond the margin, wrapped into (-period/2, period/2]; a frame that
-// waited too long pulls the ticks earlier. RT-safe.
-void SolveLoop::follow_source_phase(int64_t waited_ns) noexcept {
-  int64_t error = (waited_ns - options_.phase_margin_ns) % period_ns_;
-  if (error < 0) error += period_ns_;
-  if (error > period_ns_ / 2) error -= period_ns_;
-  const int64_t limit = period_ns_ / kMaxPhaseStepDivisor;
-  phase_correction_ns_ = std::clamp(int64_t(-kPhaseGain * double(error)), -limit, limit);
 }
 
 void SolveLoop::record_telemetry() noexcept {
@@ -193,7 +179,11 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
   latency_chain_[std::size_t(LatencyStage::kReceiveToSolved)].record(solved_ns - marker_frame_.receive_time_ns);
   latency_chain_[std::size_t(LatencyStage::kSolvedToSent)].record(offered_ns - solved_ns);
 
-  if (phase_lock_) follow_source_phase(now_ns - marker_frame_.receive_time_ns);
+  if (phase_lock_) {
+    phase_correction_ns_ = phase_follower_.correction(now_ns - marker_frame_.receive_time_ns,
+                                                      source_.health().frames_overwritten);
+    counters_.max_jitter_margin_ns.store(phase_follower_.max_jitter_margin_ns(), std::memory_order_relaxed);
+  }
   counters_.frames_solved.store(counters_.frames_solved.load(std::memory_order_relaxed) + 1, std::memory_order_release);
   add(counters_.solved_sequence);
   return true;
@@ -245,7 +235,9 @@ void SolveLoop::run() noexcept {
   realtime_ready_.store(true, std::memory_order_release);
   prefault_stack();
   if (options_.lockstep) run_lockstep();
-  else run_fixed_rate(epoch_ns_);
+  // The source's frames are due from the epoch on: a phase-locked loop starts its ticks
+  // the margin after them rather than racing them.
+  else run_fixed_rate(epoch_ns_ + (phase_lock_ ? options_.phase_margin_ns : 0));
   exited_.store(true, std::memory_order_release);
 }
 

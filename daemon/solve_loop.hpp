@@ -15,6 +15,7 @@
 #include "core/frame.hpp"
 #include "core/realtime.hpp"
 #include "core/rt/handoff.hpp"
+#include "core/rt/phase_follower.hpp"
 #include "core/rt/spsc_slots.hpp"
 #include "core/latency_histogram.hpp"
 #include "daemon/marker_telemetry.hpp"
@@ -64,6 +65,8 @@ struct LoopCounters {
   std::atomic<uint64_t> skipped_ticks{0};       // ticks given up to get back on the grid
   std::atomic<int64_t> max_wake_late_ns{0};     // worst wake-up after a deadline
   std::atomic<int64_t> max_tick_ns{0};          // longest tick, wake-up to the end of its work
+  // Phase lock: the most the ticks waited beyond phase_margin for frames arriving late.
+  std::atomic<int64_t> max_jitter_margin_ns{0};
   std::atomic<uint64_t> pipeline_swaps{0};
   // Missed deadlines of the ticks that adopted a new pipeline and of the tick after each
   // (its caches cold): what a swap (reload, actor, calibration) cost the loop.
@@ -153,7 +156,6 @@ class SolveLoop {
   void record_stage(LoopStage stage, int64_t ns) noexcept;
   // Markers used and expected, and each fit residual, of the frame just solved. RT-safe.
   void record_telemetry() noexcept;
-  void follow_source_phase(int64_t waited_ns) noexcept;
 
   LoopOptions options_;
   drivers::MarkerSource& source_;
@@ -162,6 +164,7 @@ class SolveLoop {
   std::vector<SinkTiming> sink_timing_;
   int64_t period_ns_;
   bool phase_lock_ = false;
+  rt::PhaseFollower phase_follower_;
   int64_t phase_correction_ns_ = 0;  // applied to the next deadline
   int swap_ticks_watched_ = 0;       // ticks left whose misses count as swap_misses
 

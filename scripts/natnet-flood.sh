@@ -87,7 +87,8 @@ missed=$(field missed_deadlines)
 sent=$(sed -n 's/.* \([0-9]*\) bad datagrams sent$/\1/p' "$work/serve.log")
 overwritten=$(awk '/"source": \{/ { in_source = 1 } in_source && /"overwritten"/ { gsub(/[^0-9]/, ""); print; exit }' "$stats")
 echo "frames solved $frames in $(num seconds 1) s ($(num solved_fps 1) fps of the stream's 240), $overwritten replaced" \
-     "by a newer one before a tick took them"
+     "by a newer one before a tick took them, $(field idle_ticks) idle ticks; ticks waited up to" \
+     "$(num max_jitter_margin_ms 2) ms more for late frames"
 echo "bad datagrams sent ${sent:-?}, counted and dropped by facecapd $errors (the rest: before facecapd listened or after it stopped, or lost by the kernel)"
 echo "missed deadlines $missed ($(field late_start_misses) started late), worst wake-up $(num max_wake_late_ms 2) ms, latency received -> published p99 $(num p99 2) ms"
 echo "CPU $(num cpu_percent 0)% of one core (facecapd)"

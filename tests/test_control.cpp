@@ -606,7 +606,11 @@ TEST_CASE("with 90% of markers missing, the capture reads bad and STATUS says wh
     const daemon::Figures f = d->figures_since_start();
     const std::string status = d->status_line(f);
     INFO(status);
-    CHECK(f.solved_fps == Approx(120).epsilon(0.1));  // the loop keeps its rate either way
+    // The loop keeps its rate either way: its ticks and the slots it gave up fill the time.
+    // (Frames a busy host's scheduler made the sim miss show as idle ticks, not as a slower loop.)
+    INFO(f.ticks << " ticks, " << f.skipped_ticks << " skipped, " << f.idle_ticks << " idle in " << f.seconds << " s");
+    CHECK(double(f.ticks + f.skipped_ticks) / f.seconds == Approx(120).epsilon(0.02));
+    CHECK(double(f.frames_solved) >= 0.9 * double(f.ticks));
     if (dropout < 0.5) {
       CHECK(d->quality(f).state == daemon::CaptureQuality::kGood);
       CHECK_THAT(status, Contains("capture good"));

@@ -59,13 +59,13 @@ TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth a
 
   facecap_frame f{};
   uint64_t frames = 0, dropped = 0, compared = 0;
-  int64_t first_publish = 0, last_publish = 0, last_frame_no = -1;
+  int64_t first_publish = 0, last_publish = 0, first_frame_no = -1, last_frame_no = -1;
   double weight_error = 0, jaw_error = 0, vertex_error_cm = 0;
   const int64_t read_until = monotonic_now_ns() + 4 * kNsPerSecond;
   while (monotonic_now_ns() < read_until) {
     const int status = reader.wait_next(f, kNsPerSecond);
     REQUIRE(status == FACECAP_OK);
-    if (frames == 0) first_publish = f.publish_time_ns;
+    if (frames == 0) first_publish = f.publish_time_ns, first_frame_no = f.frame_no;
     else dropped += f.dropped;
     last_publish = f.publish_time_ns;
     CHECK(f.frame_no > last_frame_no);
@@ -85,10 +85,15 @@ TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth a
     }
     notify.drain();
   }
+  // The sim's frames come out at its rate; a frame the host's scheduler made the sim publish
+  // too late for its tick is replaced by the next one (at most 3%: the loop waits out the
+  // usual lateness, rt::PhaseFollower), and no reader loses one.
   const double seconds = double(last_publish - first_publish) / kNsPerSecond;
-  const double rate = double(frames - 1) / seconds;
-  INFO(frames << " frames in " << seconds << " s = " << rate << " fps, " << dropped << " dropped");
-  CHECK(rate == Approx(120.0).epsilon(0.02));
+  const double source_frames = double(last_frame_no - first_frame_no + 1);
+  INFO(frames << " of the sim's " << source_frames << " frames published in " << seconds << " s, " << dropped
+              << " dropped by the reader");
+  CHECK((source_frames - 1) / seconds == Approx(120.0).epsilon(0.01));
+  CHECK(double(frames) >= 0.97 * source_frames);
   CHECK(dropped == 0);
   REQUIRE(compared > 20);
   INFO("mean |w - w_true| " << weight_error / compared << ", jawOpen " << jaw_error / compared << ", vertices "

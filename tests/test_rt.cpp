@@ -1,5 +1,5 @@
 // The real-time hand-offs of core/rt: latest-value mailbox, SPSC slots, deadline grid,
-// pipeline hand-off. Threaded cases run under TSan too (docs/building.md).
+// phase follower, pipeline hand-off. Threaded cases run under TSan too (docs/building.md).
 #include <array>
 #include <atomic>
 #include <memory>
@@ -10,6 +10,7 @@
 #include "core/rt/deadline_grid.hpp"
 #include "core/rt/handoff.hpp"
 #include "core/rt/latest_mailbox.hpp"
+#include "core/rt/phase_follower.hpp"
 #include "core/rt/spsc_slots.hpp"
 
 using namespace facecap;
@@ -125,6 +126,103 @@ TEST_CASE("the deadline grid counts a late start, a long tick and the slots each
   t = grid.advance(25'000'000, 25'500'000, -300'000);
   CHECK_FALSE(t.missed);
   CHECK(grid.deadline_ns() == 28'700'000);
+}
+
+namespace {
+// A source at the loop's rate whose frame k arrives at offset + k * period + delay(k),
+// handed over by a latest-value mailbox to ticks on a deadline grid that the follower
+// moves (the work itself takes no time): what the solve loop does, on simulated time.
+struct PhaseRun {
+  uint64_t taken = 0, replaced = 0, idle = 0;
+  double wait_sum_ns = 0;
+  double mean_wait_ms() const { return taken ? wait_sum_ns / double(taken) / 1e6 : 0.0; }
+};
+
+class PhaseSim {
+ public:
+  PhaseSim(int64_t period_ns, int64_t margin_ns, int64_t offset_ns)
+      : follower(period_ns, margin_ns), grid_(0, period_ns), offset_ns_(offset_ns) {}
+
+  // Frames first .. first + frames - 1, and the ticks before the last arrives.
+  template <typename Delay>
+  PhaseRun run(int64_t first, int64_t frames, Delay delay) {
+    PhaseRun run;
+    for (int64_t k = first; k < first + frames; ++k) {
+      const int64_t arrival = offset_ns_ + k * grid_.period_ns() + delay(k);
+      while (grid_.deadline_ns() < arrival) {
+        const int64_t tick = grid_.deadline_ns();
+        int64_t correction = 0;
+        if (pending_arrival_ >= 0) {
+          ++run.taken;
+          run.wait_sum_ns += double(tick - pending_arrival_);
+          correction = follower.correction(tick - pending_arrival_, replaced_total_);
+          pending_arrival_ = -1;
+        } else {
+          ++run.idle;
+        }
+        grid_.advance(tick, tick, correction);
+      }
+      if (pending_arrival_ >= 0) ++run.replaced, ++replaced_total_;
+      pending_arrival_ = arrival;
+    }
+    return run;
+  }
+
+  rt::PhaseFollower follower;
+
+ private:
+  rt::DeadlineGrid grid_;
+  int64_t offset_ns_;
+  int64_t pending_arrival_ = -1;  // a frame in the mailbox no tick has taken yet
+  uint64_t replaced_total_ = 0;
+};
+
+// Deterministic pseudo-random delays in [0, spread_ns) (the same on every library).
+struct UniformDelay {
+  int64_t spread_ns;
+  int64_t operator()(int64_t k) const {
+    uint64_t x = uint64_t(k) * 0x9E3779B97F4A7C15ull;
+    x = (x ^ (x >> 31)) * 0xBF58476D1CE4E5B9ull;
+    x ^= x >> 29;
+    return int64_t(x % uint64_t(spread_ns));
+  }
+};
+}  // namespace
+
+TEST_CASE("the phase follower puts ticks just after a steady source's frames and waits out a jittery one's") {
+  constexpr int64_t kPeriod = 4'166'667;  // 240 Hz
+  constexpr int64_t kMargin = 300'000;
+  constexpr int64_t kSecond = 240;
+  // Frames arrive 1.7 ms after the grid's first ticks.
+  PhaseSim sim(kPeriod, kMargin, 1'700'000);
+  const auto steady = [](int64_t) { return int64_t{0}; };
+
+  // Steady: within 2 s every frame waits the margin, nothing is replaced.
+  sim.run(0, 2 * kSecond, steady);
+  PhaseRun run = sim.run(2 * kSecond, 10 * kSecond, steady);
+  CHECK(run.replaced == 0);
+  CHECK(run.idle == 0);
+  CHECK(run.mean_wait_ms() == Approx(0.3).margin(0.01));
+  CHECK(sim.follower.jitter_margin_ns() == 0);
+
+  // Frames now come up to 1.5 ms late (uniformly). With ticks kept 0.3 ms after the
+  // earliest arrivals, most frames would miss their tick and be replaced by the next; the
+  // follower waits longer instead. After 5 s of it, 60 s lose under 2% of frames.
+  const UniformDelay jitter{1'500'000};
+  sim.run(12 * kSecond, 5 * kSecond, jitter);
+  run = sim.run(17 * kSecond, 60 * kSecond, jitter);
+  INFO("replaced " << run.replaced << " of " << 60 * kSecond << ", mean wait " << run.mean_wait_ms() << " ms");
+  CHECK(double(run.replaced) < 0.02 * 60 * kSecond);
+  CHECK(run.idle == run.replaced);  // a late frame leaves its tick idle
+  // The wait grows by about the jitter's spread, not by whole periods.
+  CHECK(run.mean_wait_ms() < 0.3 + 1.5 + 0.5);
+
+  // Steady again: within 10 s the extra wait is gone.
+  sim.run(77 * kSecond, 10 * kSecond, steady);
+  run = sim.run(87 * kSecond, 5 * kSecond, steady);
+  CHECK(sim.follower.jitter_margin_ns() == 0);
+  CHECK(run.replaced == 0);
+  CHECK(run.mean_wait_ms() == Approx(0.3).margin(0.01));
 }
 
 namespace {
