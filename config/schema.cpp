@@ -312,8 +312,7 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(loop.phase_margin_us), .default_value = int64_t{300}, .unit = "us", .min = 0, .max = 100000,
        .description = "With a source on its own clock (sim, live devices) the loop shifts its ticks to fall this "
                       "long after frames arrive, so frames wait as little as possible, and up to a quarter period "
-                      "longer while frames arrive late ([daemon.md](daemon.md#the-solve-loop)); 0 keeps the ticks "
-                      "fixed."},
+                      "longer while frames arrive late (docs/daemon.md, the solve loop); 0 keeps the ticks fixed."},
       {FACECAP_KEY(loop.prefetch_lead_us), .default_value = int64_t{800}, .unit = "us", .min = 0, .max = 100000,
        .description = "In fixed mode the loop wakes this long before each tick to prefetch the solver's largest "
                       "tables (the blend's terms) into the cache, so that a solve after a sleep does not start from "

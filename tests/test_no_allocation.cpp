@@ -79,7 +79,7 @@ TEST_CASE("the counter sees allocations by new and by malloc") {
   std::free(q);
 }
 
-TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, temporal filters, label check, every output, solver "
+TEST_CASE("a tick allocates nothing: sim source, phase lock, prefetch, solve, temporal filters, label check, every output, solver "
           "swap and the units check's marker samples") {
   const config::DaemonConfig c = config::default_config();
   const auto rig = std::shared_ptr<const Rig>(std::shared_ptr<const Rig>(), &BuiltinFace::instance().rig());
@@ -121,6 +121,7 @@ TEST_CASE("a tick allocates nothing: sim source, prefetch, solve, temporal filte
   LoopOptions options;
   options.realtime.fifo = false;
   options.prefetch_lead_ns = 800'000;
+  options.phase_margin_ns = 300'000;  // the sim is on its own clock: the phase follower runs too
   pipeline::SolveSettings settings = pipeline::solve_settings(c, pipeline::SolveContext::kLive);
   REQUIRE(settings.filter.targets);  // on for a live source by default; the weights' filter too here
   settings.filter.weights = true;
