@@ -30,6 +30,7 @@ void copy_solved_frame(const SolvedFrame& from, SolvedFrame& to) noexcept {
   to.flags = from.flags;
   to.folded_triangles = from.folded_triangles;
   to.max_edge_stretch_mm = from.max_edge_stretch_mm;
+  to.fold_deadline_rounds = from.fold_deadline_rounds;
 }
 
 std::string_view solve_stage_name(SolveStage stage) noexcept {

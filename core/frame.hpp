@@ -116,6 +116,9 @@ struct SolvedFrame {
   // weights (SolveResult::folds): folded triangles, the largest edge stretch in rig mm.
   uint32_t folded_triangles = 0;
   float max_edge_stretch_mm = 0.0f;
+  // Rounds the fold stage ran before it stopped for the loop's deadline (SolveResult::
+  // fold_rounds), -1 when it was not stopped: a re-solve stops there too.
+  int32_t fold_deadline_rounds = -1;
   // Operator telemetry per source marker slot (MarkerFrame::markers order): the marker's
   // target in rig space (head frame, rig units) and the fit residual, the distance in mm
   // from the solved surface point it is bound to. NaN for slots missing this frame or not

@@ -110,6 +110,7 @@ void Controller::adopt_built() {
   ReplyFn reply = std::exchange(building_reply_, nullptr);
   try {
     Built built = building_.get();
+    if (parts_.takes) parts_.takes->set_start_state_bytes(built.pipeline->encoded_state_size());
     parts_.loop->offer_pipeline(std::move(built.pipeline));
     calibration_ = std::move(built.calibration);
     actor_ = std::move(built.actor);

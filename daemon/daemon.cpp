@@ -142,6 +142,7 @@ void Daemon::start() {
                                                    pipeline::solve_settings_toml(c, pipeline::SolveContext::kLive));
   context.vertex_count = uint32_t(rig_->vertex_count());
   context.loop_rate_hz = c.loop.rate_hz;
+  context.pipeline_state_bytes = solve->encoded_state_size();
   io_ = std::make_unique<IoThread>();
   context.io = &io_->context();
   sinks_ = outputs::make_outputs(c, context);

@@ -111,6 +111,15 @@ void SolveLoop::adopt_offered_pipeline() noexcept {
   }
 }
 
+void SolveLoop::offer_start_state() noexcept {
+  std::span<const char> state;  // encoded once, for every sink that wants it
+  for (outputs::OutputSink* sink : sinks_) {
+    if (!sink->wants_start_state()) continue;
+    if (state.empty()) state = pipeline_->encoded_state();
+    sink->offer_start_state(state);
+  }
+}
+
 void SolveLoop::record_stage(LoopStage stage, int64_t ns) noexcept {
   auto& total = counters_.stage_total_ns[std::size_t(stage)];
   total.store(total.load(std::memory_order_relaxed) + ns, std::memory_order_relaxed);
@@ -144,6 +153,7 @@ bool SolveLoop::tick(int64_t now_ns) noexcept {
       *slot = marker_frame_;  // fits its storage: no allocation
       sampled_markers_.commit_push();
     }
+  offer_start_state();
   // At a fixed rate the solve should leave the tick's last quarter for the outputs.
   pipeline_->set_deadline(options_.lockstep ? 0 : now_ns + period_ns_ - period_ns_ / 4);
   pipeline_->process(marker_frame_, solved_frame_);

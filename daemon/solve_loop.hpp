@@ -153,6 +153,9 @@ class SolveLoop {
   void run_fixed_rate(int64_t epoch_ns) noexcept;
   void run_lockstep() noexcept;
   void adopt_offered_pipeline() noexcept;
+  // The pipeline's state before this tick's frame, to the sinks that want it (a take's
+  // first frame). RT-safe.
+  void offer_start_state() noexcept;
   void record_stage(LoopStage stage, int64_t ns) noexcept;
   // Markers used and expected, and each fit residual, of the frame just solved. RT-safe.
   void record_telemetry() noexcept;

@@ -37,6 +37,7 @@ constexpr uint32_t fourcc(const char (&s)[5]) {
 constexpr uint32_t kHeadChunk = fourcc("HEAD");
 constexpr uint32_t kMarkerChunk = fourcc("MRKF");
 constexpr uint32_t kSolvedChunk = fourcc("SLVF");
+constexpr uint32_t kStartStateChunk = fourcc("STAT");
 constexpr uint32_t kIndexChunk = fourcc("INDX");
 constexpr uint32_t kTailChunk = fourcc("TAIL");
 
@@ -198,6 +199,8 @@ void encode_solved_frame(ByteWriter& w, const SolvedFrame& f) {
   for (Eigen::Index i = 0; i < f.weights.size(); ++i) w.f32(f.weights[i]);
   w.u32(uint32_t(f.vertices.cols()));
   for (Eigen::Index i = 0; i < f.vertices.size(); ++i) w.f32(f.vertices.data()[i]);  // column-major: x y z per vertex
+  // Format version 4 appends:
+  w.i32(f.fold_deadline_rounds);
 }
 
 void decode_solved_frame(ByteReader& r, SolvedFrame& f) {
@@ -229,6 +232,7 @@ void decode_solved_frame(ByteReader& r, SolvedFrame& f) {
   if (vertices > r.remaining() / 12) r.fail(fmt::format("vertex count {} exceeds the chunk", vertices));
   f.vertices.resize(3, vertices);
   for (Eigen::Index i = 0; i < f.vertices.size(); ++i) f.vertices.data()[i] = r.f32("vertex");
+  f.fold_deadline_rounds = r.has(4) ? r.i32("fold deadline rounds") : -1;  // format version 4
 }
 
 int64_t realtime_now_ns() {
@@ -286,6 +290,15 @@ void RecordingWriter::append_chunk(uint32_t code, const std::vector<char>& paylo
   w.bytes(std::string_view(payload.data(), payload.size()));
   buffer_chunk_ends_.push_back(buffer_.size());
   if (buffer_.size() >= options_.buffer_bytes) flush();
+}
+
+void RecordingWriter::append_start_state(std::span<const char> state) {
+  if (!is_open() || !failure_.empty())
+    throw file_error(path_, failure_.empty() ? "append to a closed recording" : "recording stopped: " + failure_);
+  if (!index_.empty() || start_state_written_) throw file_error(path_, "the start state goes before the first frame, once");
+  payload_.assign(state.begin(), state.end());
+  start_state_written_ = true;
+  append_chunk(kStartStateChunk, payload_);
 }
 
 void RecordingWriter::append_marker_frame(const MarkerFrame& frame) {
@@ -499,10 +512,23 @@ void RecordingReader::open(std::span<const char> bytes) {
   ByteReader header_reader(head->payload, name_ + " [HEAD]");
   decode_header(header_reader, header_);
   const std::size_t chunks_begin = kPreambleBytes + kChunkHeaderBytes + head->payload.size();
+  read_start_state(chunks_begin);
   if (!load_index(chunks_begin)) scan(chunks_begin);
   for (std::size_t i = 0; i < index_.size(); ++i) {
     (index_[i].kind == ChunkKind::kMarkerFrame ? marker_entries_ : solved_entries_).push_back(i);
   }
+}
+
+void RecordingReader::read_start_state(std::size_t chunks_begin) {
+  uint32_t code = 0;
+  if (bytes_.size() < chunks_begin + kChunkHeaderBytes) return;
+  std::memcpy(&code, bytes_.data() + chunks_begin, 4);  // little-endian, as written
+  if (code != kStartStateChunk) return;
+  std::string why;
+  if (const auto chunk = chunk_at(bytes_, chunks_begin, why))
+    start_state_ = chunk->payload;
+  else
+    start_state_damage_ = why;
 }
 
 bool RecordingReader::load_index(std::size_t chunks_begin) {

@@ -23,7 +23,9 @@ namespace facecap::formats {
 
 // 2: HEAD gains rig_units and solver_settings (version 1 readers skip them).
 // 3: HEAD gains the slate: take, actor, scene, shot, notes (older readers skip them).
-inline constexpr uint16_t kRecordingFormatVersion = 3;
+// 4: an optional STAT chunk after HEAD holds the solve's state before the first frame;
+//    SLVF gains fold_deadline_rounds (older readers skip both).
+inline constexpr uint16_t kRecordingFormatVersion = 4;
 // Readers of this version understand files whose minimum reader version is <= this.
 inline constexpr uint16_t kRecordingReaderVersion = 1;
 
@@ -83,6 +85,11 @@ class RecordingWriter {
   RecordingWriter(const RecordingWriter&) = delete;
   RecordingWriter& operator=(const RecordingWriter&) = delete;
 
+  // The solve's state before the first frame (STAT: a versioned payload the pipeline
+  // encodes, pipeline/pipeline_state.hpp), so that a recording started mid-run re-solves
+  // to itself from its first frame. At most once, before any frame; throws Error
+  // otherwise, and as the appends below do.
+  void append_start_state(std::span<const char> state);
   // Throws Error when the writer is closed or has failed, or when flushing fails.
   void append_marker_frame(const MarkerFrame& frame);
   void append_solved_frame(const SolvedFrame& frame);
@@ -120,6 +127,7 @@ class RecordingWriter {
   std::vector<RecordingIndexEntry> index_;
   std::size_t marker_frames_ = 0;
   std::size_t solved_frames_ = 0;
+  bool start_state_written_ = false;
   std::string failure_;
 };
 
@@ -158,6 +166,12 @@ class RecordingReader {
   // skipped and where the file was cut off.
   std::string damage_summary() const;
 
+  // The STAT chunk's payload (RecordingWriter::append_start_state), empty when the
+  // recording has none; start_state_damage() says why one could not be read ("" when
+  // there was none or it was read).
+  std::span<const char> start_state() const noexcept { return start_state_; }
+  const std::string& start_state_damage() const noexcept { return start_state_damage_; }
+
   std::size_t marker_frame_count() const noexcept { return marker_entries_.size(); }
   std::size_t solved_frame_count() const noexcept { return solved_entries_.size(); }
   // Decodes the i-th marker / solved frame into out (its storage is reused). Throws Error
@@ -168,6 +182,8 @@ class RecordingReader {
  private:
   struct Mapping;
   void open(std::span<const char> bytes);
+  // The STAT chunk, when the chunks begin with one.
+  void read_start_state(std::size_t chunks_begin);
   bool load_index(std::size_t chunks_begin);
   void scan(std::size_t chunks_begin);
   // The first offset at or after from where a whole chunk of a known kind with a valid
@@ -184,6 +200,8 @@ class RecordingReader {
   std::vector<RecordingIndexEntry> index_;
   std::vector<std::size_t> marker_entries_;  // positions in index_
   std::vector<std::size_t> solved_entries_;
+  std::span<const char> start_state_;
+  std::string start_state_damage_;
   bool index_rebuilt_ = false;
   bool truncated_ = false;
   std::string stop_reason_;

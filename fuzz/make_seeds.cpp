@@ -22,6 +22,7 @@
 #include "formats/recording.hpp"
 #include "formats/trc.hpp"
 #include "outputs/udp/udp_stream_encoding.hpp"
+#include "pipeline/pipeline_state.hpp"
 #include "solver/align/profile.hpp"
 #include "solver/gltf_rig.hpp"
 #include "solver/obj_mesh.hpp"
@@ -71,6 +72,29 @@ Rig small_rig() {
   return rig;
 }
 
+// A start state (STAT) with every part: 2 shapes, 6 vertices, `markers` markers.
+std::vector<char> start_state_seed(std::size_t markers) {
+  const auto K = Eigen::Index(markers);
+  pipeline::SolvePipeline::State state;
+  state.mapper.accepted_targets = Eigen::Matrix3Xd::Constant(3, K, 0.5);
+  state.mapper.accepted_ns.assign(markers, 1000);
+  state.solver.previous = state.solver.previous_linear = state.weights = Eigen::VectorXd::Constant(2, 0.25);
+  state.vertices = Eigen::Matrix3Xd::Zero(3, 6);
+  auto& labeller = state.labeller.emplace();
+  labeller.last = labeller.velocity = labeller.last_in_reference = Eigen::Matrix3Xd::Ones(3, K);
+  labeller.lost_frames.assign(markers, 0);
+  labeller.ever_seen.assign(markers, 1);
+  const auto filter = [](Eigen::Index rows, Eigen::Index channels) {
+    const Eigen::MatrixXd values = Eigen::MatrixXd::Ones(rows, channels);
+    return pipeline::OneEuroFilter::State{values, values, values, std::vector<uint8_t>(std::size_t(channels), 1), 1000, true};
+  };
+  state.target_filter = filter(3, K);
+  state.weight_filter = filter(1, 2);
+  std::vector<char> bytes;
+  pipeline::encode_pipeline_state(state, bytes);
+  return bytes;
+}
+
 void write_recordings(const fs::path& dir) {
   fs::create_directories(dir);
   const MarkerTake take = small_take(6, 3);
@@ -85,6 +109,7 @@ void write_recordings(const fs::path& dir) {
   header.solver_settings = "[solver]\nmethod = \"ours\"\n";
   {
     RecordingWriter writer(dir / "solved.fcrec", header, RecordingWriter::Options{.overwrite = true});
+    writer.append_start_state(start_state_seed(take.labels.size()));
     SolvedFrame solved;
     solved.resize(2, 6);
     for (std::size_t f = 0; f < take.frames.size(); ++f) {

@@ -33,7 +33,7 @@ std::unique_ptr<OutputSink> make_shm(const config::DaemonConfig& c, const SinkCo
 std::unique_ptr<OutputSink> make_recording(const config::DaemonConfig& c, const SinkContext& context) {
   const config::RecordingSection& s = c.outputs.recording;
   if (!s.enabled && !c.control.http.enabled) return nullptr;
-  auto takes = std::make_unique<TakeRecorder>(context.vertex_count, s.solved && s.vertices);
+  auto takes = std::make_unique<TakeRecorder>(context.vertex_count, s.solved && s.vertices, context.pipeline_state_bytes);
   if (s.enabled) takes->start_take(take_options(c, context.header, new_recording_path(s.directory)));
   return takes;
 }

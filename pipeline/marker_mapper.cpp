@@ -82,6 +82,28 @@ void MarkerMapper::reset() noexcept {
   forget_accepted();
 }
 
+MarkerMapper::State MarkerMapper::make_state() const {
+  State state{.accepted_targets = accepted_targets_, .accepted_ns = accepted_ns_};
+  if (stabiliser_) state.head_pose = stabiliser_->last_pose();
+  return state;
+}
+
+bool MarkerMapper::save(State& state) const noexcept {
+  if (state.accepted_targets.cols() != marker_count() || state.accepted_ns.size() != accepted_ns_.size()) return false;
+  state.head_pose = stabiliser_ ? stabiliser_->last_pose() : align::Similarity{};
+  state.accepted_targets = accepted_targets_;  // same sizes: no allocation
+  state.accepted_ns = accepted_ns_;
+  return true;
+}
+
+bool MarkerMapper::restore(const State& state) noexcept {
+  if (state.accepted_targets.cols() != marker_count() || state.accepted_ns.size() != accepted_ns_.size()) return false;
+  if (stabiliser_) stabiliser_->restore_last_pose(state.head_pose);
+  accepted_targets_ = state.accepted_targets;
+  accepted_ns_ = state.accepted_ns;
+  return true;
+}
+
 MappedFrame MarkerMapper::make_output() const {
   MappedFrame out;
   out.targets = Eigen::Matrix3Xd::Constant(3, marker_count(), std::numeric_limits<double>::quiet_NaN());

@@ -75,6 +75,22 @@ class MarkerMapper {
   // RT-safe.
   void reset() noexcept;
 
+  // What the mapper carries from one frame to the next: the head pose a frame with too few
+  // stable markers holds, and the plausibility gate's last accepted targets.
+  struct State {
+    align::Similarity head_pose;       // source units (identity when not stabilising)
+    Eigen::Matrix3Xd accepted_targets;  // 3 x K, rig units
+    std::vector<int64_t> accepted_ns;   // K
+  };
+  // A state sized for this mapper. Not RT-safe.
+  State make_state() const;
+  // Copies the mapper's state into `state`; false (nothing copied) when it was not sized
+  // for this mapper. RT-safe.
+  bool save(State& state) const noexcept;
+  // Continues from `state`; false (nothing changed) when its marker count is not this
+  // mapper's. RT-safe.
+  bool restore(const State& state) noexcept;
+
   Eigen::Index marker_count() const { return Eigen::Index(slots_.size()); }
   std::span<const int> slots() const { return slots_; }          // per calibration marker: frame slot or -1
   std::span<const uint8_t> is_stable() const { return stable_; }  // per calibration marker

@@ -2,7 +2,11 @@
 
 #include <limits>
 
+#include <fmt/format.h>
+
+#include "core/error.hpp"
 #include "core/time.hpp"
+#include "pipeline/pipeline_state.hpp"
 #include "solver/marker_layout.hpp"
 #include "solver/solver_model.hpp"
 
@@ -83,6 +87,67 @@ SolvePipeline::SolvePipeline(const Rig& rig, const align::Calibration& calibrati
     checked_ = make_marker_frame(labels);
     points_.resize(source.labels.size());
   }
+  saved_state_ = make_state();
+  encode_pipeline_state(saved_state_, encoded_state_);
+}
+
+SolvePipeline::State SolvePipeline::make_state() const {
+  State state{.mapper = mapper_.make_state(), .solver = solver_->make_state(), .weights = result_.weights,
+              .vertices = result_.vertices};
+  if (labeller_) state.labeller = labeller_->make_state();
+  if (target_filter_) state.target_filter = target_filter_->make_state();
+  if (weight_filter_) state.weight_filter = weight_filter_->make_state();
+  return state;
+}
+
+bool SolvePipeline::save_state(State& state) const noexcept {
+  if (state.labeller.has_value() != labeller_.has_value() || state.target_filter.has_value() != target_filter_.has_value() ||
+      state.weight_filter.has_value() != weight_filter_.has_value())
+    return false;
+  if (state.weights.size() != result_.weights.size() || state.vertices.cols() != result_.vertices.cols()) return false;
+  if (labeller_ && !labeller_->save(*state.labeller)) return false;
+  if (target_filter_ && !target_filter_->save(*state.target_filter)) return false;
+  if (weight_filter_ && !weight_filter_->save(*state.weight_filter)) return false;
+  if (!mapper_.save(state.mapper) || !solver_->save_state(state.solver)) return false;
+  state.weights = result_.weights;  // same sizes: no allocation
+  state.vertices = result_.vertices;
+  return true;
+}
+
+std::span<const char> SolvePipeline::encoded_state() noexcept {
+  save_state(saved_state_);  // made by make_state(): it fits
+  encode_pipeline_state(saved_state_, encoded_state_);
+  return encoded_state_;
+}
+
+void SolvePipeline::restore_state(const State& state) {
+  const auto refuse = [](std::string_view stage, std::string_view why) {
+    throw Error(fmt::format("the pipeline state's {} does not fit this solve: {}", stage, why));
+  };
+  const auto presence = [&](std::string_view stage, bool stored, bool here) {
+    if (stored != here) refuse(stage, stored ? "this solve has none" : "none is stored");
+  };
+  presence("label check", state.labeller.has_value(), labeller_.has_value());
+  presence("target filter", state.target_filter.has_value(), target_filter_.has_value());
+  presence("weight filter", state.weight_filter.has_value(), weight_filter_.has_value());
+  if (state.weights.size() != shape_count_ || state.vertices.cols() != result_.vertices.cols())
+    refuse("last result", fmt::format("{} shapes and {} vertices stored, the rig has {} and {}", state.weights.size(),
+                                      state.vertices.cols(), shape_count_, result_.vertices.cols()));
+  // Each stage checks its own sizes: try on copies, so that a refusal changes nothing.
+  std::optional<align::MarkerLabeller> labeller = labeller_;
+  std::optional<OneEuroFilter> target_filter = target_filter_, weight_filter = weight_filter_;
+  MarkerMapper mapper = mapper_;
+  if (labeller && !labeller->restore(*state.labeller)) refuse("label check", "another marker count");
+  if (target_filter && !target_filter->restore(*state.target_filter)) refuse("target filter", "another marker count");
+  if (weight_filter && !weight_filter->restore(*state.weight_filter)) refuse("weight filter", "another shape count");
+  if (!mapper.restore(state.mapper)) refuse("marker mapper", "another marker count");
+  if (!solver_->restore_state(state.solver)) refuse("solver warm start", "another shape count");
+  labeller_ = std::move(labeller);
+  target_filter_ = std::move(target_filter);
+  weight_filter_ = std::move(weight_filter);
+  mapper_ = std::move(mapper);
+  result_.weights = state.weights;
+  result_.vertices = state.vertices;
 }
 
 const SolverParams& SolvePipeline::solver_params() const noexcept { return solver_->model().params; }
@@ -142,6 +207,7 @@ void SolvePipeline::process(const MarkerFrame& markers, SolvedFrame& out) noexce
   out.collision_constraints = result_.collision_constraints;
   out.folded_triangles = result_.folds.folded;
   out.max_edge_stretch_mm = float(result_.folds.max_edge_stretch * rig_mm_per_unit_);
+  out.fold_deadline_rounds = result_.fold_stopped_at_deadline ? int32_t(result_.fold_rounds) : -1;
   out.flags = (mapped_.head_held ? kSolvedHeadPoseHeld : 0u) | (mapped_.markers_implausible > 0 ? kSolvedImplausibleMarker : 0u) |
               (inconsistent ? kSolvedInconsistentMarker : 0u) | result_.status;
   record_fit_residuals(out);

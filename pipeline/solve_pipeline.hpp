@@ -85,6 +85,35 @@ class SolvePipeline {
   // When the next process() should end (monotonic_now_ns; 0: none): FaceSolver::set_deadline.
   // RT-safe.
   void set_deadline(int64_t deadline_ns) noexcept { solver_->set_deadline(deadline_ns); }
+  // The fold stage of the next process() calls stops after `rounds` rounds, as a deadline
+  // stopped it in the solve being reproduced (FaceSolver::stop_folds_after; -1: no stop).
+  // RT-safe.
+  void stop_folds_after(int rounds) noexcept { solver_->stop_folds_after(rounds); }
+
+  // What the pipeline carries from one frame to the next, each stateful stage's own: a
+  // recording started mid-run stores it as it was before its first frame and a re-solve
+  // restores it, so that the re-solve matches from that frame (docs/recording-format.md,
+  // STAT). The marker consistency check keeps nothing of its own (it predicts from the
+  // last weights, held here).
+  struct State {
+    std::optional<align::MarkerLabeller::State> labeller;  // with the label check or labelling
+    MarkerMapper::State mapper;
+    std::optional<OneEuroFilter::State> target_filter, weight_filter;  // with the filters
+    FaceSolver::State solver;
+    // The last solve's result: a frame with too few markers holds it, the consistency
+    // check predicts from its weights.
+    Eigen::VectorXd weights;    // M
+    Eigen::Matrix3Xd vertices;  // 3 x N, rig units
+  };
+  // The state as it is now, encoded (pipeline/pipeline_state.hpp) into storage sized at
+  // construction; valid until the next call. RT-safe.
+  std::span<const char> encoded_state() noexcept;
+  // Its size, constant for this pipeline. RT-safe.
+  std::size_t encoded_state_size() const noexcept { return encoded_state_.size(); }
+  // Continues from `state` at the next process(). Throws Error naming the stage whose
+  // state does not fit this pipeline (another rig, marker set or [solver] section);
+  // nothing is changed then. Not RT-safe.
+  void restore_state(const State& state);
   // What a loop prefetches ahead of a frame (FaceSolver::streamed_memory). RT-safe.
   std::span<const std::span<const std::byte>> streamed_memory() const noexcept { return solver_->streamed_memory(); }
   const MarkerMapper& mapper() const noexcept { return mapper_; }
@@ -105,6 +134,11 @@ class SolvePipeline {
 
  private:
   void record_fit_residuals(SolvedFrame& out) const noexcept;
+  // A state sized for this pipeline. Not RT-safe.
+  State make_state() const;
+  // Copies the pipeline's state into `state`; false (and `state` not to be used) when it
+  // was not sized for this pipeline. RT-safe.
+  bool save_state(State& state) const noexcept;
 
   MarkerMapper mapper_;
   std::unique_ptr<FaceSolver> solver_;
@@ -119,6 +153,8 @@ class SolvePipeline {
   SolveResult result_;
   align::LabelStats label_stats_;
   std::vector<MarkerBinding> bindings_;  // per calibration marker, for the fit residuals
+  State saved_state_;                // encoded_state()'s, sized at construction
+  std::vector<char> encoded_state_;  // its bytes, the capacity they need reserved
   double rig_mm_per_unit_ = 1.0;
   Eigen::Index shape_count_ = 0;
   Eigen::Index vertex_count_ = 0;

@@ -28,6 +28,35 @@ void OneEuroFilter::reset() noexcept {
   started_ = false;
 }
 
+OneEuroFilter::State OneEuroFilter::make_state() const { return {raw_, filtered_, speed_, live_, last_ns_, started_}; }
+
+bool OneEuroFilter::save(State& state) const noexcept {
+  if (!same_shape(state)) return false;
+  state.raw = raw_;  // same sizes: no allocation
+  state.filtered = filtered_;
+  state.speed = speed_;
+  state.live = live_;
+  state.last_ns = last_ns_;
+  state.started = started_;
+  return true;
+}
+
+bool OneEuroFilter::restore(const State& state) noexcept {
+  if (!same_shape(state)) return false;
+  raw_ = state.raw;
+  filtered_ = state.filtered;
+  speed_ = state.speed;
+  live_ = state.live;
+  last_ns_ = state.last_ns;
+  started_ = state.started;
+  return true;
+}
+
+bool OneEuroFilter::same_shape(const State& state) const noexcept {
+  const auto fits = [&](const Eigen::MatrixXd& m) { return m.rows() == rows() && m.cols() == channels(); };
+  return fits(state.raw) && fits(state.filtered) && fits(state.speed) && state.live.size() == live_.size();
+}
+
 void OneEuroFilter::filter(Eigen::Ref<Eigen::MatrixXd> values, std::span<const uint8_t> present, int64_t time_ns) noexcept {
   if (values.rows() != rows() || values.cols() != channels()) return;
   if (started_ && time_ns <= last_ns_) reset();

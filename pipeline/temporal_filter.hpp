@@ -42,10 +42,28 @@ class OneEuroFilter {
   // Every channel starts afresh at the next frame. RT-safe.
   void reset() noexcept;
 
+  // What the filter carries from one frame to the next.
+  struct State {
+    Eigen::MatrixXd raw, filtered, speed;  // D x N
+    std::vector<uint8_t> live;             // N
+    int64_t last_ns = 0;
+    bool started = false;
+  };
+  // A state sized for this filter. Not RT-safe.
+  State make_state() const;
+  // Copies the filter's state into `state`; false (and nothing copied) when it was not
+  // sized for this filter. RT-safe.
+  bool save(State& state) const noexcept;
+  // Continues from `state`; false (and nothing changed) when its sizes are not this
+  // filter's. RT-safe.
+  bool restore(const State& state) noexcept;
+
   Eigen::Index rows() const noexcept { return filtered_.rows(); }
   Eigen::Index channels() const noexcept { return filtered_.cols(); }
 
  private:
+  bool same_shape(const State& state) const noexcept;
+
   OneEuroParams params_;
   Eigen::MatrixXd raw_, filtered_, speed_;  // D x N: the previous frame's input, output and filtered speed
   std::vector<uint8_t> live_;               // N: the channel was filtered last frame

@@ -18,6 +18,7 @@
 #include "solver/collide/folds.hpp"
 #include "solver/params.hpp"
 #include "solver/rig.hpp"
+#include "solver/weights_stage.hpp"
 
 namespace facecap {
 
@@ -44,8 +45,9 @@ struct SolveResult {
   uint32_t fold_pins = 0;              // vertices of folded triangles pinned to the linear blend
   uint32_t markers_released = 0;       // present markers whose pins a fold released this frame
   // The fold stage stopped before the next round for the deadline set_deadline() gave
-  // (what it had not undone stays folded and flagged).
+  // (what it had not undone stays folded and flagged), after fold_rounds rounds.
   bool fold_stopped_at_deadline = false;
+  uint32_t fold_rounds = 0;
   // The fold metric against the linear blend of the same weights after the fold stage
   // (nonlinear, dt; zero for linear and meshik).
   FoldReport folds;
@@ -78,6 +80,22 @@ class FaceSolver {
   // frame can repeat for milliseconds, heed it: a round is not started when the longest
   // recent round would end past it. Real-time safe.
   void set_deadline(int64_t deadline_ns) noexcept { deadline_ns_ = deadline_ns; }
+  // Replays a deadline stop: from the next solve on (until told otherwise) the fold stage
+  // stops after `rounds` rounds, as a deadline stopped it in the solve being reproduced
+  // (its SolveResult::fold_rounds); -1: no such stop. A re-solve without the live deadline
+  // thus stops where the live solve stopped. Real-time safe.
+  void stop_folds_after(int rounds) noexcept { fold_round_stop_ = rounds; }
+
+  // What the solver carries from one frame to the next: Eq. 2's warm start.
+  using State = WeightsStage::State;
+  // A state sized for this solver. Not real-time.
+  virtual State make_state() const = 0;
+  // Copies the warm start into `state`; false (nothing copied) when it was not sized for
+  // this solver. Real-time safe.
+  virtual bool save_state(State& state) const noexcept = 0;
+  // Continues from `state`; false (nothing changed) when its shape count is not this
+  // solver's. Real-time safe.
+  virtual bool restore_state(const State& state) noexcept = 0;
 
   // The model memory each solve streams through that is too large to stay cached
   // between paced frames (the blend's terms), in the order it is read: a loop that
@@ -92,6 +110,7 @@ class FaceSolver {
   explicit FaceSolver(std::shared_ptr<const SolverModel> model) : model_(std::move(model)) {}
   std::shared_ptr<const SolverModel> model_;
   int64_t deadline_ns_ = 0;
+  int fold_round_stop_ = -1;
 };
 
 // Precomputes deformation gradients, the factorisation and the collision structure.

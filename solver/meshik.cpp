@@ -412,6 +412,9 @@ MeshIkSolver::MeshIkSolver(std::shared_ptr<const SolverModel> model, const MeshI
 MeshIkSolver::~MeshIkSolver() = default;
 
 void MeshIkSolver::reset() noexcept { state_->eq2->reset(); }
+FaceSolver::State MeshIkSolver::make_state() const { return state_->eq2->make_state(); }
+bool MeshIkSolver::save_state(FaceSolver::State& state) const noexcept { return state_->eq2->save_state(state); }
+bool MeshIkSolver::restore_state(const FaceSolver::State& state) noexcept { return state_->eq2->restore_state(state); }
 
 const MeshIkReport& MeshIkSolver::last_report() const noexcept { return state_->report; }
 

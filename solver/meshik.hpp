@@ -55,6 +55,10 @@ class MeshIkSolver final : public FaceSolver {
   void solve_with_weights(const Eigen::VectorXd& weights, const Eigen::Matrix3Xd& targets,
                           std::span<const uint8_t> present, SolveResult& out) noexcept override;
   void reset() noexcept override;
+  // Eq. 2's warm start, which starts Gauss-Newton.
+  FaceSolver::State make_state() const override;
+  bool save_state(FaceSolver::State& state) const noexcept override;
+  bool restore_state(const FaceSolver::State& state) noexcept override;
 
   const MeshIkReport& last_report() const noexcept;
 

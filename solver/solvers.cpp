@@ -40,6 +40,7 @@ bool begin_solve(const WeightsStage& weights, const Eigen::Matrix3Xd& targets, s
                  SolveResult& out) noexcept {
   out.collision_pairs = out.collision_constraints = out.fold_pins = out.markers_released = 0;
   out.fold_stopped_at_deadline = false;
+  out.fold_rounds = 0;
   out.folds = {};
   out.status = weights.usable(present, targets) ? 0u : uint32_t(kSolvedTooFewMarkers);
   return out.status == 0;
@@ -63,6 +64,9 @@ class LinearSolver final : public FaceSolver {
         active_(std::size_t(model_->shape_count())) {}
   std::string_view name() const noexcept override { return kSolverMethods.name(SolverMethod::kLinear); }
   void reset() noexcept override { weights_.reset(); }
+  State make_state() const override { return weights_.make_state(); }
+  bool save_state(State& state) const noexcept override { return weights_.save(state); }
+  bool restore_state(const State& state) noexcept override { return weights_.restore(state); }
   void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
     StageClock clock(out);
     if (!begin_solve(weights_, targets, present, out)) { clock.finish(); return; }
@@ -114,6 +118,9 @@ class PoissonSolver final : public FaceSolver {
     return kSolverMethods.name(blend_.kind() == TriangleBlend::Kind::kNonlinear ? SolverMethod::kNonlinear : SolverMethod::kDt);
   }
   void reset() noexcept override { weights_.reset(); }
+  State make_state() const override { return weights_.make_state(); }
+  bool save_state(State& state) const noexcept override { return weights_.save(state); }
+  bool restore_state(const State& state) noexcept override { return weights_.restore(state); }
   std::span<const std::span<const std::byte>> streamed_memory() const noexcept override { return blend_.streamed_memory(); }
 
   void solve(const Eigen::Matrix3Xd& targets, std::span<const uint8_t> present, SolveResult& out) noexcept override {
@@ -130,6 +137,7 @@ class PoissonSolver final : public FaceSolver {
     out.status = 0;
     out.collision_pairs = out.collision_constraints = out.fold_pins = out.markers_released = 0;
     out.fold_stopped_at_deadline = false;
+    out.fold_rounds = 0;
     out.weights = weights;
     solve_mesh(targets, present, out, clock);
   }
@@ -177,10 +185,11 @@ class PoissonSolver final : public FaceSolver {
     bool released = false;
     for (int round = 0; round < kFoldRounds && out.folds.folded > 0 && folds_.pin_capacity() > 0; ++round) {
       const int64_t round_start_ns = monotonic_now_ns();
-      if (deadline_ns_ != 0 && round_start_ns + longest_fold_round_ns_ > deadline_ns_) {
+      if ((deadline_ns_ != 0 && round_start_ns + longest_fold_round_ns_ > deadline_ns_) || round == fold_round_stop_) {
         out.fold_stopped_at_deadline = true;
         break;
       }
+      out.fold_rounds = uint32_t(round + 1);
       const uint32_t added = folds_.add_pins(pins_);
       out.fold_pins += added;
       if (!released && (added == 0 || round == kReleaseRound)) {

@@ -153,6 +153,20 @@ void WeightsStage::reset() noexcept {
   previous_linear_.setZero();
 }
 
+bool WeightsStage::save(State& state) const noexcept {
+  if (state.previous.size() != previous_.size() || state.previous_linear.size() != previous_linear_.size()) return false;
+  state.previous = previous_;  // same sizes: no allocation
+  state.previous_linear = previous_linear_;
+  return true;
+}
+
+bool WeightsStage::restore(const State& state) noexcept {
+  if (state.previous.size() != previous_.size() || state.previous_linear.size() != previous_linear_.size()) return false;
+  previous_ = state.previous;
+  previous_linear_ = state.previous_linear;
+  return true;
+}
+
 bool WeightsStage::usable(std::span<const uint8_t> present, const Eigen::Matrix3Xd& targets) const noexcept {
   uint32_t n = 0;
   for (Eigen::Index k = 0; k < model_.marker_count(); ++k) n += present[std::size_t(k)] && targets.col(k).allFinite();

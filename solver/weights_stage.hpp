@@ -40,6 +40,19 @@ class WeightsStage {
   // Forgets the warm start. Real-time safe.
   void reset() noexcept;
 
+  // The warm start carried from frame to frame: the last weights (Eq. 2's w_prev) and the
+  // last Eq. 2 solution before refinement (where the next QP starts).
+  struct State {
+    Eigen::VectorXd previous, previous_linear;  // M
+  };
+  State make_state() const { return {previous_, previous_linear_}; }
+  // Copies the warm start into `state`; false (nothing copied) when it was not sized for
+  // this stage. Real-time safe.
+  bool save(State& state) const noexcept;
+  // Continues from `state`; false (nothing changed) when its shape count is not this
+  // stage's. Real-time safe.
+  bool restore(const State& state) noexcept;
+
   // Whether at least kMinimumMarkers markers are present and finite. Real-time safe.
   bool usable(std::span<const uint8_t> present, const Eigen::Matrix3Xd& targets) const noexcept;
 

@@ -367,7 +367,7 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   {
     formats::RecordingReader take(stopped["file"].get<std::string>());
     CHECK_FALSE(take.truncated());
-    CHECK(take.header().format_version == 3);
+    CHECK(take.header().format_version == formats::kRecordingFormatVersion);
     CHECK(take.header().take == "t/1");
     CHECK(take.header().scene == "s 1");
     CHECK(take.header().shot == "2");
@@ -713,4 +713,97 @@ TEST_CASE("facecapd --version and facecap --version give the version and, in a c
     test::run_and_capture(fmt::format("git -C '{}' cat-file -e '{}^{{commit}}' 2>&1", FACECAP_SOURCE_DIR, commit[1].str()), &status);
     CHECK(WEXITSTATUS(status) == 0);
   }
+}
+
+namespace {
+
+// `facecap diff` of two recordings as JSON; weights to 1e-6.
+json diff_weights(const fs::path& dir, const fs::path& a, const fs::path& b, int expected_exit) {
+  const test::Run r = test::run_facecap(dir, {"diff", a.string(), b.string(), "--tolerance-weight", "1e-6", "--json"});
+  INFO(r.err);
+  REQUIRE(r.exit_code == expected_exit);
+  return json::parse(r.out);
+}
+
+// A copy of a recording without its start state (STAT), as recordings were before it.
+void copy_without_start_state(const fs::path& from, const fs::path& to) {
+  const formats::RecordingReader reader(from);
+  formats::RecordingWriter writer(to, reader.header());
+  MarkerFrame markers;
+  SolvedFrame solved;
+  for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) {
+    reader.read_marker_frame(i, markers);
+    reader.read_solved_frame(i, solved);
+    writer.append_marker_frame(markers);
+    writer.append_solved_frame(solved);
+  }
+  writer.close();
+}
+
+}  // namespace
+
+TEST_CASE("a take started mid-run re-solves to itself from its first frame: the recording stores the solve's start state") {
+  const fs::path dir = test::scratch_dir("control-midrun");
+  test::write_text(dir / "token", "s3cret\n");
+  // facecapd's defaults: the temporal filter on, a 120 Hz source under a 120 Hz fixed-rate loop.
+  RunningDaemon d({"outputs.shm.name=" + unique_shm("midrun"), "control.http.enabled=true", "control.http.port=0",
+                   "control.http.token_file=" + (dir / "token").string(),
+                   "outputs.recording.directory=" + (dir / "takes").string()});
+  REQUIRE(d->control_port() != 0);
+  control::HttpClient client("127.0.0.1", d->control_port(), "s3cret");
+  // 1.5 s in, the filter, the warm start and the speed gate have state.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  post(client, "/record/start", {{"take", "midrun"}});
+  std::this_thread::sleep_for(std::chrono::milliseconds(2000));
+  const fs::path live = post(client, "/record/stop", json::object())["file"].get<std::string>();
+  {
+    const formats::RecordingReader take(live);
+    CHECK(take.start_state().size() > 0);
+    CHECK(take.start_state_damage().empty());
+    REQUIRE(take.solved_frame_count() > 120);
+    SolvedFrame first;
+    take.read_solved_frame(0, first);
+    CHECK(first.frame_no > 120);  // a frame of the running loop's, not its first
+  }
+
+  // Solved again from what it stores, from its first frame on.
+  const fs::path again = dir / "again.fcrec";
+  test::Run r = test::run_facecap(dir, {"solve", "--rig", "builtin", "--take", live.string(), "-o", again.string(), "-q"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  CHECK_THAT(r.out, Contains("from the recording's start state"));
+  const json same = diff_weights(dir, live, again, 0);
+  INFO(same.dump(2));
+  CHECK(same["frames"]["compared"].get<std::size_t>() == formats::RecordingReader(live).solved_frame_count());
+  CHECK(same["weights"]["max"].get<double>() <= 1e-6);
+  CHECK(same["flags"]["frames_differ"] == 0);
+  WARN("a take started mid-run, re-solved from its start state: largest weight difference " << same["weights"]["max"]);
+
+  // A state that does not fit the solve asked for (the filter off) is named and left out.
+  r = test::run_facecap(dir, {"solve", "--rig", "builtin", "--take", live.string(), "-o", (dir / "unfiltered.fcrec").string(),
+                              "--set", "filter.mode=off", "-q"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  CHECK_THAT(r.err, Contains(live.string() + ": the pipeline state's target filter does not fit this solve: this solve has "
+                             "none; solving from a cold start"));
+  CHECK_THAT(r.out, Contains("from a cold start: the recording's start state does not fit this solve"));
+
+  // Without the start state (a recording from before it), the re-solve starts cold, says
+  // so, and its first frames differ: the comparison above can fail.
+  const fs::path stateless = dir / "stateless.fcrec";
+  copy_without_start_state(live, stateless);
+  const fs::path cold = dir / "cold.fcrec";
+  r = test::run_facecap(dir, {"solve", "--rig", "builtin", "--take", stateless.string(), "-o", cold.string(), "-q"});
+  INFO(r.out << r.err);
+  REQUIRE(r.exit_code == 0);
+  CHECK_THAT(r.out, Contains("from a cold start: the recording carries no start state"));
+  const json differs = diff_weights(dir, live, cold, 1);
+  INFO(differs.dump(2));
+  CHECK(differs["weights"]["max"].get<double>() > 1e-3);
+  SolvedFrame first;
+  formats::RecordingReader(live).read_solved_frame(0, first);
+  // The worst frame is among the first seconds (the filter and warm start settling).
+  CHECK(differs["weights"]["largest"]["frame"].get<int64_t>() - first.frame_no < 360);
+  WARN("the same take re-solved from a cold start: largest weight difference " << differs["weights"]["max"] << " at frame "
+       << differs["weights"]["largest"]["frame"].get<int64_t>() - first.frame_no << " of the take");
 }

@@ -175,7 +175,8 @@ TEST_CASE("ICT FaceKit's stress corpus folds in the paper's solve and not with t
   check_corpus(load_rig(dir.string()));
 }
 
-TEST_CASE("a fold stage past its deadline starts no round and flags the fold; without a deadline it undoes it") {
+TEST_CASE("a fold stage past its deadline starts no round and flags the fold; without a deadline it undoes it, and a re-solve "
+          "told where it stopped stops there") {
   const Rig& rig = BuiltinFace::instance().rig();
   const CorpusSolver corpus(rig, SolverMethod::kNonlinear);
   const auto& layout = corpus.layout;
@@ -194,9 +195,23 @@ TEST_CASE("a fold stage past its deadline starts no round and flags the fold; wi
     solver->set_deadline(monotonic_now_ns() - 1);  // already passed
     solver->solve_with_weights(pose.weights, pose.targets, present, out);
     CHECK(out.fold_stopped_at_deadline);
+    CHECK(out.fold_rounds == 0);
     CHECK(out.fold_pins == 0);
     CHECK(out.folds.folded > 0);
     CHECK((out.status & kSolvedFolded) != 0);
+
+    // A re-solve without the deadline stops where it stopped (SolvedFrame::fold_deadline_rounds).
+    const Eigen::Matrix3Xd stopped = out.vertices;
+    solver->set_deadline(0);
+    solver->stop_folds_after(int(out.fold_rounds));
+    solver->solve_with_weights(pose.weights, pose.targets, present, out);
+    CHECK(out.fold_stopped_at_deadline);
+    CHECK(out.vertices == stopped);
+    solver->stop_folds_after(1);
+    solver->solve_with_weights(pose.weights, pose.targets, present, out);
+    CHECK(out.fold_rounds == 1);
+    CHECK(out.fold_pins > 0);
+    solver->stop_folds_after(-1);
     return;
   }
   FAIL("no pose of the built-in corpus needed fold pins");

@@ -227,6 +227,7 @@ TEST_CASE("labelling an unlabelled point cloud in the pipeline allocates nothing
   for (std::size_t k = 0; k < points.size() + 4; ++k) slots.push_back(fmt::format("unlabelled_{}", k + 1));
   pipeline::SolveSettings settings;
   settings.label_markers = true;
+  settings.filter.targets = settings.filter.weights = true;  // every stage's state in encoded_state()
   pipeline::SolvePipeline pipeline(rig, calibration, {slots, ""}, settings);
   SolvedFrame solved = pipeline.make_solved_frame(false);
   MarkerFrame frame = make_marker_frame(slots);
@@ -244,6 +245,9 @@ TEST_CASE("labelling an unlabelled point cloud in the pipeline allocates nothing
   }
   CHECK(pipeline.label_stats().assigned == int(points.size()));
   CHECK(allocations == 0);
+  const test::CountAllocations counter;
+  CHECK(pipeline.encoded_state().size() == pipeline.encoded_state_size());
+  CHECK(counter.count() == 0);
 }
 
 TEST_CASE("runtime takes, the control stream and the operator telemetry allocate nothing on the solve thread") {
@@ -255,14 +259,13 @@ TEST_CASE("runtime takes, the control stream and the operator telemetry allocate
   drivers::SimSource sim(sim_options, rig, pipeline::rest_marker_set(calibration));
   sim.open();
   const pipeline::SourceDescription source{sim.info().labels, sim.info().units};
-  outputs::TakeRecorder takes(rig->vertex_count(), true);
+  auto solve = std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, pipeline::solve_settings(c, pipeline::SolveContext::kLive));
+  outputs::TakeRecorder takes(rig->vertex_count(), true, solve->encoded_state_size());
   control::StreamSink stream({rig->name, "cm", rig->shape_names, sim.info().labels, uint32_t(rig->vertex_count()), {}}, 8);
   stream.set_rate(1000.0);  // a client listening: every frame copied
   LoopOptions options;
   options.realtime.fifo = false;
-  SolveLoop loop(options, sim,
-                 std::make_unique<pipeline::SolvePipeline>(*rig, calibration, source, pipeline::solve_settings(c, pipeline::SolveContext::kLive)),
-                 {&takes, &stream});
+  SolveLoop loop(options, sim, std::move(solve), {&takes, &stream});
   sim.start({.epoch_ns = monotonic_now_ns()});
 
   const Counted between_takes = run_ticks(loop, 30, loop.period_ns());
@@ -279,7 +282,7 @@ TEST_CASE("runtime takes, the control stream and the operator telemetry allocate
   take.file = test::scratch_dir("noalloc-takes") / "take.fcrec";
   take.header = pipeline::make_recording_header(*rig, calibration, source, "test", 120.0, "");
   take.vertices = true;
-  takes.start_take(take);  // adopted by the next tick
+  takes.start_take(take);  // adopted by the next tick, which encodes the solve's state for it
   const Counted recording = run_ticks(loop, 60, loop.period_ns());
   drain();
   CHECK(takes.recording());
@@ -292,6 +295,7 @@ TEST_CASE("runtime takes, the control stream and the operator telemetry allocate
   REQUIRE(summary);
   CHECK(summary->counters.marker_frames + summary->counters.dropped >= 60);
   CHECK(summary->counters.marker_frames + summary->counters.dropped <= 61);
+  CHECK(formats::RecordingReader(summary->file).start_state().size() > 0);
   // The telemetry was recorded on those ticks: markers used of expected, residuals.
   CHECK(loop.counters().markers_expected.load() == 48 * loop.counters().frames_solved.load());
   CHECK(loop.counters().markers_used.load() < loop.counters().markers_expected.load());

@@ -12,6 +12,7 @@
 #include "core/error.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/marker_mapper.hpp"
+#include "pipeline/pipeline_state.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
 #include "pipeline/source_units.hpp"
@@ -505,6 +506,48 @@ formats::MarkerTake scene_take(const GlitchScene& scene, int frames, const std::
 }
 
 }  // namespace
+
+TEST_CASE("a pipeline restored from another's encoded state solves the next frames exactly as that one does; a state "
+          "that does not fit is refused naming the stage") {
+  const GlitchScene scene;
+  pipeline::SolveSettings settings = pipeline::solve_settings(config::default_config(), pipeline::SolveContext::kLive);
+  settings.filter.weights = true;  // every stage with state: both filters, the label check, the gate, the warm start
+  settings.check_labels = true;
+  const pipeline::SourceDescription source{scene.labels, "cm"};
+  pipeline::SolvePipeline live(scene.rig, scene.calibration, source, settings);
+  SolvedFrame solved = live.make_solved_frame(true);
+  for (int i = 0; i < 60; ++i) live.process(scene.frame(i), solved);
+  const std::vector<char> bytes(live.encoded_state().begin(), live.encoded_state().end());
+  CHECK(bytes.size() == live.encoded_state_size());
+
+  pipeline::SolvePipeline restored(scene.rig, scene.calibration, source, settings);
+  restored.restore_state(pipeline::decode_pipeline_state(bytes, "test"));
+  pipeline::SolvePipeline cold(scene.rig, scene.calibration, source, settings);
+  SolvedFrame again = restored.make_solved_frame(true), from_cold = cold.make_solved_frame(true);
+  double restored_max = 0.0, cold_max = 0.0;
+  for (int i = 60; i < 70; ++i) {
+    live.process(scene.frame(i), solved);
+    restored.process(scene.frame(i), again);
+    cold.process(scene.frame(i), from_cold);
+    restored_max = std::max({restored_max, double((solved.weights - again.weights).cwiseAbs().maxCoeff()),
+                             double((solved.vertices - again.vertices).cwiseAbs().maxCoeff())});
+    cold_max = std::max(cold_max, double((solved.weights - from_cold.weights).cwiseAbs().maxCoeff()));
+  }
+  CHECK(restored_max == 0.0);
+  CHECK(cold_max > 1e-3);  // without the state the frames differ: the check above can fail
+
+  pipeline::SolveSettings unfiltered = settings;
+  unfiltered.filter.targets = unfiltered.filter.weights = false;
+  pipeline::SolvePipeline other(scene.rig, scene.calibration, source, unfiltered);
+  CHECK_THROWS_WITH(other.restore_state(pipeline::decode_pipeline_state(bytes, "test")),
+                    Contains("the pipeline state's target filter does not fit this solve: this solve has none"));
+  std::vector<char> newer = bytes;
+  newer[0] = 2;  // state_version
+  CHECK_THROWS_WITH(pipeline::decode_pipeline_state(newer, "take.fcrec"),
+                    Contains("take.fcrec [STAT]") && Contains("pipeline state version 2; this build reads version 1"));
+  for (const std::size_t cut : {std::size_t(3), bytes.size() / 2, bytes.size() - 1})
+    CHECK_THROWS_AS(pipeline::decode_pipeline_state(std::span<const char>(bytes.data(), cut), "take.fcrec"), Error);
+}
 
 TEST_CASE("a take converted to mm solves as the cm take with a cm calibration, and a mm take stating cm is refused naming mm") {
   const GlitchScene scene;  // the calibration's take units: cm, the built-in face's

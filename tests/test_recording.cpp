@@ -74,6 +74,7 @@ SolvedFrame test_solved_frame(int64_t i) {
   f.collision_constraints = 3;
   f.markers_used = 2;
   f.flags = kSolvedHeadPoseHeld;
+  f.fold_deadline_rounds = int32_t(i) - 1;  // -1: not stopped, then after 0 rounds
   return f;
 }
 
@@ -102,6 +103,7 @@ void check_solved_frame(const SolvedFrame& got, const SolvedFrame& want) {
   CHECK(got.collision_constraints == want.collision_constraints);
   CHECK(got.markers_used == want.markers_used);
   CHECK(got.flags == want.flags);
+  CHECK(got.fold_deadline_rounds == want.fold_deadline_rounds);
 }
 
 // A small recording: 3 marker frames and 2 solved frames, interleaved.
@@ -152,6 +154,37 @@ TEST_CASE("Recording: header and frames round-trip through the index", "[recordi
     check_solved_frame(solved_frame, test_solved_frame(int64_t(i)));
   }
   CHECK_THROWS_AS(reader.read_marker_frame(3, marker_frame), Error);
+}
+
+TEST_CASE("Recording: the start state goes before the first frame, reads back, and a damaged one is named, not fatal",
+          "[recording]") {
+  const auto dir = facecap::test::scratch_dir("recording-start-state");
+  CHECK(RecordingReader(write_small_recording(dir)).start_state().empty());
+  const std::string state = "state bytes";
+  {
+    RecordingWriter writer(dir / "state.fcrec", test_header());
+    writer.append_start_state(std::span<const char>(state.data(), state.size()));
+    CHECK_THROWS_WITH(writer.append_start_state(std::span<const char>(state.data(), state.size())),
+                      Catch::Contains("the start state goes before the first frame, once"));
+    writer.append_marker_frame(test_marker_frame(0));
+    writer.append_solved_frame(test_solved_frame(0));
+    writer.close();
+  }
+  const RecordingReader reader(dir / "state.fcrec");
+  CHECK(std::string(reader.start_state().begin(), reader.start_state().end()) == state);
+  CHECK(reader.start_state_damage().empty());
+  CHECK(reader.marker_frame_count() == 1);
+  CHECK(reader.solved_frame_count() == 1);
+  // A flipped bit in the state: reported, and the frames read as usual.
+  auto bytes = read_file_bytes(dir / "state.fcrec");
+  const std::size_t at = std::string_view(bytes.data(), bytes.size()).find(state);
+  REQUIRE(at != std::string_view::npos);
+  bytes[at] ^= 0x08;
+  const RecordingReader damaged(std::span<const char>(bytes.data(), bytes.size()), "damaged.fcrec");
+  CHECK(damaged.start_state().empty());
+  CHECK_THAT(damaged.start_state_damage(), Catch::Contains("checksum mismatch in chunk STAT"));
+  CHECK(damaged.marker_frame_count() == 1);
+  CHECK(damaged.solved_frame_count() == 1);
 }
 
 TEST_CASE("Recording cut off at every byte reads back up to its last complete chunk", "[recording]") {

@@ -3,6 +3,7 @@
 // (marker frames and solved frames, the calibration in the header).
 #include <filesystem>
 #include <optional>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -12,6 +13,7 @@
 #include "formats/recording.hpp"
 #include "formats/take.hpp"
 #include "pipeline/calibration.hpp"
+#include "pipeline/pipeline_state.hpp"
 #include "pipeline/recording_header.hpp"
 #include "pipeline/settings.hpp"
 #include "pipeline/solve_pipeline.hpp"
@@ -31,19 +33,55 @@ struct Options {
   SolveConfigOptions settings;
 };
 
-// The settings and calibration a recording was solved with, when the take is one.
+// What a recording stores about its solve, when the take is one.
 struct Stored {
   std::optional<std::string> solver_settings;
   std::optional<std::string> calibration;
+  std::optional<formats::RecordingReader> recording;
 };
 
 Stored stored_in(const std::string& take_path) {
   Stored stored;
   if (formats::detect_file_format(take_path) != formats::TakeFormat::kRecording) return stored;
-  const formats::RecordingReader reader(take_path);
+  const formats::RecordingReader& reader = stored.recording.emplace(take_path);
   if (!reader.header().solver_settings.empty()) stored.solver_settings = reader.header().solver_settings;
   if (!reader.header().calibration.empty()) stored.calibration = reader.header().calibration;
   return stored;
+}
+
+// Continues `solve` from the recording's state before its first frame (a take started
+// mid-run then re-solves to itself from that frame). A state that is damaged or does not
+// fit is warned about and the solve starts cold. Returns how the solve starts, for the
+// summary.
+std::string restore_start_state(const formats::RecordingReader& reader, pipeline::SolvePipeline& solve) {
+  const std::string cold = "from a cold start: ";
+  if (!reader.start_state_damage().empty()) {
+    fmt::print(stderr, "facecap: warning: {}: its start state is unreadable ({}); solving from a cold start\n", reader.name(),
+               reader.start_state_damage());
+    return cold + "the recording's start state is unreadable";
+  }
+  if (reader.start_state().empty()) return cold + "the recording carries no start state";
+  try {
+    solve.restore_state(pipeline::decode_pipeline_state(reader.start_state(), reader.name()));
+  } catch (const Error& e) {
+    fmt::print(stderr, "facecap: warning: {}: {}; solving from a cold start\n", reader.name(), e.what());
+    return cold + "the recording's start state does not fit this solve";
+  }
+  return "from the recording's start state";
+}
+
+// Per frame, the fold rounds the recorded solve ran before its deadline stopped them (-1:
+// not stopped), so that the re-solve stops there too; empty when the recording's solved
+// frames are not one per marker frame.
+std::vector<int> fold_deadline_rounds(const formats::RecordingReader& reader, std::size_t frames) {
+  if (reader.solved_frame_count() != frames) return {};
+  std::vector<int> rounds(frames);
+  SolvedFrame solved;
+  for (std::size_t f = 0; f < frames; ++f) {
+    reader.read_solved_frame(f, solved);
+    rounds[f] = solved.fold_deadline_rounds;
+  }
+  return rounds;
 }
 
 void run_solve(const Options& o) {
@@ -78,6 +116,9 @@ void run_solve(const Options& o) {
     throw file_error(o.take, fmt::format("head stabilisation needs 3 stable markers; {} of the calibration's {} are in the take",
                                          solve.mapper().stable_markers_found(), cal.stable_markers.size()));
   const std::string method(solve.method());
+  const std::string start = stored.recording ? restore_start_state(*stored.recording, solve) : std::string();
+  const std::vector<int> fold_rounds =
+      stored.recording ? fold_deadline_rounds(*stored.recording, take.frames.size()) : std::vector<int>();
 
   const formats::ArkitWeights arkit(rig.shape_names);
   formats::FaceTake face;
@@ -94,6 +135,7 @@ void run_solve(const Options& o) {
   std::size_t held_head = 0, held_face = 0, relabelled = 0;
   for (std::size_t f = 0; f < take.frames.size(); ++f) {
     const MarkerFrame& frame = take.frames[f];
+    if (!fold_rounds.empty()) solve.stop_folds_after(fold_rounds[f]);
     solve.process(frame, solved);
     relabelled += std::size_t(solve.label_stats().relabelled);
     held_head += (solved.flags & kSolvedHeadPoseHeld) != 0;
@@ -113,8 +155,9 @@ void run_solve(const Options& o) {
     recording->close();
   }
   const std::size_t mapped_shapes = arkit.realised();
-  fmt::print("{} -> {}: {} frames with {} ({}; {} of 52 ARKit shapes on the rig); head pose held in {}, face held in {}{}\n",
-             o.take, o.output, take.frames.size(), method, settings.origin, mapped_shapes, held_head, held_face,
+  fmt::print("{} -> {}: {} frames with {} ({}; {} of 52 ARKit shapes on the rig){}; head pose held in {}, face held in {}{}\n",
+             o.take, o.output, take.frames.size(), method, settings.origin, mapped_shapes,
+             start.empty() ? std::string() : ", " + start, held_head, held_face,
              o.check_labels ? fmt::format(", {} markers relabelled", relabelled) : std::string());
   if (!cal.unobserved_shapes.empty())
     fmt::print("{} shapes the calibrated markers cannot observe stayed at 0: {}\n", cal.unobserved_shapes.size(),

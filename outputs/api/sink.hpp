@@ -9,6 +9,7 @@
 // its own thread drains: the recorder; network outputs share one I/O thread). Either way
 // offer() never waits: when a sink cannot take a frame it drops it and counts the drop.
 #include <cstdint>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -42,6 +43,14 @@ class OutputSink {
   // Hands one solved frame, and the marker frame it was solved from, to the sink. Never
   // waits, allocates, locks, throws or logs. RT-safe.
   virtual void offer(const MarkerFrame& markers, const SolvedFrame& solved) noexcept = 0;
+  // Whether the sink wants the solve's state as it is before the next frame it is offered
+  // (a recording's first frame, so that a re-solve can start where the live solve was).
+  // RT-safe.
+  virtual bool wants_start_state() const noexcept { return false; }
+  // That state (encoded: pipeline/pipeline_state.hpp), just before the next frame is
+  // solved, when wants_start_state(). Copied into storage sized beforehand; dropped when it
+  // does not fit. RT-safe.
+  virtual void offer_start_state(std::span<const char> /*state*/) noexcept {}
   // Once per loop tick, with or without a frame (heartbeats). RT-safe.
   virtual void tick(int64_t /*now_ns*/) noexcept {}
   // Whether offer() would take a frame now rather than drop it. A lockstep loop (not real

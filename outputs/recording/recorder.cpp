@@ -31,8 +31,9 @@ SolvedFrame sized_frame(Eigen::Index shape_count, Eigen::Index vertex_count) {
 Recorder::Recorder(RecorderOptions options, Eigen::Index vertex_count)
     : options_(std::move(options)),
       queue_(options_.queue_frames,
-             Entry{false, false, make_marker_frame(options_.header.marker_labels),
+             Entry{false, false, false, make_marker_frame(options_.header.marker_labels),
                    sized_frame(Eigen::Index(options_.header.shape_names.size()), options_.vertices ? vertex_count : 0)}) {
+  start_state_.reserve(options_.start_state_bytes);
   std::filesystem::create_directories(options_.file.parent_path().empty() ? "." : options_.file.parent_path());
   writer_ = std::make_unique<formats::RecordingWriter>(options_.file, options_.header,
                                                        formats::RecordingWriter::Options{.write = options_.write});
@@ -53,14 +54,24 @@ std::string Recorder::description() const {
                      options_.solved ? (options_.vertices ? "solved frames with vertices" : "solved frames") : "");
 }
 
+void Recorder::offer_start_state(std::span<const char> state) noexcept {
+  if (first_offered_) return;
+  start_state_too_large_ = state.size() > start_state_.capacity();
+  start_state_offered_ = !start_state_too_large_;
+  if (start_state_offered_) start_state_.assign(state.begin(), state.end());  // within capacity: no allocation
+}
+
 void Recorder::offer(const MarkerFrame& markers, const SolvedFrame& solved) noexcept {
   offered_.fetch_add(1, std::memory_order_relaxed);
+  const bool first = !first_offered_;  // a dropped first frame takes the start state with it
+  first_offered_ = true;
   Entry* slot = queue_.begin_push();
   if (!slot) {
     dropped_.fetch_add(1, std::memory_order_relaxed);
     return;
   }
   // Slots were sized like these frames, so the copies reuse their storage.
+  slot->has_start_state = first && (start_state_offered_ || start_state_too_large_);
   slot->has_markers = options_.markers;
   slot->has_solved = options_.solved;
   if (options_.markers) slot->markers = markers;
@@ -111,6 +122,13 @@ void Recorder::fail(const std::string& what) {
   }
 }
 
+void Recorder::store_start_state() {
+  if (start_state_offered_) return writer_->append_start_state(start_state_);
+  spdlog::warn("recording {}: the solve's state before the first frame did not fit the {} bytes kept for it (the "
+               "solver was rebuilt since the take started); a re-solve starts cold",
+               options_.file.string(), start_state_.capacity());
+}
+
 // The writer thread. Not RT-safe (encodes, allocates, writes).
 void Recorder::run() {
   int64_t last_flush_ns = monotonic_now_ns();
@@ -120,6 +138,7 @@ void Recorder::run() {
     while (Entry* entry = queue_.front()) {
       if (writer_->is_open()) {
         try {
+          if (entry->has_start_state) store_start_state();
           if (entry->has_markers) writer_->append_marker_frame(entry->markers);
           if (entry->has_solved) writer_->append_solved_frame(entry->solved);
           written_.fetch_add(1, std::memory_order_relaxed);

@@ -6,7 +6,9 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <span>
 #include <thread>
+#include <vector>
 
 #include "core/frame.hpp"
 #include "core/rt/spsc_slots.hpp"
@@ -22,6 +24,9 @@ struct RecorderOptions {
   bool markers = true;
   bool solved = true;
   bool vertices = false;  // solved meshes too (large); a re-solve reproduces them otherwise
+  // Room for the solve's state before the first frame (OutputSink::offer_start_state),
+  // stored so that the recording re-solves to itself from its first frame; 0: not stored.
+  std::size_t start_state_bytes = 0;
   formats::RecordingWriter::WriteFn write = nullptr;  // tests inject write failures; null: pwrite(2)
 };
 
@@ -49,6 +54,10 @@ class Recorder final : public OutputSink {
   bool wants_vertices() const noexcept override { return options_.solved && options_.vertices; }
   // Queues copies of one loop frame; drops it (counted) when the queue is full. RT-safe.
   void offer(const MarkerFrame& markers, const SolvedFrame& solved) noexcept override;
+  // Until the first frame is offered, when options.start_state_bytes. RT-safe.
+  bool wants_start_state() const noexcept override { return options_.start_state_bytes > 0 && !first_offered_; }
+  // Keeps the state for the writer thread, which stores it before the first frame. RT-safe.
+  void offer_start_state(std::span<const char> state) noexcept override;
   // Whether offer() would queue now. Producer side only. RT-safe.
   bool ready() noexcept override { return queue_.begin_push() != nullptr; }
   SinkHealth health() const noexcept override;
@@ -65,10 +74,14 @@ class Recorder final : public OutputSink {
   struct Entry {
     bool has_markers = false;
     bool has_solved = false;
+    bool has_start_state = false;  // the first frame, start_state_ to be stored before it
     MarkerFrame markers;
     SolvedFrame solved;
   };
   void run();
+  // Stores the start state the solve thread offered before the first frame, or says why
+  // there is none. Writer thread only.
+  void store_start_state();
   // The writer failed with what: the frames it lost become dropped, the recording stops.
   // Writer thread (or stop() after it) only.
   void fail(const std::string& what);
@@ -79,6 +92,11 @@ class Recorder final : public OutputSink {
   std::unique_ptr<formats::RecordingWriter> writer_;
   rt::SpscSlots<Entry> queue_;
   std::thread thread_;
+  // The solve thread's until the first frame is queued, the writer thread's after.
+  std::vector<char> start_state_;  // capacity options.start_state_bytes
+  bool start_state_offered_ = false;
+  bool start_state_too_large_ = false;
+  bool first_offered_ = false;  // the solve thread's
   std::atomic<bool> stop_requested_{false};
   std::atomic<uint64_t> offered_{0}, written_{0}, marker_frames_{0}, solved_frames_{0}, dropped_{0}, errors_{0};
   std::string failure_;  // the writer thread's, then stop()'s

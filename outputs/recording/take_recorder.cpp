@@ -18,8 +18,8 @@ void add(SinkHealth& total, const SinkHealth& h) {
 
 }  // namespace
 
-TakeRecorder::TakeRecorder(Eigen::Index vertex_count, bool record_vertices)
-    : vertex_count_(vertex_count), record_vertices_(record_vertices) {}
+TakeRecorder::TakeRecorder(Eigen::Index vertex_count, bool record_vertices, std::size_t start_state_bytes)
+    : vertex_count_(vertex_count), record_vertices_(record_vertices), start_state_bytes_(start_state_bytes) {}
 
 TakeRecorder::~TakeRecorder() {
   try {
@@ -37,6 +37,14 @@ std::string TakeRecorder::description() const {
 }
 
 void TakeRecorder::tick(int64_t /*now_ns*/) noexcept { handoff_.adopt(current_); }
+
+bool TakeRecorder::wants_start_state() const noexcept {
+  return current_ && current_->recorder && current_->recorder->wants_start_state();
+}
+
+void TakeRecorder::offer_start_state(std::span<const char> state) noexcept {
+  if (current_ && current_->recorder) current_->recorder->offer_start_state(state);
+}
 
 void TakeRecorder::offer(const MarkerFrame& markers, const SolvedFrame& solved) noexcept {
   if (current_ && current_->recorder) current_->recorder->offer(markers, solved);
@@ -56,10 +64,16 @@ void TakeRecorder::start_take(RecorderOptions options) {
   if (live_) throw Error(stopping_ ? "the last take is still closing" : "a take is being recorded: stop it first");
   auto take = std::make_unique<Take>();
   options.vertices = options.vertices && record_vertices_;
+  if (options.solved) options.start_state_bytes = start_state_bytes_;  // a markers-only take is not re-solved to itself
   take->recorder = std::make_unique<Recorder>(std::move(options), vertex_count_);
   live_ = take->recorder.get();
   last_file_ = live_->file();
   handoff_.offer(std::move(take));
+}
+
+void TakeRecorder::set_start_state_bytes(std::size_t bytes) {
+  const std::lock_guard lock(mutex_);
+  start_state_bytes_ = bytes;
 }
 
 bool TakeRecorder::stop_take() {

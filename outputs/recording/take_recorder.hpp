@@ -28,8 +28,10 @@ struct TakeSummary {
 class TakeRecorder final : public OutputSink {
  public:
   // vertex_count: the rig's; record_vertices: whether takes may record solved vertices
-  // (the loop solves them only when some output wants them). Not RT-safe.
-  TakeRecorder(Eigen::Index vertex_count, bool record_vertices);
+  // (the loop solves them only when some output wants them); start_state_bytes: the
+  // solve's encoded state, which takes of solved frames store before their first frame.
+  // Not RT-safe.
+  TakeRecorder(Eigen::Index vertex_count, bool record_vertices, std::size_t start_state_bytes);
   // stop(). Not RT-safe.
   ~TakeRecorder() override;
   TakeRecorder(const TakeRecorder&) = delete;
@@ -40,6 +42,9 @@ class TakeRecorder final : public OutputSink {
   bool wants_vertices() const noexcept override { return record_vertices_; }
   // Adopts a take started or stopped since the last tick. RT-safe.
   void tick(int64_t now_ns) noexcept override;
+  // The take being recorded's (Recorder::wants_start_state). RT-safe.
+  bool wants_start_state() const noexcept override;
+  void offer_start_state(std::span<const char> state) noexcept override;
   // Queues the frame into the take being recorded, if any. RT-safe.
   void offer(const MarkerFrame& markers, const SolvedFrame& solved) noexcept override;
   bool ready() noexcept override;
@@ -54,6 +59,9 @@ class TakeRecorder final : public OutputSink {
   // from its next tick. Throws Error (a take is being recorded or still closing, the file
   // cannot be created).
   void start_take(RecorderOptions options);
+  // The solve's encoded state size after the loop was given a new pipeline: the room
+  // takes started from now on keep for it.
+  void set_start_state_bytes(std::size_t bytes);
   // Asks the loop to let go of the take being recorded; false when there is none.
   bool stop_take();
   // Once the loop has let go of a stopped take: writes what it queued, closes the file
@@ -74,6 +82,7 @@ class TakeRecorder final : public OutputSink {
 
   Eigen::Index vertex_count_;
   bool record_vertices_;
+  std::size_t start_state_bytes_;  // under mutex_
   rt::Handoff<Take> handoff_;
   std::unique_ptr<Take> current_;  // the solve thread's; the supervisor's once the loop stopped
 

@@ -105,6 +105,42 @@ void MarkerLabeller::reset() noexcept {
   set_pose_known_ = false;
 }
 
+MarkerLabeller::State MarkerLabeller::make_state() const {
+  return {last_, velocity_, last_in_reference_, lost_frames_, ever_seen_, set_pose_, set_pose_known_, tracking_};
+}
+
+bool MarkerLabeller::fits(const State& state) const noexcept {
+  const Eigen::Index K = marker_count();
+  return state.last.cols() == K && state.velocity.cols() == K && state.last_in_reference.cols() == K &&
+         state.lost_frames.size() == labels_.size() && state.ever_seen.size() == labels_.size();
+}
+
+bool MarkerLabeller::save(State& state) const noexcept {
+  if (!fits(state)) return false;
+  state.last = last_;  // same sizes: no allocation
+  state.velocity = velocity_;
+  state.last_in_reference = last_in_reference_;
+  state.lost_frames = lost_frames_;
+  state.ever_seen = ever_seen_;
+  state.set_pose = set_pose_;
+  state.set_pose_known = set_pose_known_;
+  state.tracking = tracking_;
+  return true;
+}
+
+bool MarkerLabeller::restore(const State& state) noexcept {
+  if (!fits(state)) return false;
+  last_ = state.last;
+  velocity_ = state.velocity;
+  last_in_reference_ = state.last_in_reference;
+  lost_frames_ = state.lost_frames;
+  ever_seen_ = state.ever_seen;
+  set_pose_ = state.set_pose;
+  set_pose_known_ = state.set_pose_known;
+  tracking_ = state.tracking;
+  return true;
+}
+
 void MarkerLabeller::predict() noexcept {
   for (Eigen::Index k = 0; k < marker_count(); ++k) {
     if (lost_frames_[std::size_t(k)] == 0)

@@ -73,6 +73,26 @@ class MarkerLabeller {
   LabelStats check(MarkerFrame& frame) noexcept;
 
   void reset() noexcept;
+
+  // What the labeller carries from one frame to the next: each marker's last position,
+  // velocity and frames lost, and the set's motion.
+  struct State {
+    Eigen::Matrix3Xd last, velocity, last_in_reference;  // 3 x K
+    std::vector<int> lost_frames;                        // K
+    std::vector<uint8_t> ever_seen;                      // K
+    Similarity set_pose;
+    bool set_pose_known = false;
+    bool tracking = false;
+  };
+  // A state sized for this labeller. Not real-time.
+  State make_state() const;
+  // Copies the labeller's state into `state`; false (nothing copied) when it was not
+  // sized for this labeller. Real-time safe.
+  bool save(State& state) const noexcept;
+  // Continues from `state`; false (nothing changed) when its marker count is not this
+  // labeller's. Real-time safe.
+  bool restore(const State& state) noexcept;
+
   const std::vector<std::string>& labels() const { return labels_; }
   Eigen::Index marker_count() const { return Eigen::Index(labels_.size()); }
 
@@ -83,6 +103,7 @@ class MarkerLabeller {
   int assign(int n, std::span<const int> own_label, bool use_margin, double gate_scale) noexcept;
   void acquire(int n) noexcept;
   void update(int n) noexcept;
+  bool fits(const State& state) const noexcept;
 
   std::vector<std::string> labels_;
   Eigen::Matrix3Xd reference_;

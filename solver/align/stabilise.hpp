@@ -64,6 +64,10 @@ class HeadStabiliser {
   // in marker_flags (one per frame marker) when it is non-empty. Returns out.held.
   bool process(std::span<const Marker> markers, HeadPoseResult& out, std::span<uint32_t> marker_flags = {}) noexcept;
   void reset() noexcept;
+  // What it carries from frame to frame: the last fitted pose, which a frame with too few
+  // stable markers holds. RT-safe.
+  const Similarity& last_pose() const noexcept { return last_; }
+  void restore_last_pose(const Similarity& pose) noexcept { last_ = pose; }
 
   // After process(): per stable marker, |pose^-1(current) - reference| (take units), or
   // NaN when it was missing; outliers included (their flag says so).
