@@ -762,12 +762,16 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
       {"source", h.source_description},
       {"calibration_bytes", fmt::format("{}", h.calibration.size())},
       {"solved_frames", fmt::format("{}", reader.solved_frame_count())},
+      {"start_state_bytes", fmt::format("{}", reader.start_state().size())},  // 0: a re-solve starts cold
       {"index", reader.index_rebuilt() ? "rebuilt by scanning" : "present"},
   };
   // The slate (format version 3), as docs/daemon.md promises `facecap inspect` shows it.
   for (const auto& [key, value] : {std::pair<const char*, const std::string&>{"take", h.take}, {"actor", h.actor},
                                    {"scene", h.scene}, {"shot", h.shot}, {"notes", h.notes}})
     if (!value.empty()) take.metadata.emplace_back(key, value);
+  if (!reader.start_state_damage().empty())
+    take.warnings.push_back(fmt::format("{}: start state unreadable: {}; a re-solve starts cold", reader.name(),
+                                        reader.start_state_damage()));
   if (const std::string damage = reader.damage_summary(); !damage.empty())
     take.warnings.push_back(fmt::format("{}: recording damaged: {}; the rest was read", reader.name(), damage));
   if (duplicates > 0)

@@ -172,6 +172,7 @@ TEST_CASE("Recording: the start state goes before the first frame, reads back, a
   }
   const RecordingReader reader(dir / "state.fcrec");
   CHECK(std::string(reader.start_state().begin(), reader.start_state().end()) == state);
+  CHECK(take_from_recording(reader).metadata_value("start_state_bytes") == "11");
   CHECK(reader.start_state_damage().empty());
   CHECK(reader.marker_frame_count() == 1);
   CHECK(reader.solved_frame_count() == 1);
@@ -183,6 +184,8 @@ TEST_CASE("Recording: the start state goes before the first frame, reads back, a
   const RecordingReader damaged(std::span<const char>(bytes.data(), bytes.size()), "damaged.fcrec");
   CHECK(damaged.start_state().empty());
   CHECK_THAT(damaged.start_state_damage(), Catch::Contains("checksum mismatch in chunk STAT"));
+  CHECK_THAT(take_from_recording(damaged).warnings.front(),
+             Catch::Contains("damaged.fcrec: start state unreadable: checksum mismatch in chunk STAT"));
   CHECK(damaged.marker_frame_count() == 1);
   CHECK(damaged.solved_frame_count() == 1);
 }
