@@ -511,7 +511,7 @@ TEST_CASE("ICT FaceKit lip poses with and without collision handling") {
 // up to 65,536 rows, 32-bit beyond), the solves of every kernel path this CPU runs must
 // match Eigen's own LDL^T.
 TEST_CASE("SparseLdlt solves match Eigen's with 16-bit and 32-bit row indices") {
-  for (const auto [n, path] : [] {
+  for (const auto& [n, path] : [] {
          std::vector<std::pair<Eigen::Index, KernelPath>> cases;
          for (const KernelPath p : facecap::test::runnable_kernel_paths())
            for (const Eigen::Index size : {Eigen::Index(1000), Eigen::Index(70000)}) cases.push_back({size, p});
