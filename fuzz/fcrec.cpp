@@ -1,17 +1,14 @@
-// .fcrec recordings: the header, the start state, index or scan, every frame decoded, and
-// the take view.
+// .fcrec recordings: the header, index or scan, every frame decoded, and the take view
+// (the start state's bytes are fuzzed on their own: pipeline_state.cpp).
 // The fuzz build skips chunk checksums (FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION), so
 // mutations reach the decoders behind them.
 #include "formats/recording.hpp"
 #include "fuzz/fuzz_support.hpp"
-#include "pipeline/pipeline_state.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace facecap;
   return fuzz::parse_refusing_errors([&] {
     const formats::RecordingReader reader(fuzz::bytes_of(data, size), "fuzz.fcrec");
-    if (!reader.start_state().empty())  // on its own: a refused state leaves the frames to read
-      fuzz::parse_refusing_errors([&] { pipeline::decode_pipeline_state(reader.start_state(), reader.name()); });
     MarkerFrame markers;
     for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) reader.read_marker_frame(i, markers);
     SolvedFrame solved;

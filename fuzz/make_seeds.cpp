@@ -235,6 +235,7 @@ int main(int argc, char** argv) {
     write(out / "c3d/labels2.c3d", write_c3d(small_take(1, 260)));  // LABELS2 past 255 points
     write(out / "trc/small.trc", write_trc(take, "small.trc"));
     write_recordings(out / "fcrec");
+    write(out / "pipeline_state/every_part.bin", start_state_seed(take.labels.size()));
 
     FaceTake face;
     for (int i = 0; i < 6; ++i) {

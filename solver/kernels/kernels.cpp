@@ -2,6 +2,10 @@
 // baseline like the rest of the solver.
 #include "solver/kernels/kernels.hpp"
 
+#if defined(FACECAP_KERNELS_X86)
+#include <cpuid.h>
+#endif
+
 #include <fmt/format.h>
 
 #include "core/error.hpp"
@@ -33,7 +37,10 @@ CpuFeatures read_cpu_features() noexcept {
   __builtin_cpu_init();
   f.avx2 = __builtin_cpu_supports("avx2");
   f.fma = __builtin_cpu_supports("fma");
-  f.f16c = __builtin_cpu_supports("f16c");
+  // Clang's __builtin_cpu_supports does not know "f16c": CPUID leaf 1, ECX bit 29 (its
+  // registers are the AVX ones, whose saving the avx2 check above covers).
+  unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+  f.f16c = __get_cpuid(1, &eax, &ebx, &ecx, &edx) && (ecx & bit_F16C) != 0;
   f.avx512 = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
              __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq");
 #endif
