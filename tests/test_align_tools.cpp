@@ -297,8 +297,11 @@ TEST_CASE("facecap eval on a real AnimFace take reports held-out error for every
   Run r = run_facecap(dir, {"calibrate", "--rig", ict.string(), "--take", take, "-o", (dir / "actor.toml").string()});
   INFO(r.out << r.err);
   REQUIRE(r.exit_code == 0);
-  r = run_facecap(dir, {"eval", "--rig", ict.string(), "--take", take, "--calib", (dir / "actor.toml").string(), "--solver", "all",
-                        "--json", "--max-frames", "240", "--every", "60", "--offline-every", "1000"});
+  // meshik is left out: holding out each of the ~60 markers in turn costs it about 2 s a
+  // marker on a single frame, two minutes of CI (its eval fields are checked against a
+  // synthetic take's truth in test_tools).
+  r = run_facecap(dir, {"eval", "--rig", ict.string(), "--take", take, "--calib", (dir / "actor.toml").string(), "--solver",
+                        "nonlinear,linear,dt", "--json", "--max-frames", "240", "--every", "60"});
   INFO(r.out << r.err);
   REQUIRE(r.exit_code == 0);
   const auto eval = nlohmann::json::parse(r.out);
@@ -307,10 +310,7 @@ TEST_CASE("facecap eval on a real AnimFace take reports held-out error for every
   CHECK(eval["solver"]["weight_refinements"] == 0);
   CHECK(eval["solver"]["boundary_hold"] == 0.003);
   CHECK(eval["stable_residual_mm"]["median"].get<double>() < 1.0);
-  // meshik (offline, about 0.6 s a solve) only on frame 0.
-  CHECK(eval["solvers"]["meshik"]["frames_solved"] == 1);
-  CHECK(eval["solvers"]["meshik"]["jitter_mm"].is_null());
-  for (const char* name : {"nonlinear", "linear", "dt", "meshik"}) {
+  for (const char* name : {"nonlinear", "linear", "dt"}) {
     INFO(name);
     REQUIRE(eval["solvers"].contains(name));
     const double heldout = eval["solvers"][name]["heldout_mm"]["median"].get<double>();
