@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cerrno>
 #include <cstring>
@@ -464,18 +465,36 @@ void Daemon::apply_live_settings() {
 bool Daemon::reload() {
   notifier_.reloading();
   spdlog::info("reloading {}", options_.config_file.empty() ? "(defaults)" : options_.config_file);
+  const auto reject = [&](std::string_view why, std::string_view problems) {
+    spdlog::error("reload rejected ({}); the running configuration stays:", why);
+    for (std::size_t at = 0; at < problems.size();) {  // a line each: a message is one line (core/log.cpp)
+      const std::size_t end = std::min(problems.find('\n', at), problems.size());
+      spdlog::error("  {}", problems.substr(at, end - at));
+      at = end + 1;
+    }
+    notifier_.ready(fmt::format("{} (reload rejected: {})", last_status_, why));
+    reloads_rejected_.fetch_add(1, std::memory_order_release);
+    return false;
+  };
   config::LoadedConfig fresh;
   try {
     fresh = config::load_config(options_.config_file, options_.overrides);
   } catch (const Error& e) {
-    spdlog::error("reload rejected; the running configuration stays:\n{}", e.what());
-    notifier_.ready(last_status_ + " (reload rejected: invalid configuration)");
-    reloads_rejected_.fetch_add(1, std::memory_order_release);
-    return false;
+    return reject("invalid configuration", e.what());
   }
   label_unlabelled_source(fresh.values, source_->info());
+  const std::vector<const config::KeySpec*> changed = config::changed_keys(config_.values, fresh.values);
+  // Keys that take effect at the next start are checked now, as --check-config does: a
+  // reload must not leave a file that a restart (after a crash, at boot) cannot start from.
+  if (std::any_of(changed.begin(), changed.end(), [](const auto* key) { return key->reload == config::Reload::kRestart; })) {
+    try {
+      check_rig_and_calibration(fresh.values);
+    } catch (const std::exception& e) {
+      return reject("facecapd would not start again with it", e.what());
+    }
+  }
   bool rebuild = false, calibration_changed = false;
-  for (const config::KeySpec* key : config::changed_keys(config_.values, fresh.values)) {
+  for (const config::KeySpec* key : changed) {
     const config::Value value = config::get_value(*key, fresh.values);
     switch (key->reload) {
       case config::Reload::kRestart:

@@ -174,6 +174,33 @@ TEST_CASE("SIGHUP with an invalid file keeps the running configuration and a val
   CHECK(d.wait_exit(5 * kNsPerSecond) == 0);
 }
 
+TEST_CASE("SIGHUP with a restart-only key that would not start (rig.path to no rig) is rejected; the running "
+          "configuration stays") {
+  const fs::path dir = test::scratch_dir("facecapd-hup-rig");
+  const std::string shm = unique_shm("huprig");
+  const fs::path config = dir / "facecapd.toml";
+  const std::string base = "version = 1\n[outputs.shm]\nname = \"" + shm + "\"\n[control]\nstatus_interval_s = 0.2\n";
+  test::write_text(config, base);
+  NotifyRecorder notify;
+  DaemonProcess d({"--config", config.string()}, {"NOTIFY_SOCKET=" + notify.listener.address()}, dir / "facecapd.log");
+  INFO(d.log());
+  REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
+  client::Subscriber reader(shm);
+
+  // Valid TOML and a valid key: only loading the rig shows it would not start.
+  test::write_text(config, base + "[rig]\npath = \"" + (dir / "no-such-rig").string() + "\"\n");
+  const std::size_t before = notify.messages.size();
+  ::kill(d.pid(), SIGHUP);
+  REQUIRE(notify.wait_for("reload rejected: facecapd would not start again with it", 10 * kNsPerSecond, before));
+  CHECK_THAT(d.log(), Contains("reload rejected (facecapd would not start again with it); the running configuration "
+                               "stays:") && Contains("no-such-rig"));
+  CHECK_THAT(d.log(), !Contains("rig.path changed to"));
+  facecap_frame f{};
+  CHECK(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);  // still solving, on the built-in face
+  ::kill(d.pid(), SIGTERM);
+  CHECK(d.wait_exit(5 * kNsPerSecond) == 0);
+}
+
 TEST_CASE("facecapd refuses to start with a rig file that does not exist and creates nothing") {
   const fs::path dir = test::scratch_dir("facecapd-badrig");
   const std::string shm = unique_shm("badrig");
