@@ -1,5 +1,6 @@
 // facecapd as a process, the way systemd runs it: NOTIFY_SOCKET and WATCHDOG_USEC from a
 // socket this test owns, frames read through the client library, SIGTERM and SIGHUP.
+#include <algorithm>
 #include <csignal>
 #include <regex>
 
@@ -375,7 +376,7 @@ TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working an
   CHECK(std::stod(out.substr(at + 18)) < 1.0);  // mm
 }
 
-TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file missing at most 100 ms of frames") {
+TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file missing at most 50 ms of frames") {
   // SIGKILL: no handler runs, so the file holds what the recorder had handed to the
   // kernel. The last frame solved is the one in the shared memory the killed writer left.
   const fs::path dir = test::scratch_dir("facecapd-kill");
@@ -411,7 +412,7 @@ TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file miss
   WARN("SIGKILL at 240 Hz: the last frame solved was " << last_solved << ", the last recorded " << last.frame_no << ": "
        << last_solved - last.frame_no << " frames (" << lost_ms << " ms) lost");
   CHECK(last.frame_no <= last_solved);
-  CHECK(lost_ms <= 100.0);
+  CHECK(lost_ms <= 50.0);  // the docs' promise; chunks reach the kernel every 20 ms
   ::shm_unlink(("/" + shm).c_str());
 }
 
