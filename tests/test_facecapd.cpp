@@ -554,23 +554,45 @@ TEST_CASE("a recording that reaches RLIMIT_FSIZE fails with EFBIG, the take stop
   // SIGXFSZ is ignored, so the write past the limit returns EFBIG to the recorder instead
   // of ending the process. 1600 blocks of sh's 512 bytes (819 KB): room for the shared
   // memory (about 600 KB), which the limit applies to as well, and reached by the
-  // recording within a few seconds.
+  // recording within a few seconds. /status is read at 6 s, after the failure, while it runs.
   const fs::path dir = test::scratch_dir("facecapd-fsize");
+  const int port = 20000 + ::getpid() % 20000;
   const std::string command = fmt::format(
       "sh -c 'ulimit -f 1600; FACECAPD_ALLOW_ROOT=1 timeout -s TERM 8 {} --set outputs.shm.name={} "
-      "--set outputs.recording.enabled=true --set outputs.recording.directory={} --set logging.stats_file={} >{} 2>&1; "
-      "echo exit=$?' 2>&1",
-      kFacecapd, unique_shm("fsize"), (dir / "takes").string(), (dir / "stats.json").string(), (dir / "facecapd.log").string());
+      "--set outputs.recording.enabled=true --set outputs.recording.directory={} --set logging.stats_file={} "
+      "--set control.http.enabled=true --set control.http.port={} >{} 2>&1 & pid=$!; sleep 6; "
+      "kill -0 $pid && echo alive at 6 s; curl -s http://127.0.0.1:{}/status >{}; wait $pid; echo exit=$?' 2>&1",
+      kFacecapd, unique_shm("fsize"), (dir / "takes").string(), (dir / "stats.json").string(), port,
+      (dir / "facecapd.log").string(), port, (dir / "status.json").string());
   int status = 0;
   const std::string out = test::run_and_capture(command, &status);
   const std::string log = test::slurp(dir / "facecapd.log");
   INFO(out << log);
-  CHECK_THAT(out, Contains("exit=124"));  // ran until timeout's SIGTERM, not ended by SIGXFSZ (153)
+  CHECK_THAT(out, Contains("alive at 6 s") && Contains("exit=124"));  // ran until timeout's SIGTERM, not ended by SIGXFSZ (153)
   CHECK_THAT(log, Contains("write failed: File too large") && Contains("FAILED: "));
+  // /status while running: the recording output failed, frames still being solved.
+  const auto running = nlohmann::json::parse(test::slurp(dir / "status.json"));
+  const auto recording_output = std::find_if(running["outputs"].begin(), running["outputs"].end(),
+                                             [](const auto& o) { return o["name"] == "recording"; });
+  REQUIRE(recording_output != running["outputs"].end());
+  CHECK((*recording_output)["failed"] == true);
+  CHECK((*recording_output)["errors"].get<uint64_t>() >= 1);
   const auto stats = nlohmann::json::parse(test::slurp(dir / "stats.json"));
   CHECK(stats["outputs"]["recording"]["failed"] == true);
   CHECK(stats["outputs"]["recording"]["offered"] == stats["frames_solved"]);
-  CHECK(stats["frames_solved"].get<uint64_t>() > 600);  // solving went on for the 8 s
+  const uint64_t solved_at_6s = running["totals"]["frames_solved"], solved_at_end = stats["frames_solved"];
+  WARN("RLIMIT_FSIZE reached: " << solved_at_6s << " frames solved at 6 s (after the failure), " << solved_at_end
+                                << " at the end");
+  CHECK(solved_at_end > solved_at_6s + 100);  // solving went on after the failure
+  // What was written before the limit reads back whole.
+  std::vector<fs::path> takes;
+  for (const auto& entry : fs::directory_iterator(dir / "takes")) takes.push_back(entry.path());
+  REQUIRE(takes.size() == 1);
+  formats::RecordingReader reader(takes[0]);
+  CHECK(reader.solved_frame_count() > 100);
+  SolvedFrame frame;
+  for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) reader.read_solved_frame(i, frame);
+  CHECK(fs::file_size(takes[0]) <= 1600 * 512);
 }
 
 TEST_CASE("the capture quality sees marker noise from the data: 0.1 mm good, 1 mm degraded, 3 mm bad, naming the noise, "
