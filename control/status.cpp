@@ -73,7 +73,7 @@ nlohmann::json status_json(const StatusReport& r) {
       {"recording",
        {{"active", t.active}, {"file", t.file}, {"take", t.take}, {"actor", t.actor}, {"scene", t.scene},
         {"shot", t.shot}, {"notes", t.notes}, {"markers_only", t.markers_only}, {"seconds", t.seconds},
-        {"frames_written", t.frames_written}, {"frames_dropped", t.frames_dropped}}},
+        {"frames_written", t.frames_written}, {"frames_dropped", t.frames_dropped}, {"failed", t.failed}}},
   };
 }
 

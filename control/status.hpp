@@ -36,6 +36,7 @@ struct TakeReport {
   bool markers_only = false;
   double seconds = 0;
   uint64_t frames_written = 0, frames_dropped = 0;
+  bool failed = false;  // a write failed (disk full, file-size limit, file deleted): the take stopped there
 };
 
 struct StatusReport {

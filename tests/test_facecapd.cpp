@@ -577,6 +577,7 @@ TEST_CASE("a recording that reaches RLIMIT_FSIZE fails with EFBIG, the take stop
   REQUIRE(recording_output != running["outputs"].end());
   CHECK((*recording_output)["failed"] == true);
   CHECK((*recording_output)["errors"].get<uint64_t>() >= 1);
+  CHECK(running["recording"]["failed"] == true);  // the take in progress says it stopped
   const auto stats = nlohmann::json::parse(test::slurp(dir / "stats.json"));
   CHECK(stats["outputs"]["recording"]["failed"] == true);
   CHECK(stats["outputs"]["recording"]["offered"] == stats["frames_solved"]);
