@@ -131,7 +131,7 @@ void NatNetSource::open() {
   }
   if (!nn::is_supported_bitstream(bitstream_)) {
     throw Error(fmt::format("NatNet server {} ({} {}) streams NatNet {}: facecap reads 3.x and 4.x", server_name_,
-                            printable(server_info_->sender.name.text()), server_info_->sender.app_version.to_string(),
+                            server_info_->sender.name.text(), server_info_->sender.app_version.to_string(),
                             server_info_->sender.natnet_version.to_string()));
   }
 
@@ -243,9 +243,10 @@ bool NatNetSource::from_server(std::span<const char> datagram, const natnet::End
   if (from.address != server_.address) return false;
   if (from.port == server_.port) return true;
   // Motive answers on its command port; frames come from its data socket, whose port NatNet does not fix.
+  if (datagram.size() < 2) return false;
   uint16_t id = 0;
-  if (datagram.size() >= 2) std::memcpy(&id, datagram.data(), 2);
-  return datagram.size() >= 2 && id == uint16_t(nn::MessageId::kFrameOfData);
+  std::memcpy(&id, datagram.data(), 2);
+  return id == uint16_t(nn::MessageId::kFrameOfData);
 }
 
 void NatNetSource::handle(std::span<const char> datagram, bool truncated, const natnet::Endpoint& from,
@@ -318,7 +319,7 @@ void NatNetSource::handle(std::span<const char> datagram, bool truncated, const 
       send_connect();
       break;
     case nn::MessageId::kMessageString:
-      spdlog::info("natnet: message from {}: {}", server_name_, printable(std::get<nn::Text>(m.body).text));
+      spdlog::info("natnet: message from {}: {}", server_name_, std::get<nn::Text>(m.body).text);  // escaped by the log format
       break;
     default: break;  // requests of other clients (multicast), keep-alives, echo requests
   }
@@ -329,13 +330,13 @@ void NatNetSource::on_server_info(const nn::ServerInfo& info, const natnet::Endp
     discovering_ = false;
     server_ = {from.address, uint16_t(options_.command_port)};
     server_name_ = server_.address_string();
-    spdlog::info("natnet: discovered {} ({}) at {}", printable(info.sender.name.text()),
-                 info.sender.app_version.to_string(), server_name_);
+    spdlog::info("natnet: discovered {} ({}) at {}", info.sender.name.text(), info.sender.app_version.to_string(),
+                 server_name_);
     send_connect();  // now a NAT_CONNECT: a unicast server streams to connected clients only
   }
   const bool first = !server_info_;
   server_info_ = info;
-  server_software_ = fmt::format("{} {}, NatNet {}", printable(info.sender.name.text()),
+  server_software_ = fmt::format("{} {}, NatNet {}", printable(info.sender.name.text()),  // shown in /status
                                  info.sender.app_version.to_string(), info.sender.natnet_version.major_minor());
   clock_.set_rate(info.connection ? info.connection->high_res_clock_hz : 0);
   const auto asked = asked_bitstream(options_.bitstream);
@@ -352,7 +353,7 @@ void NatNetSource::on_models(const nn::ModelDefinitions& models) {
     return;
   }
   model_updates_.fetch_add(1, std::memory_order_relaxed);
-  std::string note = printable(converter_->follow(models));  // marker names from the server
+  std::string note = printable(converter_->follow(models));  // marker names from the server, shown in STATUS
   if (!note.empty()) spdlog::warn("natnet: new model definitions from {}: {}", server_name_, note);
   else spdlog::info("natnet: new model definitions from {} followed", server_name_);
   note_ = std::move(note);
