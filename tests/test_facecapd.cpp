@@ -175,7 +175,7 @@ TEST_CASE("SIGHUP with an invalid file keeps the running configuration and a val
   CHECK(d.wait_exit(5 * kNsPerSecond) == 0);
 }
 
-TEST_CASE("SIGHUP with a restart-only key that would not start (rig.path to no rig) is rejected; the running "
+TEST_CASE("SIGHUP with a restart-only key that would not start (rig.path to an empty directory) is rejected; the running "
           "configuration stays") {
   const fs::path dir = test::scratch_dir("facecapd-hup-rig");
   const std::string shm = unique_shm("huprig");
@@ -188,13 +188,15 @@ TEST_CASE("SIGHUP with a restart-only key that would not start (rig.path to no r
   REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
   client::Subscriber reader(shm);
 
-  // Valid TOML and a valid key: only loading the rig shows it would not start.
-  test::write_text(config, base + "[rig]\npath = \"" + (dir / "no-such-rig").string() + "\"\n");
+  // A rig directory that exists (the file's check passes) but holds no rig: only loading
+  // the rig shows that facecapd would not start with it.
+  fs::create_directories(dir / "empty-rig");
+  test::write_text(config, base + "[rig]\npath = \"" + (dir / "empty-rig").string() + "\"\n");
   const std::size_t before = notify.messages.size();
   ::kill(d.pid(), SIGHUP);
   REQUIRE(notify.wait_for("reload rejected: facecapd would not start again with it", 10 * kNsPerSecond, before));
   CHECK_THAT(d.log(), Contains("reload rejected (facecapd would not start again with it); the running configuration "
-                               "stays:") && Contains("no-such-rig"));
+                               "stays:") && Contains("empty-rig"));
   CHECK_THAT(d.log(), !Contains("rig.path changed to"));
   facecap_frame f{};
   CHECK(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);  // still solving, on the built-in face
