@@ -33,7 +33,7 @@ nlohmann::json status_json(const StatusReport& r) {
       {"source",
        {{"driver", r.source_driver}, {"description", r.source_description}, {"rate_hz", r.source_rate_hz},
         {"frames_delivered", r.source_delivered}, {"frames_overwritten", r.source_overwritten},
-        {"frames_late", r.source_late}, {"errors", r.source_errors}, {"finished", r.source_finished},
+        {"frames_late", r.source_late}, {"errors", r.source_errors}, {"foreign", r.source_foreign}, {"finished", r.source_finished},
         {"units",
          {{"stated", r.source_units}, {"check", r.source_units_check}, {"size_ratio", r.source_size_ratio},
           {"look_like", r.source_units_look_like}, {"problem", r.source_units_problem}}}}},
@@ -73,7 +73,7 @@ nlohmann::json status_json(const StatusReport& r) {
       {"recording",
        {{"active", t.active}, {"file", t.file}, {"take", t.take}, {"actor", t.actor}, {"scene", t.scene},
         {"shot", t.shot}, {"notes", t.notes}, {"markers_only", t.markers_only}, {"seconds", t.seconds},
-        {"frames_written", t.frames_written}, {"frames_dropped", t.frames_dropped}}},
+        {"frames_written", t.frames_written}, {"frames_dropped", t.frames_dropped}, {"failed", t.failed}}},
   };
 }
 
@@ -151,6 +151,8 @@ std::string metrics_text(const StatusReport& r) {
       .sample(double(r.source_overwritten), "outcome=\"overwritten\"")
       .sample(double(r.source_late), "outcome=\"late\"");
   e.counter("facecap_source_errors_total", "Malformed input or device errors of the source.", double(r.source_errors));
+  e.counter("facecap_source_foreign_total", "Datagrams from senders other than the source's server, dropped.",
+            double(r.source_foreign));
   e.gauge("facecap_solved_frames_per_second", "Frames solved per second over the last status window.", r.solved_fps);
   e.gauge("facecap_latency_p50_seconds", "Median latency, frame received to published, over the last window.",
           r.latency_p50_ms / 1e3);

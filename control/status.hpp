@@ -36,6 +36,7 @@ struct TakeReport {
   bool markers_only = false;
   double seconds = 0;
   uint64_t frames_written = 0, frames_dropped = 0;
+  bool failed = false;  // a write failed (disk full, file-size limit, file deleted): the take stopped there
 };
 
 struct StatusReport {
@@ -46,6 +47,7 @@ struct StatusReport {
   std::string source_driver, source_description;
   double source_rate_hz = 0;
   uint64_t source_delivered = 0, source_overwritten = 0, source_late = 0, source_errors = 0;
+  uint64_t source_foreign = 0;  // datagrams from senders other than the source's server (NatNet), dropped
   bool source_finished = false;
   // Its units against the calibration's face (docs/daemon.md "Units"): "checking" (its
   // first seconds), "plausible" or "implausible"; the face's size over the calibrated one's;

@@ -8,6 +8,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "core/printable.hpp"
+
 namespace facecap {
 namespace {
 
@@ -33,6 +35,22 @@ class JournalPriorityFlag final : public spdlog::custom_flag_formatter {
   }
 };
 
+// "%v": the message with control characters and bytes that are not UTF-8 escaped
+// (core/printable.hpp), so that text from outside in a message can neither start a line of
+// its own (with a journald priority such as "<0>") nor drive the terminal.
+class PrintableMessageFlag final : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&, spdlog::memory_buf_t& dest) override {
+    text_.clear();
+    append_printable(std::string_view(msg.payload.data(), msg.payload.size()), text_);
+    dest.append(text_.data(), text_.data() + text_.size());
+  }
+  std::unique_ptr<custom_flag_formatter> clone() const override { return std::make_unique<PrintableMessageFlag>(); }
+
+ private:
+  std::string text_;
+};
+
 }  // namespace
 
 bool is_journal_stream(int fd) {
@@ -44,9 +62,10 @@ bool is_journal_stream(int fd) {
 }
 
 void configure_log_output() {
-  if (!is_journal_stream(STDOUT_FILENO)) return;
   auto formatter = std::make_unique<spdlog::pattern_formatter>();
-  formatter->add_flag<JournalPriorityFlag>('*').set_pattern("%*%l: %v");
+  formatter->add_flag<PrintableMessageFlag>('v');
+  if (is_journal_stream(STDOUT_FILENO)) formatter->add_flag<JournalPriorityFlag>('*').set_pattern("%*%l: %v");
+  else formatter->set_pattern("[%Y-%m-%d %H:%M:%S.%e] [%^%l%$] %v");  // spdlog's default, its message escaped
   spdlog::set_formatter(std::move(formatter));
 }
 

@@ -433,6 +433,7 @@ void Controller::report(control::StatusReport& r) const {
   const outputs::RecorderCounters counters = parts_.takes->take_counters();
   t.frames_written = std::max(counters.marker_frames, counters.solved_frames);
   t.frames_dropped = counters.dropped;
+  t.failed = counters.errors > 0;
 }
 
 // ---------------------------------------------------------------- recordings

@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cerrno>
 #include <cstring>
@@ -297,6 +298,7 @@ Figures Daemon::figures_between(const Sample& from, const Sample& to) const {
   f.source_overwritten = to.source.frames_overwritten - from.source.frames_overwritten;
   f.source_late = to.source.frames_late - from.source.frames_late;
   f.source_errors = to.source.errors - from.source.errors;
+  f.source_foreign = to.source.foreign - from.source.foreign;
   f.outputs_dropped = to.outputs_dropped - from.outputs_dropped;
   for (std::size_t bit = 0; bit < kSolvedFlagCount; ++bit) f.flagged_frames[bit] = to.flagged[bit] - from.flagged[bit];
   CaptureFigures& capture = f.capture;
@@ -404,6 +406,7 @@ std::string Daemon::status_line(const Figures& w) const {
   if (w.source_overwritten + w.source_late > 0)
     line += fmt::format(", source frames lost {}", w.source_overwritten + w.source_late);
   if (w.source_errors > 0) line += fmt::format(", source errors {}", w.source_errors);
+  if (w.source_foreign > 0) line += fmt::format(", foreign datagrams {}", w.source_foreign);
   if (w.outputs_dropped > 0) line += fmt::format(", outputs dropped {}", w.outputs_dropped);
   for (const auto& sink : sinks_)
     if (sink->health().failed) line += fmt::format(", output {} FAILED", sink->name());
@@ -462,18 +465,36 @@ void Daemon::apply_live_settings() {
 bool Daemon::reload() {
   notifier_.reloading();
   spdlog::info("reloading {}", options_.config_file.empty() ? "(defaults)" : options_.config_file);
+  const auto reject = [&](std::string_view why, std::string_view problems) {
+    spdlog::error("reload rejected ({}); the running configuration stays:", why);
+    for (std::size_t at = 0; at < problems.size();) {  // a line each: a message is one line (core/log.cpp)
+      const std::size_t end = std::min(problems.find('\n', at), problems.size());
+      spdlog::error("  {}", problems.substr(at, end - at));
+      at = end + 1;
+    }
+    notifier_.ready(fmt::format("{} (reload rejected: {})", last_status_, why));
+    reloads_rejected_.fetch_add(1, std::memory_order_release);
+    return false;
+  };
   config::LoadedConfig fresh;
   try {
     fresh = config::load_config(options_.config_file, options_.overrides);
   } catch (const Error& e) {
-    spdlog::error("reload rejected; the running configuration stays:\n{}", e.what());
-    notifier_.ready(last_status_ + " (reload rejected: invalid configuration)");
-    reloads_rejected_.fetch_add(1, std::memory_order_release);
-    return false;
+    return reject("invalid configuration", e.what());
   }
   label_unlabelled_source(fresh.values, source_->info());
+  const std::vector<const config::KeySpec*> changed = config::changed_keys(config_.values, fresh.values);
+  // Keys that take effect at the next start are checked now, as --check-config does: a
+  // reload must not leave a file that a restart (after a crash, at boot) cannot start from.
+  if (std::any_of(changed.begin(), changed.end(), [](const auto* key) { return key->reload == config::Reload::kRestart; })) {
+    try {
+      check_rig_and_calibration(fresh.values);
+    } catch (const std::exception& e) {
+      return reject("facecapd would not start again with it", e.what());
+    }
+  }
   bool rebuild = false, calibration_changed = false;
-  for (const config::KeySpec* key : config::changed_keys(config_.values, fresh.values)) {
+  for (const config::KeySpec* key : changed) {
     const config::Value value = config::get_value(*key, fresh.values);
     switch (key->reload) {
       case config::Reload::kRestart:
@@ -554,6 +575,8 @@ void Daemon::supervise_once(int64_t now_ns) {
     if (const std::string flagged = flagged_text(f); !flagged.empty()) spdlog::warn("frames flagged: {}", flagged);
     if (f.outputs_dropped > 0) spdlog::warn("{} frames dropped by the outputs", f.outputs_dropped);
     if (f.source_errors > 0) spdlog::warn("{} source errors (malformed input, device errors)", f.source_errors);
+    if (f.source_foreign > 0)
+      spdlog::warn("{} datagrams from senders other than the source's server dropped", f.source_foreign);
     if (!sample.source.state.empty()) spdlog::warn("source: {}", sample.source.state.view());
     *stats_sample_ = sample;
     next_stats_ns_ = now_ns + int64_t(c.logging.stats_interval_s * kNsPerSecond);
@@ -684,6 +707,7 @@ void Daemon::publish_status(int64_t now_ns) {
   r.source_overwritten = source.frames_overwritten;
   r.source_late = source.frames_late;
   r.source_errors = source.errors;
+  r.source_foreign = source.foreign;
   r.source_finished = source.finished;
   r.source_units = source_->info().units;
   if (const auto& verdict = units_check_ ? units_check_->verdict() : std::nullopt) {
@@ -748,9 +772,11 @@ void Daemon::publish_status(int64_t now_ns) {
                          double(loop_->sink_timing(i).max_ns.load()) / kNsPerUs});
   }
   auto published = std::make_shared<control::Published>();
-  published->status_json = control::status_json(r).dump() + "\n";
+  // Text from outside (NatNet marker names, cut to a label's size) may not be UTF-8: replaced, never thrown.
+  constexpr auto kReplace = nlohmann::json::error_handler_t::replace;
+  published->status_json = control::status_json(r).dump(-1, ' ', false, kReplace) + "\n";
   published->metrics_text = control::metrics_text(r);
-  published->config_json = config_json(config_).dump() + "\n";
+  published->config_json = config_json(config_).dump(-1, ' ', false, kReplace) + "\n";
   board_.publish(std::move(published));
   next_publish_ns_ = now_ns + kPublishIntervalNs;
 }
@@ -778,7 +804,7 @@ void Daemon::write_stats_file(const Figures& f) const {
   j["latency_ms"] = {{"p50", ms(f.latency_p50_ns)}, {"p99", ms(f.latency_p99_ns)}, {"max", ms(f.latency_max_ns)}};
   j["cpu_percent"] = f.cpu_percent;
   j["source"] = {{"description", source_->description()}, {"overwritten", f.source_overwritten},
-                 {"late", f.source_late}, {"errors", f.source_errors}, {"status", std::string(source_->health().state.view())}};
+                 {"late", f.source_late}, {"errors", f.source_errors}, {"foreign", f.source_foreign}, {"status", std::string(source_->health().state.view())}};
   nlohmann::json chain = nlohmann::json::object();
   for (std::size_t i = 0; i < kLatencyStageCount; ++i) {
     const LatencyFigures& stage = f.latency_chain[i];
@@ -834,7 +860,7 @@ void Daemon::write_stats_file(const Figures& f) const {
         {"mean_ms", ms(counters.solver_stage_total_ns[s].load()) / frames}};
   j["stages"] = stages;
   std::ofstream out(path, std::ios::trunc);
-  out << j.dump(2) << "\n";
+  out << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   if (!out) spdlog::error("cannot write the stats file {}", path);
 }
 

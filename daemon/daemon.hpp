@@ -64,6 +64,7 @@ struct Figures {
   uint64_t source_overwritten = 0;
   uint64_t source_late = 0;
   uint64_t source_errors = 0;
+  uint64_t source_foreign = 0;   // datagrams from senders other than the source's server
   uint64_t outputs_dropped = 0;  // over every output whose drops are losses (not drops_by_design)
   std::array<uint64_t, kSolvedFlagCount> flagged_frames{};  // solved frames with each SolvedFlags bit
   CaptureFigures capture;        // markers used, held frames, fit residuals

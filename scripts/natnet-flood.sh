@@ -11,8 +11,8 @@
 #   --multicast  stream to 239.255.42.99 on the loopback interface (default: unicast to the
 #                data port, which works where loopback multicast does not)
 # Exits 1 when facecapd crashes or fails, counts no bad datagram, or solves under 90% of
-# the stream's frames (not judged when natnet-serve itself fell behind on a busy machine);
-# 77 (skipped) without ../shared/data.
+# the stream's 240 frames a second (also when natnet-serve itself fell behind: the run did
+# not show the stream solved at its rate); 77 (skipped) without ../shared/data.
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -94,13 +94,16 @@ echo "missed deadlines $missed ($(field late_start_misses) started late), worst 
 echo "CPU $(num cpu_percent 0)% of one core (facecapd)"
 [ "${errors:-0}" -gt 0 ] || { echo "FAILED: no bad datagram was counted"; exit 1; }
 skipped=$(sed -n 's/.* \([0-9]*\) frame times skipped.*/\1/p' "$work/serve.log")
-if awk -v f="$frames" -v s="$(field seconds)" 'BEGIN { exit !(f >= 0.9 * 240 * s) }'; then
-  echo "ok: no crash, the bad datagrams that arrived counted and dropped, the stream solved at its rate"
-elif [ "${skipped:-0}" -gt $((240 * seconds / 100)) ]; then
-  # The sender, not facecapd, fell behind: the machine is too busy to judge the rate.
-  echo "ok: no crash, the bad datagrams that arrived counted and dropped; rate not judged: natnet-serve itself" \
-       "skipped $skipped frame times (the machine is busy)"
+# The verdict is the solved frame rate against the stream's 240 Hz, whatever the cause of a
+# shortfall: a flood the sender cannot send alongside the stream fails too (it says so).
+if awk -v fps="$(field solved_fps)" 'BEGIN { exit !(fps >= 0.9 * 240) }'; then
+  echo "ok: no crash, the bad datagrams that arrived counted and dropped, the stream solved at $(num solved_fps 1) fps" \
+       "(at least 90% of 240)"
 else
-  echo "FAILED: under 90% of the stream's frames were solved"
+  echo "FAILED: $(num solved_fps 1) fps solved, under 90% of the stream's 240"
+  if [ "${skipped:-0}" -gt $((240 * seconds / 100)) ]; then
+    echo "  natnet-serve itself skipped $skipped frame times: this machine cannot send $rate bad datagrams a second" \
+         "alongside the stream, so the flood, not only facecapd, cut the rate"
+  fi
   exit 1
 fi

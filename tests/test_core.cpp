@@ -1,8 +1,10 @@
 #include <cstdlib>
+#include <sstream>
 
 #include <catch2/catch.hpp>
 #include <fcntl.h>
 #include <fmt/format.h>
+#include <spdlog/sinks/ostream_sink.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -12,6 +14,7 @@
 #include "core/huge_pages.hpp"
 #include "core/io.hpp"
 #include "core/log.hpp"
+#include "core/printable.hpp"
 #include "core/realtime.hpp"
 #include "core/time.hpp"
 #include "core/toml_reader.hpp"
@@ -170,4 +173,35 @@ TEST_CASE("a descriptor is the journal's stream only when $JOURNAL_STREAM names 
   CHECK_FALSE(is_journal_stream(fd));
   ::unsetenv("JOURNAL_STREAM");
   ::close(fd);
+}
+
+TEST_CASE("outside text is made printable: controls, C1 controls and bytes that are not UTF-8 escaped, UTF-8 kept") {
+  CHECK(printable("Anna take 3") == "Anna take 3");
+  CHECK(printable("Zo\xc3\xab \xe2\x82\xac \xf0\x9f\x98\x80") == "Zo\xc3\xab \xe2\x82\xac \xf0\x9f\x98\x80");  // ë € 😀
+  CHECK(printable("a\nb\r\tc") == "a\\x0ab\\x0d\\x09c");
+  CHECK(printable("\x1b[2J\x7f") == "\\x1b[2J\\x7f");
+  CHECK(printable(std::string_view("nul\0x", 5)) == "nul\\x00x");
+  CHECK(printable("\xc2\x9b" "31m") == "\\xc2\\x9b31m");                 // U+009B, a C1 CSI
+  CHECK(printable("\xff\xfe") == "\\xff\\xfe");                         // never UTF-8
+  CHECK(printable("\xc3") == "\\xc3");                                   // cut sequence
+  CHECK(printable("\xc0\xaf") == "\\xc0\\xaf");                         // overlong '/'
+  CHECK(printable("\xed\xa0\x80") == "\\xed\\xa0\\x80");                // a surrogate
+  CHECK(printable("\xf4\x90\x80\x80") == "\\xf4\\x90\\x80\\x80");       // above U+10FFFF
+  CHECK(printable("\xe2\x82") == "\\xe2\\x82");                         // cut before its last byte
+}
+
+TEST_CASE("a log message carrying outside text stays one line: no journald priority can be forged in it") {
+  // The journal's format ("<N>level: message"), chosen when standard output is the journal's stream.
+  struct stat out {};
+  REQUIRE(::fstat(STDOUT_FILENO, &out) == 0);
+  ::setenv("JOURNAL_STREAM", fmt::format("{}:{}", out.st_dev, out.st_ino).c_str(), 1);
+  std::ostringstream text;
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(
+      std::make_shared<spdlog::logger>("", std::make_shared<spdlog::sinks::ostream_sink_st>(text)));
+  configure_log_output();
+  spdlog::info("take started: {}", "evil\n<0>facecapd: EMERGENCY\x1b]0;owned\x07\xff");
+  spdlog::set_default_logger(previous);
+  ::unsetenv("JOURNAL_STREAM");
+  CHECK(text.str() == "<6>info: take started: evil\\x0a<0>facecapd: EMERGENCY\\x1b]0;owned\\x07\\xff\n");
 }

@@ -1,5 +1,6 @@
 // facecapd as a process, the way systemd runs it: NOTIFY_SOCKET and WATCHDOG_USEC from a
 // socket this test owns, frames read through the client library, SIGTERM and SIGHUP.
+#include <algorithm>
 #include <csignal>
 #include <regex>
 
@@ -170,6 +171,35 @@ TEST_CASE("SIGHUP with an invalid file keeps the running configuration and a val
   CHECK_THAT(log, Contains("solver.alpha = 0.5") && Contains("new solver handed to the loop"));
   CHECK_THAT(log, Contains("loop.rate_hz changed to 60.0: takes effect after a restart"));
   CHECK(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);
+  ::kill(d.pid(), SIGTERM);
+  CHECK(d.wait_exit(5 * kNsPerSecond) == 0);
+}
+
+TEST_CASE("SIGHUP with a restart-only key that would not start (rig.path to an empty directory) is rejected; the running "
+          "configuration stays") {
+  const fs::path dir = test::scratch_dir("facecapd-hup-rig");
+  const std::string shm = unique_shm("huprig");
+  const fs::path config = dir / "facecapd.toml";
+  const std::string base = "version = 1\n[outputs.shm]\nname = \"" + shm + "\"\n[control]\nstatus_interval_s = 0.2\n";
+  test::write_text(config, base);
+  NotifyRecorder notify;
+  DaemonProcess d({"--config", config.string()}, {"NOTIFY_SOCKET=" + notify.listener.address()}, dir / "facecapd.log");
+  INFO(d.log());
+  REQUIRE(notify.wait_for("READY=1", 120 * kNsPerSecond));
+  client::Subscriber reader(shm);
+
+  // A rig directory that exists (the file's check passes) but holds no rig: only loading
+  // the rig shows that facecapd would not start with it.
+  fs::create_directories(dir / "empty-rig");
+  test::write_text(config, base + "[rig]\npath = \"" + (dir / "empty-rig").string() + "\"\n");
+  const std::size_t before = notify.messages.size();
+  ::kill(d.pid(), SIGHUP);
+  REQUIRE(notify.wait_for("reload rejected: facecapd would not start again with it", 10 * kNsPerSecond, before));
+  CHECK_THAT(d.log(), Contains("reload rejected (facecapd would not start again with it); the running configuration "
+                               "stays:") && Contains("empty-rig"));
+  CHECK_THAT(d.log(), !Contains("rig.path changed to"));
+  facecap_frame f{};
+  CHECK(reader.wait_next(f, kNsPerSecond) == FACECAP_OK);  // still solving, on the built-in face
   ::kill(d.pid(), SIGTERM);
   CHECK(d.wait_exit(5 * kNsPerSecond) == 0);
 }
@@ -348,7 +378,7 @@ TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working an
   CHECK(std::stod(out.substr(at + 18)) < 1.0);  // mm
 }
 
-TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file missing at most 100 ms of frames") {
+TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file missing at most 50 ms of frames") {
   // SIGKILL: no handler runs, so the file holds what the recorder had handed to the
   // kernel. The last frame solved is the one in the shared memory the killed writer left.
   const fs::path dir = test::scratch_dir("facecapd-kill");
@@ -384,7 +414,7 @@ TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file miss
   WARN("SIGKILL at 240 Hz: the last frame solved was " << last_solved << ", the last recorded " << last.frame_no << ": "
        << last_solved - last.frame_no << " frames (" << lost_ms << " ms) lost");
   CHECK(last.frame_no <= last_solved);
-  CHECK(lost_ms <= 100.0);
+  CHECK(lost_ms <= 50.0);  // the docs' promise; chunks reach the kernel every 20 ms
   ::shm_unlink(("/" + shm).c_str());
 }
 
@@ -526,23 +556,46 @@ TEST_CASE("a recording that reaches RLIMIT_FSIZE fails with EFBIG, the take stop
   // SIGXFSZ is ignored, so the write past the limit returns EFBIG to the recorder instead
   // of ending the process. 1600 blocks of sh's 512 bytes (819 KB): room for the shared
   // memory (about 600 KB), which the limit applies to as well, and reached by the
-  // recording within a few seconds.
+  // recording within a few seconds. /status is read at 6 s, after the failure, while it runs.
   const fs::path dir = test::scratch_dir("facecapd-fsize");
+  const int port = 20000 + ::getpid() % 20000;
   const std::string command = fmt::format(
       "sh -c 'ulimit -f 1600; FACECAPD_ALLOW_ROOT=1 timeout -s TERM 8 {} --set outputs.shm.name={} "
-      "--set outputs.recording.enabled=true --set outputs.recording.directory={} --set logging.stats_file={} >{} 2>&1; "
-      "echo exit=$?' 2>&1",
-      kFacecapd, unique_shm("fsize"), (dir / "takes").string(), (dir / "stats.json").string(), (dir / "facecapd.log").string());
+      "--set outputs.recording.enabled=true --set outputs.recording.directory={} --set logging.stats_file={} "
+      "--set control.http.enabled=true --set control.http.port={} >{} 2>&1 & pid=$!; sleep 6; "
+      "kill -0 $pid && echo alive at 6 s; curl -s http://127.0.0.1:{}/status >{}; wait $pid; echo exit=$?' 2>&1",
+      kFacecapd, unique_shm("fsize"), (dir / "takes").string(), (dir / "stats.json").string(), port,
+      (dir / "facecapd.log").string(), port, (dir / "status.json").string());
   int status = 0;
   const std::string out = test::run_and_capture(command, &status);
   const std::string log = test::slurp(dir / "facecapd.log");
   INFO(out << log);
-  CHECK_THAT(out, Contains("exit=124"));  // ran until timeout's SIGTERM, not ended by SIGXFSZ (153)
+  CHECK_THAT(out, Contains("alive at 6 s") && Contains("exit=124"));  // ran until timeout's SIGTERM, not ended by SIGXFSZ (153)
   CHECK_THAT(log, Contains("write failed: File too large") && Contains("FAILED: "));
+  // /status while running: the recording output failed, frames still being solved.
+  const auto running = nlohmann::json::parse(test::slurp(dir / "status.json"));
+  const auto recording_output = std::find_if(running["outputs"].begin(), running["outputs"].end(),
+                                             [](const auto& o) { return o["name"] == "recording"; });
+  REQUIRE(recording_output != running["outputs"].end());
+  CHECK((*recording_output)["failed"] == true);
+  CHECK((*recording_output)["errors"].get<uint64_t>() >= 1);
+  CHECK(running["recording"]["failed"] == true);  // the take in progress says it stopped
   const auto stats = nlohmann::json::parse(test::slurp(dir / "stats.json"));
   CHECK(stats["outputs"]["recording"]["failed"] == true);
   CHECK(stats["outputs"]["recording"]["offered"] == stats["frames_solved"]);
-  CHECK(stats["frames_solved"].get<uint64_t>() > 600);  // solving went on for the 8 s
+  const uint64_t solved_at_6s = running["totals"]["frames_solved"], solved_at_end = stats["frames_solved"];
+  WARN("RLIMIT_FSIZE reached: " << solved_at_6s << " frames solved at 6 s (after the failure), " << solved_at_end
+                                << " at the end");
+  CHECK(solved_at_end > solved_at_6s + 100);  // solving went on after the failure
+  // What was written before the limit reads back whole.
+  std::vector<fs::path> takes;
+  for (const auto& entry : fs::directory_iterator(dir / "takes")) takes.push_back(entry.path());
+  REQUIRE(takes.size() == 1);
+  formats::RecordingReader reader(takes[0]);
+  CHECK(reader.solved_frame_count() > 100);
+  SolvedFrame frame;
+  for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) reader.read_solved_frame(i, frame);
+  CHECK(fs::file_size(takes[0]) <= 1600 * 512);
 }
 
 TEST_CASE("the capture quality sees marker noise from the data: 0.1 mm good, 1 mm degraded, 3 mm bad, naming the noise, "

@@ -1,7 +1,8 @@
 // The NatNet server of `facecap natnet-serve` answered datagram by datagram (no sockets),
 // the server clock followed through echoes, and the NatNet driver in-process against a
 // natnet-serve process on loopback: frames with their markers and exposure times, bad
-// datagrams counted exactly and dropped while frames keep coming.
+// datagrams counted exactly and dropped while frames keep coming, and datagrams from
+// senders other than the server dropped unread and counted.
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 
@@ -242,26 +243,35 @@ TEST_CASE("the natnet driver takes frames from natnet-serve and counts and drops
   CHECK(exposure_ms > 3.9);
   CHECK(exposure_ms < 30.0);
 
-  // Bad datagrams at the data port: each kind counted, none delivered as a frame.
+  // Bad datagrams at the data port from the server's address (frames may come from any of
+  // its ports): each kind counted, none delivered as a frame.
   drivers::natnet::UdpSocket attacker(0x7f000001, 0, false, "test");
   const Endpoint data_port{0x7f000001, uint16_t(port + 1)};
   const auto send = [&](std::vector<char> bytes) { CHECK(attacker.send_to(bytes, data_port)); };
   send({'\x07', '\x00'});                                        // shorter than a header
   send({'\x07', '\x00', '\x64', '\x00', '\x01', '\x02'});        // says 100 bytes, has 2
-  std::vector<char> padded = packet(MessageId::kKeepAlive);
-  padded.insert(padded.end(), 5, '\0');
-  send(padded);                                                  // 5 bytes more than it says
+  send({'\x07', '\x00', '\x04', '\x00', '\x01', '\x00', '\x00', '\x00', '\x00', '\x00'});  // 2 bytes more than it says
   send({'\x07', '\x00', '\x04', '\x00', '\x01', '\x00', '\x00', '\x00'});  // a frame cut after its number
+  // Not the server: a message other than a frame from another port than its command port,
+  // and anything from another address, dropped unread.
   send({'\x4d', '\x00', '\x00', '\x00'});                        // message id 77
+  drivers::natnet::UdpSocket stranger(0x7f000009, 0, false, "stranger");
+  ServerInfo spoofed = two_actor_server(tools::ServeMode::kUnicast).server_info();
+  spoofed.sender.natnet_version = {3, 0, 0, 0};
+  CHECK(stranger.send_to(packet(MessageId::kServerInfo, spoofed), data_port));
+  CHECK(stranger.send_to(packet(MessageId::kMessageString, Text{"evil\n<0>facecapd: EMERGENCY"}), data_port));
   const uint64_t frames_before = source.counts().frames;
   const int64_t give_up = monotonic_now_ns() + 5 * kSecond;
-  while (source.health().errors < 5 && monotonic_now_ns() < give_up) usleep(5000);
+  while ((source.health().errors < 4 || source.health().foreign < 3) && monotonic_now_ns() < give_up) usleep(5000);
   REQUIRE(wait_frames(frames_before + 30));
   const drivers::NatNetCounts counts = source.counts();
   CHECK(counts.truncated == 2);
   CHECK(counts.oversize == 1);
-  CHECK(counts.malformed == 2);
-  CHECK(source.health().errors == 5);
+  CHECK(counts.malformed == 1);
+  CHECK(source.health().errors == 4);
+  CHECK(counts.foreign == 3);
+  CHECK(source.health().foreign == 3);
+  CHECK(source.bitstream().major_minor() == "4.1");  // the spoofed SERVERINFO changed nothing
   CHECK(counts.stale == 0);
   CHECK(source.health().state.empty());
   source.stop();

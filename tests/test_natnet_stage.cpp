@@ -4,21 +4,28 @@
 // solve` of the same takes. Every handshake style at bitstreams 3.1 and 4.1; two actors
 // on one multicast stream; an unlabelled point cloud labelled by the pipeline; a server
 // that falls silent and returns, and one that restarts; the latency chain in STATUS and
-// the stats file; and a real Motive capture replayed at its recorded timing. Skipped
+// the stats file; a spoofed sender on 127.0.0.9 that changes nothing; and a real Motive
+// capture replayed at its recorded timing. Skipped
 // without ../shared/data; the multicast cases skip with a message where loopback
 // multicast does not work.
 #include <algorithm>
+#include <atomic>
 #include <csignal>
 #include <fstream>
+#include <set>
+#include <sstream>
+#include <thread>
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "drivers/natnet/udp_socket.hpp"
+#include "formats/natnet.hpp"
 #include "formats/recording.hpp"
 #include "formats/take.hpp"
 #include "tests/process_test_support.hpp"
+#include "tools/natnet_server.hpp"
 
 using namespace facecap;
 using namespace facecap::test;
@@ -162,6 +169,28 @@ std::vector<std::string> serve_args(const fs::path& take, uint16_t port, std::ve
                                    std::to_string(port + 1)};
   args.insert(args.end(), extra.begin(), extra.end());
   return args;
+}
+
+// The local UDP ports of `pid`'s sockets (/proc: its socket inodes, found in the
+// namespace's UDP table).
+std::vector<uint16_t> udp_ports_of(pid_t pid) {
+  std::set<std::string> inodes;
+  for (const auto& fd : fs::directory_iterator(fmt::format("/proc/{}/fd", pid))) {
+    std::error_code error;
+    const std::string target = fs::read_symlink(fd.path(), error).string();
+    if (!error && target.starts_with("socket:[")) inodes.insert(target.substr(8, target.size() - 9));
+  }
+  std::vector<uint16_t> ports;
+  std::istringstream table(slurp(fmt::format("/proc/{}/net/udp", pid)));
+  std::string line;
+  std::getline(table, line);  // the header
+  while (std::getline(table, line)) {
+    std::istringstream fields(line);
+    std::string slot, local, remote, state, queues, timer, retransmits, uid, timeout, inode;
+    fields >> slot >> local >> remote >> state >> queues >> timer >> retransmits >> uid >> timeout >> inode;
+    if (inodes.count(inode)) ports.push_back(uint16_t(std::stoul(local.substr(local.find(':') + 1), nullptr, 16)));
+  }
+  return ports;
 }
 
 }  // namespace
@@ -403,4 +432,102 @@ TEST_CASE("a real Motive capture replayed through facecapd at its recorded timin
   CHECK(solved + late == 518);
   CHECK(solved >= 512);  // a deadline missed by more than a frame's 3.8 to 12.8 ms passes one over
   CHECK(stats["seconds"].get<double>() >= 4.3);  // the capture's 4.309 s
+}
+
+TEST_CASE("a spoofed NatNet sender changes no solved frame: its frames and SERVERINFO are dropped unread and counted",
+          "[natnet][stage]") {
+  FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
+  namespace nn = formats::natnet;
+  using drivers::natnet::Endpoint;
+  using drivers::natnet::UdpSocket;
+  const fs::path dir = scratch_dir("natnet-spoof");
+  const Actor jaw = calibrated_actor(dir, animface / "JawMoCap.trc", "jaw");
+  const uint16_t port = stage_port(14);
+  ChildProcess serve("tools/facecap",
+                     serve_args(jaw.take, port, {"--seconds", "20", "--mode", "unicast", "--marker-set", "Anna"}), {},
+                     dir / "serve.log");
+  REQUIRE(serve.wait_for_log("commands on", 10 * kSecond));
+  NotifyRecorder notify;
+  DaemonProcess d(facecapd_args(dir, port, "spoof", jaw.profile, 4, {"--set", "source.natnet.marker_set=Anna"}),
+                  {"NOTIFY_SOCKET=" + notify.listener.address()}, dir / "spoof.log");
+  INFO(d.log() << serve.log());
+  REQUIRE(notify.wait_for("READY=1", 60 * kSecond));
+
+  // The attacker: another take (the cheeks) as the same marker set, each frame numbered one
+  // ahead of the real stream's (read as one more unicast client of the server), sent to
+  // facecapd's command socket and data port from 127.0.0.9; and once a second a SERVERINFO
+  // announcing NatNet 3.1, which would make facecapd misread the real 4.1 frames.
+  const Endpoint server{0x7f000001, port};
+  std::vector<Endpoint> targets;
+  for (const uint16_t p : udp_ports_of(d.pid())) targets.push_back({0x7f000001, p});
+  REQUIRE(targets.size() >= 2);  // the command and data sockets
+  tools::ServeOptions spoof_options;
+  spoof_options.mode = tools::ServeMode::kMulticast;
+  spoof_options.loop = true;
+  spoof_options.rate_hz = 60;
+  spoof_options.marker_sets = {{"Anna", ""}};
+  std::optional<tools::NatNetServer> spoof;
+  const formats::MarkerTake cheeks = formats::read_take(animface / "CheeksMoCap.trc");
+  nn::ServerInfo spoofed_info = tools::NatNetServer(spoof_options, cheeks).server_info();
+  spoofed_info.sender.natnet_version = {3, 1, 0, 0};
+  const std::vector<char> info_packet = nn::encode_message({nn::MessageId::kServerInfo, spoofed_info}, nn::kBitstream31);
+
+  UdpSocket watcher(0x7f000001, 0, false, "watcher"), attacker(0x7f000009, 0, false, "attacker");
+  std::atomic<bool> stop{false};
+  std::atomic<uint64_t> sent{0}, frames_spoofed{0};
+  std::thread attack([&] {
+    std::vector<char> buffer(nn::kHeaderBytes + nn::kMaxPayloadBytes);
+    int64_t next_hello_ns = 0;
+    while (!stop.load()) {
+      const int64_t now = monotonic_now_ns();
+      if (now >= next_hello_ns) {  // stay a client of the real server; spoof its SERVERINFO
+        nn::Connect connect;
+        connect.sender.natnet_version = {4, 1, 0, 0};
+        watcher.send_to(nn::encode_message({nn::MessageId::kConnect, connect}, nn::kBitstream41), server);
+        for (const Endpoint& to : targets) sent += attacker.send_to(info_packet, to);
+        next_hello_ns = now + kSecond;
+      }
+      if (!drivers::natnet::wait_readable(watcher, nullptr, 20 * kNsPerMs)) continue;
+      const auto got = watcher.receive(buffer);
+      if (!got) continue;
+      nn::Message real;
+      try {
+        real = nn::parse_message(std::span<const char>(buffer.data(), got->size), nn::kBitstream41, "real stream");
+      } catch (const std::exception&) {
+        continue;
+      }
+      if (real.id != nn::MessageId::kFrameOfData) continue;
+      const int32_t real_number = std::get<nn::FrameOfData>(real.body).frame_number;
+      if (!spoof) {
+        spoof_options.first_frame = real_number + 1;
+        spoof.emplace(spoof_options, cheeks);
+      }
+      const int64_t t = monotonic_now_ns();
+      for (const tools::Outgoing& o : spoof->next_frame(t, t))
+        for (const Endpoint& to : targets) sent += attacker.send_to(o.bytes, to);
+      ++frames_spoofed;
+    }
+  });
+  const int status = notify.wait_exit(d, 30 * kSecond);
+  stop = true;
+  attack.join();
+  CHECK(status == 0);
+  CHECK(frames_spoofed.load() > 120);
+
+  const nlohmann::json stats = read_json(dir / "spoof-stats.json");
+  INFO(stats.dump(2));
+  const uint64_t foreign = stats["source"]["foreign"];
+  WARN("spoofed sender: " << frames_spoofed.load() << " frames and " << sent.load() << " datagrams sent from 127.0.0.9, " << foreign
+                          << " counted as foreign by facecapd");
+  CHECK(foreign > 2 * 120);
+  CHECK(foreign <= sent.load());
+  CHECK(stats["source"]["errors"] == 0);
+  CHECK(stats["solved_fps"].get<double>() > 50.0);  // the stream's 60 Hz (55.7 on a host at load 16)
+  CHECK_THAT(d.log(), Contains("natnet: dropped a datagram from 127.0.0.9:") && Contains("which is not the server 127.0.0.1:"));
+  const Comparison c = compare_with_take(only_recording(dir / "spoof-recordings"), jaw, dir, "spoof");
+  WARN("with the spoofed sender: " << c.frames << " frames solved; markers as in the real take in " << c.markers_exact
+                                   << "; largest weight difference from facecap solve of those frames " << c.worst_weight);
+  CHECK(c.frames > 120);
+  CHECK(c.markers_exact == c.frames);
+  CHECK(c.worst_weight < 1e-4);
 }

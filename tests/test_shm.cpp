@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "client/facecap_client.hpp"
+#include "client/facecap_shm_lock.hpp"
 #include "core/error.hpp"
 #include "core/time.hpp"
 #include "outputs/shm/shm_writer.hpp"
@@ -267,6 +268,27 @@ TEST_CASE("a killed writer's segment is taken over and its readers follow the ne
   CHECK(reader.check_writer(0) == FACECAP_RESTARTED);
   CHECK(reader.shape_count() == 6);
   CHECK(reader.writer_pid() == ::getpid());
+}
+
+TEST_CASE("a killed writer's segment is taken over even while a reader holds a read lock on it") {
+  // A reader that locks what it reads (lockf(F_LOCK) or F_RDLCK on its read-only descriptor)
+  // once kept a restarted facecapd from its name: the lock counted as a live writer's.
+  const std::string name = unique_name("readlock");
+  const pid_t child = start_child_writer(name);
+  kill_child(child);
+  const int fd = ::shm_open(("/" + name).c_str(), O_RDONLY, 0);
+  REQUIRE(fd >= 0);
+  struct flock read_lock = shm::whole_segment_lock(F_RDLCK);
+  REQUIRE(::fcntl(fd, F_OFD_SETLK, &read_lock) == 0);
+  CHECK_FALSE(shm::writer_lock_held(fd));  // a reader's lock is not a writer's
+  client::Subscriber reader(name);
+  CHECK(reader.check_writer(0) != FACECAP_WRITER_STALLED);
+  ShmWriter replacement(spec(name, 6));  // threw "another writer is creating it" before
+  CHECK(reader.check_writer(0) == FACECAP_RESTARTED);
+  CHECK(reader.shape_count() == 6);
+  replacement.beat(monotonic_now_ns());
+  CHECK_THROWS_WITH(ShmWriter(spec(name)), Catch::Contains(fmt::format("pid {} is writing", ::getpid())));
+  ::close(fd);
 }
 
 TEST_CASE("segments are created 0640 and mapped read-only by readers") {

@@ -11,12 +11,17 @@
 #include "control/http_client.hpp"
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "core/printable.hpp"
 #include "tools/commands.hpp"
 
 namespace facecap::tools {
 namespace {
 
 using nlohmann::json;
+
+// Text facecapd passes on from outside (take names, notes, NatNet server names), made safe
+// for the terminal (core/printable.hpp).
+std::string shown(const json& text) { return printable(text.get<std::string>()); }
 
 struct CtlOptions {
   std::string config;  // facecapd.toml to take the address, port and token file from
@@ -54,7 +59,7 @@ json call(const CtlOptions& o, std::string_view method, std::string_view target,
   if (result.content_type.rfind("text/plain", 0) == 0 && result.status == 200) return result.body;
   json answer = json::parse(result.body, nullptr, false);
   if (result.status / 100 != 2) {
-    const std::string what = answer.is_object() && answer.contains("error") ? answer["error"].get<std::string>() : result.body;
+    const std::string what = answer.is_object() && answer.contains("error") ? shown(answer["error"]) : printable(result.body);
     throw Error(fmt::format("{} {}: {} (HTTP {})", method, target, what, result.status));
   }
   if (answer.is_discarded()) throw Error(fmt::format("{} {}: the answer is not JSON", method, target));
@@ -66,23 +71,23 @@ void print_json(const json& j) { std::puts(j.dump(2).c_str()); }
 void print_status(const json& s) {
   const json& w = s["window"];
   const json& t = s["totals"];
-  fmt::print("{}, pid {}, up {:.1f} s{}\n", s["version"].get<std::string>().empty() ? "facecapd" : s["version"].get<std::string>(),
+  fmt::print("{}, pid {}, up {:.1f} s{}\n", shown(s["version"]).empty() ? "facecapd" : shown(s["version"]),
              s["pid"].get<int64_t>(), s["uptime_s"].get<double>(),
-             s["busy"].get<std::string>().empty() ? "" : fmt::format("; busy {}", s["busy"].get<std::string>()));
-  fmt::print("source     {}\n", s["source"]["description"].get<std::string>());
-  fmt::print("rig        {} ({} vertices, {} shapes), solver {}\n", s["rig"]["name"].get<std::string>(),
-             s["rig"]["vertices"].get<int64_t>(), s["rig"]["shapes"].get<int64_t>(), s["solver"].get<std::string>());
+             shown(s["busy"]).empty() ? "" : fmt::format("; busy {}", shown(s["busy"])));
+  fmt::print("source     {}\n", shown(s["source"]["description"]));
+  fmt::print("rig        {} ({} vertices, {} shapes), solver {}\n", shown(s["rig"]["name"]),
+             s["rig"]["vertices"].get<int64_t>(), s["rig"]["shapes"].get<int64_t>(), shown(s["solver"]));
   const json& c = s["calibration"];
   fmt::print("actor      {} (calibration {}: {} markers, {} in the source, head {})\n",
-             s["actor"].get<std::string>().empty() ? "none" : s["actor"].get<std::string>(), c["source"].get<std::string>(),
+             shown(s["actor"]).empty() ? "none" : shown(s["actor"]), shown(c["source"]),
              c["markers"].get<uint64_t>(), c["markers_in_source"].get<uint64_t>(),
              c["head_stabilised"].get<bool>() ? "stabilised" : "not stabilised");
   fmt::print("loop       {} {:g} Hz: {:.1f} fps, latency p50 {:.2f} p99 {:.2f} ms, {} missed deadlines ({} in the last {:.1f} s)\n",
-             s["loop"]["mode"].get<std::string>(), s["loop"]["rate_hz"].get<double>(), w["solved_fps"].get<double>(),
+             shown(s["loop"]["mode"]), s["loop"]["rate_hz"].get<double>(), w["solved_fps"].get<double>(),
              w["latency_ms"]["p50"].get<double>(), w["latency_ms"]["p99"].get<double>(), t["missed_deadlines"].get<uint64_t>(),
              w["missed_deadlines"].get<uint64_t>(), w["seconds"].get<double>());
-  std::string quality = w["quality"].get<std::string>();
-  for (const auto& reason : w["quality_reasons"]) quality += (quality.find(':') == std::string::npos ? ": " : ", ") + reason.get<std::string>();
+  std::string quality = shown(w["quality"]);
+  for (const auto& reason : w["quality_reasons"]) quality += (quality.find(':') == std::string::npos ? ": " : ", ") + shown(reason);
   fmt::print("capture    {}\n           markers {:.1f} of {:.0f}, head held {:.0f}%, face held {:.0f}%, fit residual p50 {:.2f} p95 {:.2f} max {:.2f} mm\n",
              quality, w["markers_used"].get<double>(), w["markers_expected"].get<double>(),
              100 * w["head_held_fraction"].get<double>(), 100 * w["face_held_fraction"].get<double>(),
@@ -92,13 +97,13 @@ void print_status(const json& s) {
     if (count.get<uint64_t>() > 0) flagged += fmt::format("{}{} {}", flagged.empty() ? "" : ", ", name, count.get<uint64_t>());
   if (!flagged.empty()) fmt::print("flagged    {}\n", flagged);
   for (const auto& o : s["outputs"])
-    fmt::print("output     {}: {} offered, {} delivered, {} dropped, {} errors; offer p99 {:.1f} us\n", o["name"].get<std::string>(),
+    fmt::print("output     {}: {} offered, {} delivered, {} dropped, {} errors; offer p99 {:.1f} us\n", shown(o["name"]),
                o["offered"].get<uint64_t>(), o["delivered"].get<uint64_t>(), o["dropped"].get<uint64_t>(),
                o["errors"].get<uint64_t>(), o["offer_us"]["p99"].get<double>());
   const json& r = s["recording"];
   if (r["active"].get<bool>())
-    fmt::print("recording  take {} ({:.1f} s, {} frames, {} dropped) to {}\n", r["take"].get<std::string>(), r["seconds"].get<double>(),
-               r["frames_written"].get<uint64_t>(), r["frames_dropped"].get<uint64_t>(), r["file"].get<std::string>());
+    fmt::print("recording  take {} ({:.1f} s, {} frames, {} dropped) to {}\n", shown(r["take"]), r["seconds"].get<double>(),
+               r["frames_written"].get<uint64_t>(), r["frames_dropped"].get<uint64_t>(), shown(r["file"]));
   else
     fmt::print("recording  no take\n");
 }
@@ -132,13 +137,13 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
   });
   ctl->add_subcommand("actors", "The actor profiles facecapd can load")->callback([o, done] {
     done(call(*o, "GET", "/actors"), [](const json& a) {
-      fmt::print("profiles in {} (current: {})\n", a["directory"].get<std::string>(),
-                 a["current"].get<std::string>().empty() ? "none" : a["current"].get<std::string>());
+      fmt::print("profiles in {} (current: {})\n", shown(a["directory"]),
+                 shown(a["current"]).empty() ? "none" : shown(a["current"]));
       for (const auto& actor : a["actors"])
-        fmt::print("  {:<24} {}\n", actor["name"].get<std::string>(),
+        fmt::print("  {:<24} {}\n", shown(actor["name"]),
                    actor["usable"].get<bool>() ? fmt::format("{} markers, from {}", actor["markers"].get<uint64_t>(),
-                                                             actor["calibrated_from"].get<std::string>())
-                                               : "unusable: " + actor["error"].get<std::string>());
+                                                             shown(actor["calibrated_from"]))
+                                               : "unusable: " + shown(actor["error"]));
     });
   });
   auto* actor = ctl->add_subcommand("actor", "Solve with an actor's profile from now on (no restart, no frame lost)");
@@ -147,7 +152,7 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
   actor->callback([o, done] {
     json body = o->actor_file.empty() ? json{{"name", o->actor_name}} : json{{"file", o->actor_file}};
     done(call(*o, "POST", "/actor", body), [](const json& a) {
-      fmt::print("actor {}: {} markers, {} in the source, head {} (built in {:.2f} s)\n", a["actor"].get<std::string>(),
+      fmt::print("actor {}: {} markers, {} in the source, head {} (built in {:.2f} s)\n", shown(a["actor"]),
                  a["markers"].get<uint64_t>(), a["markers_in_source"].get<uint64_t>(),
                  a["head_stabilised"].get<bool>() ? "stabilised" : "not stabilised", a["build_seconds"].get<double>());
     });
@@ -162,17 +167,17 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
     if (o->replace) body["replace"] = true;
     done(call(*o, "POST", "/calibrate", body), [](const json& c) {
       fmt::print("calibrated from {} ({} frames, neutral at frame {}, {} averaged): units {}, surface ICP {:.2f} mm\n",
-                 c["capture"].get<std::string>(), c["frames"].get<uint64_t>(), c["neutral_frame"].get<int64_t>(),
-                 c["averaged_frames"].get<uint64_t>(), c["units"].get<std::string>(), c["trimmed_rms_mm"].get<double>());
+                 shown(c["capture"]), c["frames"].get<uint64_t>(), c["neutral_frame"].get<int64_t>(),
+                 c["averaged_frames"].get<uint64_t>(), shown(c["units"]), c["trimmed_rms_mm"].get<double>());
       for (const auto& [label, residual] : c["marker_residual_mm"].items())
-        fmt::print("  {:<24} {:7.2f} mm\n", label, residual.get<double>());
+        fmt::print("  {:<24} {:7.2f} mm\n", printable(label), residual.get<double>());
       fmt::print("residual median {:.2f} mm, max {:.2f} mm; {} markers, head {}; {}\n", c["residual_mm"]["median"].get<double>(),
                  c["residual_mm"]["max"].get<double>(), c["markers"].get<uint64_t>(),
                  c["head_stabilised"].get<bool>() ? "stabilised" : "not stabilised",
-                 c["profile"].is_null() ? std::string("not saved") : "saved as " + c["profile"].get<std::string>());
-      if (!c["backup"].is_null()) fmt::print("the old profile is kept as {}\n", c["backup"].get<std::string>());
-      for (const auto& w : c["warnings"]) fmt::print("warning: {}\n", w.get<std::string>());
-      for (const auto& n : c["notes"]) fmt::print("note: {}\n", n.get<std::string>());
+                 c["profile"].is_null() ? std::string("not saved") : "saved as " + shown(c["profile"]));
+      if (!c["backup"].is_null()) fmt::print("the old profile is kept as {}\n", shown(c["backup"]));
+      for (const auto& w : c["warnings"]) fmt::print("warning: {}\n", shown(w));
+      for (const auto& n : c["notes"]) fmt::print("note: {}\n", shown(n));
     });
   });
   auto* record = ctl->add_subcommand("record", "Start or stop a take");
@@ -190,15 +195,15 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
     for (const auto& [key, value] : {std::pair{"actor", s.actor}, {"scene", s.scene}, {"shot", s.shot}, {"notes", s.notes}})
       if (!value.empty()) body[key] = value;
     done(call(*o, "POST", "/record/start", body), [](const json& r) {
-      fmt::print("recording take {} to {} ({:g} Hz{})\n", r["take"].get<std::string>(), r["file"].get<std::string>(),
+      fmt::print("recording take {} to {} ({:g} Hz{})\n", shown(r["take"]), shown(r["file"]),
                  r["rate_hz"].get<double>(), r["markers_only"].get<bool>() ? ", markers only" : "");
     });
   });
   record->add_subcommand("stop", "Stop the take and close its file")->callback([o, done] {
     done(call(*o, "POST", "/record/stop", json::object()), [](const json& r) {
       fmt::print("take {} stopped after {:.1f} s: {} marker frames, {} solved frames, {} dropped, in {}\n",
-                 r["take"].get<std::string>(), r["seconds"].get<double>(), r["marker_frames"].get<uint64_t>(),
-                 r["solved_frames"].get<uint64_t>(), r["dropped"].get<uint64_t>(), r["file"].get<std::string>());
+                 shown(r["take"]), r["seconds"].get<double>(), r["marker_frames"].get<uint64_t>(),
+                 r["solved_frames"].get<uint64_t>(), r["dropped"].get<uint64_t>(), shown(r["file"]));
     });
   });
 }

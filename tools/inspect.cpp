@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
+#include "core/printable.hpp"
 #include "formats/arkit.hpp"
 #include "formats/livelinkface.hpp"
 #include "drivers/capture/capture_file.hpp"
@@ -175,7 +176,7 @@ nlohmann::json solved_json(const SolvedSummary& s) {
 }
 
 void print_solved(const SolvedSummary& s) {
-  fmt::print("\nsolved frames {} (rig {}, {})\n", s.frames, s.rig_name, s.rig_units.empty() ? "units unknown" : s.rig_units);
+  fmt::print("\nsolved frames {} (rig {}, {})\n", s.frames, printable(s.rig_name), s.rig_units.empty() ? "units unknown" : s.rig_units);
   const char* angle_names[] = {"yaw", "pitch", "roll"};
   const char* axes[] = {"x", "y", "z"};
   for (int i = 0; i < 3; ++i)
@@ -184,7 +185,7 @@ void print_solved(const SolvedSummary& s) {
                s.head_translation[std::size_t(i)][0], s.head_translation[std::size_t(i)][1]);
   fmt::print("  {:<24} {:>7} {:>7} {:>7} {:>12}\n", "shape", "min", "median", "max", "frames > 0.5");
   for (const auto& shape : s.shapes)
-    fmt::print("  {:<24} {:7.3f} {:7.3f} {:7.3f} {:12}\n", shape.name, shape.min, shape.median, shape.max,
+    fmt::print("  {:<24} {:7.3f} {:7.3f} {:7.3f} {:12}\n", printable(shape.name), shape.min, shape.median, shape.max,
                shape.frames_above_half);
 }
 
@@ -227,17 +228,17 @@ void print_markers(const std::filesystem::path& path, const MarkerTake& take) {
   if (!take.frames.empty()) fmt::print("  (numbers {}..{})", take.frames.front().frame_no, take.frames.back().frame_no);
   fmt::print("\nrate_hz   {}\nmarkers   {}\nunits     {}\n", take.rate_hz, take.marker_count(), take.units);
   fmt::print("gaps      {} missing samples in {} runs\n", gaps.missing_samples, gaps.gap_runs);
-  for (const auto& [key, value] : take.metadata) fmt::print("  {:<22} {}\n", key, value);
-  for (const auto& w : take.warnings) fmt::print("warning   {}\n", w);
+  for (const auto& [key, value] : take.metadata) fmt::print("  {:<22} {}\n", printable(key), printable(value));
+  for (const auto& w : take.warnings) fmt::print("warning   {}\n", printable(w));
   if (take.frames.empty()) return;
   fmt::print("\nfirst frame ({}):\n", take.frames.front().frame_no);
   for (std::size_t k = 0; k < take.marker_count(); ++k) {
     const Marker& m = take.frames.front().markers[k];
     if (m.present()) {
-      fmt::print("  {:<24} {:12.4f} {:12.4f} {:12.4f}\n", take.labels[k], m.position.x(), m.position.y(),
+      fmt::print("  {:<24} {:12.4f} {:12.4f} {:12.4f}\n", printable(take.labels[k]), m.position.x(), m.position.y(),
                  m.position.z());
     } else {
-      fmt::print("  {:<24} missing\n", take.labels[k]);
+      fmt::print("  {:<24} missing\n", printable(take.labels[k]));
     }
   }
 }
@@ -249,7 +250,7 @@ void print_face(const std::filesystem::path& path, const FaceTake& take) {
   fmt::print("gaps      {} rows where tracking was lost\n", take.lost_frames());
   fmt::print("shapes    {} ARKit weights + {} head/eye angles\n", formats::kArkitShapeCount,
              formats::kLiveLinkAngleCount);
-  for (const auto& w : take.warnings) fmt::print("warning   {}\n", w);
+  for (const auto& w : take.warnings) fmt::print("warning   {}\n", printable(w));
   if (take.frames.empty()) return;
   const auto& f = take.frames.front();
   fmt::print("\nfirst frame ({}):\n", formats::format_livelink_timecode(f.timecode));

@@ -21,6 +21,7 @@ SourceHealth MailboxSource::health() const noexcept {
   h.frames_overwritten = mailbox_ ? mailbox_->overwritten() : 0;
   h.frames_late = late_.load(std::memory_order_relaxed);
   h.errors = errors_.load(std::memory_order_relaxed);
+  h.foreign = foreign_.load(std::memory_order_relaxed);
   h.reconnects = reconnects_.load(std::memory_order_relaxed);
   h.state = state_.get();
   h.finished = finished_.load(std::memory_order_relaxed);

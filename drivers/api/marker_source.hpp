@@ -35,6 +35,7 @@ struct SourceHealth {
   uint64_t frames_overwritten = 0;  // replaced by a newer frame before the loop took them
   uint64_t frames_late = 0;         // their time passed before they could be produced or taken
   uint64_t errors = 0;              // malformed input, device errors
+  uint64_t foreign = 0;             // input from a sender other than the source's server, dropped unread
   uint64_t reconnects = 0;          // times a lost device or connection came back
   bool finished = false;            // no more frames will come (a replay that ended)
   // What the source is doing when an operator should know (waiting for a device, the last
@@ -107,6 +108,7 @@ class MailboxSource : public MarkerSource {
   std::atomic<uint64_t> delivered_{0};
   std::atomic<uint64_t> late_{0};
   std::atomic<uint64_t> errors_{0};
+  std::atomic<uint64_t> foreign_{0};
   std::atomic<uint64_t> reconnects_{0};
   std::atomic<bool> finished_{false};
   SharedStateLine state_;  // written by the source's own thread

@@ -7,6 +7,7 @@
 
 #include "core/error.hpp"
 #include "core/log.hpp"
+#include "core/printable.hpp"
 #include "core/time.hpp"
 #include "formats/natnet_request.hpp"
 
@@ -237,8 +238,29 @@ void NatNetSource::count_bad(std::atomic<uint64_t>& counter, Describe&& describe
   }
 }
 
+bool NatNetSource::from_server(std::span<const char> datagram, const natnet::Endpoint& from) const noexcept {
+  if (discovering_) return true;  // no server chosen yet: the first NAT_SERVERINFO chooses it
+  if (from.address != server_.address) return false;
+  if (from.port == server_.port) return true;
+  // Motive answers on its command port; frames come from its data socket, whose port NatNet does not fix.
+  if (datagram.size() < 2) return false;
+  uint16_t id = 0;
+  std::memcpy(&id, datagram.data(), 2);
+  return id == uint16_t(nn::MessageId::kFrameOfData);
+}
+
 void NatNetSource::handle(std::span<const char> datagram, bool truncated, const natnet::Endpoint& from,
                           int64_t received_ns) {
+  if (!from_server(datagram, from)) {
+    foreign_.fetch_add(1, std::memory_order_relaxed);
+    if (foreign_logged_ < kErrorsLoggedEach) {
+      ++foreign_logged_;
+      spdlog::warn("natnet: dropped a datagram from {}, which is not the server {}{}", from.to_string(),
+                   server_.to_string(),
+                   foreign_logged_ == kErrorsLoggedEach ? " (further ones are counted, and summed up every 10 s)" : "");
+    }
+    return;
+  }
   if (truncated || datagram.size() > nn::kHeaderBytes + nn::kMaxPayloadBytes) {
     count_bad(oversize_, [&] { return fmt::format("a datagram from {} larger than any NatNet packet", from.to_string()); });
     return;
@@ -297,7 +319,7 @@ void NatNetSource::handle(std::span<const char> datagram, bool truncated, const 
       send_connect();
       break;
     case nn::MessageId::kMessageString:
-      spdlog::info("natnet: message from {}: {}", server_name_, std::get<nn::Text>(m.body).text);
+      spdlog::info("natnet: message from {}: {}", server_name_, std::get<nn::Text>(m.body).text);  // escaped by the log format
       break;
     default: break;  // requests of other clients (multicast), keep-alives, echo requests
   }
@@ -314,6 +336,8 @@ void NatNetSource::on_server_info(const nn::ServerInfo& info, const natnet::Endp
   }
   const bool first = !server_info_;
   server_info_ = info;
+  server_software_ = fmt::format("{} {}, NatNet {}", printable(info.sender.name.text()),  // shown in /status
+                                 info.sender.app_version.to_string(), info.sender.natnet_version.major_minor());
   clock_.set_rate(info.connection ? info.connection->high_res_clock_hz : 0);
   const auto asked = asked_bitstream(options_.bitstream);
   const nn::Version streamed = asked.value_or(nn::Version{info.sender.natnet_version.major, info.sender.natnet_version.minor});
@@ -329,7 +353,7 @@ void NatNetSource::on_models(const nn::ModelDefinitions& models) {
     return;
   }
   model_updates_.fetch_add(1, std::memory_order_relaxed);
-  std::string note = converter_->follow(models);
+  std::string note = printable(converter_->follow(models));  // marker names from the server, shown in STATUS
   if (!note.empty()) spdlog::warn("natnet: new model definitions from {}: {}", server_name_, note);
   else spdlog::info("natnet: new model definitions from {} followed", server_name_);
   note_ = std::move(note);
@@ -405,7 +429,7 @@ void NatNetSource::periodic(int64_t now_ns) {
       next_reconnect_ns_ = now_ns + kReconnectNs;
     }
   }
-  const uint64_t errors = errors_.load(std::memory_order_relaxed);
+  const uint64_t errors = errors_.load(std::memory_order_relaxed), foreign = foreign_.load(std::memory_order_relaxed);
   if (now_ns >= next_error_log_ns_) {
     if (errors > errors_at_last_log_) {
       const NatNetCounts c = counts();
@@ -413,7 +437,11 @@ void NatNetSource::periodic(int64_t now_ns) {
                    "oversize {})", errors - errors_at_last_log_, seconds(kErrorLogNs), c.malformed, c.truncated,
                    c.oversize);
     }
+    if (foreign > foreign_at_last_log_)
+      spdlog::warn("natnet: {} datagrams from senders other than the server {} dropped in the last {:.0f} s ({} since "
+                   "start)", foreign - foreign_at_last_log_, server_.to_string(), seconds(kErrorLogNs), foreign);
     errors_at_last_log_ = errors;
+    foreign_at_last_log_ = foreign;
     next_error_log_ns_ = now_ns + kErrorLogNs;
   }
 }
@@ -429,15 +457,13 @@ NatNetCounts NatNetSource::counts() const noexcept {
   c.silences = silences_.load(std::memory_order_relaxed);
   c.model_updates = model_updates_.load(std::memory_order_relaxed);
   c.unlabelled_dropped = unlabelled_dropped_.load(std::memory_order_relaxed);
+  c.foreign = foreign_.load(std::memory_order_relaxed);
   return c;
 }
 
 std::string NatNetSource::description() const {
   std::string text = fmt::format("natnet: {}", server_name_);
-  if (server_info_) {
-    text += fmt::format(" ({} {}, NatNet {})", server_info_->sender.name.text(),
-                        server_info_->sender.app_version.to_string(), server_info_->sender.natnet_version.major_minor());
-  }
+  if (!server_software_.empty()) text += fmt::format(" ({})", server_software_);
   text += fmt::format(", bitstream {}, ", bitstream_.major_minor());
   text += multicast_ ? fmt::format("multicast {}:{}", natnet::ipv4_string(group_), options_.data_port)
                      : fmt::format("unicast to port {} and {}", options_.data_port,

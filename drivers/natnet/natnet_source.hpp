@@ -16,7 +16,10 @@
 // on ours, for latency), follows a restarted server, and when the server falls silent says
 // so in its state line (SourceHealth::state) and reconnects every second until frames come again. Malformed,
 // truncated and oversize datagrams are counted (NatNetCounts, SourceHealth::errors) and
-// dropped.
+// dropped. Once the server is chosen (server_address, or the first to answer discovery),
+// datagrams from any other sender are dropped unread and counted (SourceHealth::foreign):
+// every datagram must come from the server's address, and all but frames of data from its
+// command port. Text from the server is logged and shown escaped (core/printable.hpp).
 #include <atomic>
 #include <cstdint>
 #include <optional>
@@ -46,6 +49,7 @@ struct NatNetCounts {
   uint64_t silences = 0;          // times the server fell silent for silence_timeout_s
   uint64_t model_updates = 0;     // model definitions received after open()
   uint64_t unlabelled_dropped = 0;  // unlabelled points beyond the slots
+  uint64_t foreign = 0;           // from a sender other than the server: dropped unread
   uint64_t errors() const noexcept { return malformed + truncated + oversize; }
 };
 
@@ -77,6 +81,8 @@ class NatNetSource final : public MailboxSource {
   bool await(Wanted wanted, int64_t deadline_ns);
   void run();
   void drain(natnet::UdpSocket& socket);
+  // Whether the datagram comes from the chosen server (any sender while discovering).
+  bool from_server(std::span<const char> datagram, const natnet::Endpoint& from) const noexcept;
   void handle(std::span<const char> datagram, bool truncated, const natnet::Endpoint& from, int64_t received_ns);
   void on_server_info(const formats::natnet::ServerInfo& info, const natnet::Endpoint& from);
   void on_frame(const formats::natnet::FrameOfData& frame, int64_t received_ns);
@@ -94,6 +100,7 @@ class NatNetSource final : public MailboxSource {
   natnet::LocalInterface interface_;
   natnet::Endpoint server_;
   std::string server_name_;  // "10.0.0.5", for messages
+  std::string server_software_;  // "Motive 2.1.0.0, NatNet 3.0", from NAT_SERVERINFO, escaped
   std::optional<natnet::UdpSocket> command_, data_;
   std::optional<formats::natnet::ServerInfo> server_info_;
   std::optional<formats::natnet::FrameConverter> converter_;
@@ -114,7 +121,7 @@ class NatNetSource final : public MailboxSource {
   int32_t last_frame_number_ = 0;
   int64_t next_keepalive_ns_ = 0, next_echo_ns_ = 0, next_reconnect_ns_ = 0, next_models_request_ns_ = 0;
   int64_t next_error_log_ns_ = 0;
-  uint64_t errors_logged_ = 0, errors_at_last_log_ = 0;
+  uint64_t errors_logged_ = 0, errors_at_last_log_ = 0, foreign_logged_ = 0, foreign_at_last_log_ = 0;
   bool silent_ = false;
 
   std::atomic<int64_t> last_frame_ns_{0};

@@ -27,6 +27,32 @@ constexpr mode_t kSegmentMode = 0640;  // owner writes, the facecap group reads
 // A name freed by removing a stale segment can be taken by another writer before ours is
 // created; after this many rounds we give up and say so.
 constexpr int kCreateAttempts = 4;
+// Someone inspecting our new segment holds a lock on it for a moment; a read lock held
+// longer (a reader that opened it between its creation and our lock) makes us give up.
+constexpr int64_t kLockWaitNs = kNsPerSecond;
+
+// Whether the name still refers to the segment open on `fd`.
+bool names_segment(const std::string& name, int fd) {
+  const int now = shm_open(name.c_str(), O_RDONLY, 0);
+  if (now < 0) return false;
+  struct stat ours {}, named {};
+  const bool same = fstat(fd, &ours) == 0 && fstat(now, &named) == 0 && ours.st_dev == named.st_dev &&
+                    ours.st_ino == named.st_ino;
+  close(now);
+  return same;
+}
+
+// Takes the writer lock on our new segment, waiting up to kLockWaitNs. False, errno set,
+// when it could not.
+bool take_writer_lock(int fd) {
+  const int64_t give_up = monotonic_now_ns() + kLockWaitNs;
+  while (!try_writer_lock(fd)) {
+    if ((errno != EAGAIN && errno != EACCES && errno != EINTR) || monotonic_now_ns() >= give_up) return false;
+    timespec pause{0, long(kNsPerMs)};
+    nanosleep(&pause, nullptr);
+  }
+  return true;
+}
 
 // Removes the segment `name` when its writer is gone (nobody holds the writer lock) and
 // returns empty; otherwise explains who holds it and leaves it alone.
@@ -59,11 +85,14 @@ std::string remove_if_stale(const std::string& name) {
     }
   } else if (!h) {
     owner = "it is not a facecap segment";
-  } else if (!locked) {
+  } else if (!can_take) {
     owner = "its writer is gone but this user may not remove it";
-  } else {
-    spdlog::warn("taking over shared memory {}: its writer (facecapd pid {}) is gone, nothing holds its lock", name,
-                 h->writer_pid);
+  } else if (locked || names_segment(name, fd)) {
+    // Without our lock (a reader holds a read lock, which does not keep a writer's name),
+    // the name is checked to still be this segment, so that a writer that took it over
+    // meanwhile keeps its new one.
+    spdlog::warn("taking over shared memory {}: its writer (facecapd pid {}) is gone{}", name, h->writer_pid,
+                 locked ? ", nothing holds its lock" : "; a reader's read lock on it is left with the old segment");
     shm_unlink(name.c_str());
   }
   if (p != MAP_FAILED) munmap(p, sizeof(Header));
@@ -96,13 +125,13 @@ ShmWriter::ShmWriter(const ShmOutputSpec& spec) : name_(shm_object_name(spec.nam
                               "writer", name_, owner));
   }
   if (fd < 0) throw Error(fmt::format("cannot create shared memory {}: {}", name_, std::strerror(errno)));
-  // Before anything else: a segment whose lock is free counts as stale. Someone inspecting
-  // the new segment holds the lock for a moment; wait for them.
+  // Before anything else: a segment whose lock is free counts as stale.
   if (!take_writer_lock(fd)) {
     const int saved_errno = errno;
     close(fd);
     shm_unlink(name_.c_str());
-    throw Error(fmt::format("cannot lock shared memory {}: {}", name_, std::strerror(saved_errno)));
+    throw Error(fmt::format("cannot lock shared memory {} within {} s (another process holds a lock on it): {}", name_,
+                            kLockWaitNs / kNsPerSecond, std::strerror(saved_errno)));
   }
   // The umask may have narrowed the mode; readers in the group need exactly 0640.
   const bool sized = fchmod(fd, kSegmentMode) == 0 && ftruncate(fd, off_t(geometry.total_bytes)) == 0;
