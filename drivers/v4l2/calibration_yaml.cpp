@@ -141,6 +141,8 @@ class YamlParser {
     while (at_ < lines_.size() && lines_[at_].indent == indent && !is_item(lines_[at_].content)) {
       const Line& line = lines_[at_];
       const std::size_t colon = key_colon(line.content);
+      if (line.content.front() == '{') fail(line.number, "flow mappings ({ ... }) are not read (nor is JSON): write YAML");
+      if (line.content.front() == '<') fail(line.number, "XML is not read: write YAML");
       if (colon == std::string_view::npos) fail(line.number, "expected `key: value`");
       std::string key = scalar_text(std::string_view(line.content).substr(0, colon), line.number, false).text_;
       if (key.empty()) fail(line.number, "a key with no name");
