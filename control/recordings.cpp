@@ -85,7 +85,7 @@ Reply recording_frames(const std::string& directory, const ReadRecording& reques
   if (fs::symlink_status(file, ec).type() != fs::file_type::regular)
     return error_reply(404, fmt::format("no recording \"{}\" in {}", request.name, directory));
   try {
-    const formats::RecordingReader reader(file, {.no_follow = true});  // not swapped for a link since
+    const formats::RecordingReader reader(file, {.no_follow = true});  // nor a link swapped in since
     const formats::RecordingHeader& h = reader.header();
     const std::size_t total = reader.solved_frame_count();
     if (request.first >= total)

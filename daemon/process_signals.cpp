@@ -61,6 +61,10 @@ StartupSignalWatch::StartupSignalWatch() {
     while (!stopping_.load()) {
       const int signal = wait_for_control_signal(20 * kNsPerMs);
       if (signal == 0) continue;
+      if (signal == SIGHUP) {  // a reload: the run loop's, once it runs
+        hup_pending_.store(true);
+        continue;
+      }
       if (stopping_.load()) {
         ::kill(::getpid(), signal);  // pending again, for the run loop
         return;
@@ -82,6 +86,7 @@ StartupSignalWatch::StartupSignalWatch() {
 void StartupSignalWatch::stop() {
   stopping_.store(true);
   if (thread_.joinable()) thread_.join();
+  if (hup_pending_.exchange(false)) ::kill(::getpid(), SIGHUP);
 }
 
 }  // namespace facecap::daemon

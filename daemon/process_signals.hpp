@@ -35,10 +35,10 @@ std::string pin_library_thread_pools();
 // Waits up to timeout_ns for a control signal: the signal, or 0 on timeout.
 int wait_for_control_signal(int64_t timeout_ns);
 
-// From construction until stop(): SIGTERM or SIGINT (or SIGHUP) ends the process at once,
-// by that signal, with a line on stderr, so that loading the configuration, the rig and
-// the source's files stays stoppable whatever it reads; the run loop takes the signals
-// over after stop(). A signal that arrives as stop() is called is left for the run loop.
+// From construction until stop(): SIGTERM or SIGINT ends the process at once, by that
+// signal, with a line on stderr, so that loading the configuration, the rig and the
+// source's files stays stoppable whatever it reads; the run loop takes the signals over
+// after stop(). A SIGHUP, or a signal arriving as stop() is called, is left to the run loop.
 class StartupSignalWatch {
  public:
   StartupSignalWatch();
@@ -49,6 +49,7 @@ class StartupSignalWatch {
 
  private:
   std::atomic<bool> stopping_{false};
+  std::atomic<bool> hup_pending_{false};
   std::thread thread_;
 };
 
