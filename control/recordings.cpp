@@ -35,7 +35,10 @@ Reply list_recordings(const std::string& directory) {
   std::vector<fs::directory_entry> files;
   for (const auto& entry : fs::directory_iterator(directory, ec)) {
     std::error_code ignored;
-    if (entry.path().extension() == kRecordingExtension && entry.is_regular_file(ignored)) files.push_back(entry);
+    // symlink_status: a link (out of the directory or not) is not a take.
+    if (entry.path().extension() == kRecordingExtension &&
+        entry.symlink_status(ignored).type() == fs::file_type::regular)
+      files.push_back(entry);
   }
   if (ec) return error_reply(500, fmt::format("cannot list the recordings in {}: {}", directory, ec.message()));
   std::sort(files.begin(), files.end(), [](const auto& a, const auto& b) {
@@ -46,7 +49,7 @@ Reply list_recordings(const std::string& directory) {
   for (const fs::directory_entry& entry : files) {
     json item = {{"name", entry.path().filename().string()}, {"file", entry.path().string()}};
     try {
-      const formats::RecordingReader reader(entry.path());
+      const formats::RecordingReader reader(entry.path(), {.no_follow = true});
       const formats::RecordingHeader& h = reader.header();
       bool vertices = false;
       if (reader.solved_frame_count() > 0) {
@@ -79,10 +82,10 @@ Reply list_recordings(const std::string& directory) {
 Reply recording_frames(const std::string& directory, const ReadRecording& request, const ReplayRig& rig) {
   const fs::path file = fs::path(directory) / request.name;
   std::error_code ec;
-  if (!fs::is_regular_file(file, ec))
+  if (fs::symlink_status(file, ec).type() != fs::file_type::regular)
     return error_reply(404, fmt::format("no recording \"{}\" in {}", request.name, directory));
   try {
-    const formats::RecordingReader reader(file);
+    const formats::RecordingReader reader(file, {.no_follow = true});  // nor a link swapped in since
     const formats::RecordingHeader& h = reader.header();
     const std::size_t total = reader.solved_frame_count();
     if (request.first >= total)

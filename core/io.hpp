@@ -8,8 +8,29 @@
 
 namespace facecap {
 
-// Whole file into memory; throws Error naming the file on failure.
+// Opens a file for reading only if it is a regular file (following symlinks unless
+// no_follow): a FIFO, device, socket or directory named as a file is refused at once,
+// never waited on (the open itself does not block on a FIFO). Returns the descriptor
+// (O_CLOEXEC, blocking); throws Error naming the path and what it is.
+int open_regular_file(const std::filesystem::path& path, bool no_follow = false);
+
+// Whole file into memory; throws Error naming the file on failure (open_regular_file).
 std::vector<char> read_file_bytes(const std::filesystem::path& path);
+
+// A regular file mapped read-only (open_regular_file): only the pages read cost memory,
+// so a reader that refuses a file from its header never touches the rest.
+class MappedFile {
+ public:
+  explicit MappedFile(const std::filesystem::path& path, bool no_follow = false);
+  ~MappedFile();
+  MappedFile(MappedFile&& other) noexcept;
+  MappedFile& operator=(MappedFile&& other) noexcept;
+  std::span<const char> bytes() const noexcept { return {static_cast<const char*>(address_), size_}; }
+
+ private:
+  void* address_ = nullptr;
+  std::size_t size_ = 0;
+};
 
 // Writes via a temporary file and rename, so readers never see a half-written file.
 void write_file_atomically(const std::filesystem::path& path, std::span<const char> bytes);

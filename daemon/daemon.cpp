@@ -83,10 +83,12 @@ std::string check_rig_and_calibration(const config::DaemonConfig& config) {
   const kernels::KernelTable& kernels = kernels::table(config.solver.kernels);  // throws when the CPU lacks them
   const std::shared_ptr<const Rig> rig = load_configured_rig(config.rig);
   const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(config), *rig);
-  return fmt::format("rig {} ({} vertices, {} shapes), calibration {} ({} markers), {} kernels", config.rig.path,
+  const std::string source_files = drivers::check_source_files(config.source);
+  return fmt::format("rig {} ({} vertices, {} shapes), calibration {} ({} markers), {} kernels{}{}", config.rig.path,
                      rig->vertex_count(), rig->shape_count(),
                      config.calibration.file.empty() ? "default marker set" : config.calibration.file,
-                     calibration.markers.size(), kKernelPaths.name(kernels.path));
+                     calibration.markers.size(), kKernelPaths.name(kernels.path), source_files.empty() ? "" : ", ",
+                     source_files);
 }
 
 // Counters at one moment, for figures over a window.

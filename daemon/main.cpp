@@ -63,6 +63,8 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
+  // Loading files below (configuration, rig, calibrations) can take long: stoppable throughout.
+  daemon::StartupSignalWatch startup_watch;
   if (!check_file.empty()) {
     try {
       const config::LoadedConfig checked = config::load_config(check_file, overrides);
@@ -104,6 +106,7 @@ int main(int argc, char** argv) {
     daemon::Daemon d({.config_file = config_file, .overrides = overrides, .handle_signals = true, .version = version},
                      std::move(loaded));
     d.start();
+    startup_watch.stop();
     return d.run();
   } catch (const Error& e) {
     spdlog::critical("{}", e.what());

@@ -1,8 +1,11 @@
 #include "daemon/process_signals.hpp"
 
+#include <cstdio>
 #include <cstdlib>
+#include <cstring>
 
 #include <dlfcn.h>
+#include <unistd.h>
 #include <fmt/format.h>
 #include <ctime>
 
@@ -51,6 +54,39 @@ int wait_for_control_signal(int64_t timeout_ns) {
   const timespec timeout{time_t(timeout_ns / kNsPerSecond), long(timeout_ns % kNsPerSecond)};
   const int signal = sigtimedwait(&handled, nullptr, &timeout);
   return signal > 0 ? signal : 0;
+}
+
+StartupSignalWatch::StartupSignalWatch() {
+  thread_ = std::thread([this] {
+    while (!stopping_.load()) {
+      const int signal = wait_for_control_signal(20 * kNsPerMs);
+      if (signal == 0) continue;
+      if (signal == SIGHUP) {  // a reload: the run loop's, once it runs
+        hup_pending_.store(true);
+        continue;
+      }
+      if (stopping_.load()) {
+        ::kill(::getpid(), signal);  // pending again, for the run loop
+        return;
+      }
+      std::fprintf(stderr, "facecapd: %s during startup: stopping\n", strsignal(signal));
+      struct sigaction fallback {};
+      fallback.sa_handler = SIG_DFL;
+      sigaction(signal, &fallback, nullptr);
+      sigset_t just_this;
+      sigemptyset(&just_this);
+      sigaddset(&just_this, signal);
+      pthread_sigmask(SIG_UNBLOCK, &just_this, nullptr);
+      ::raise(signal);  // ends the process by the signal, as an unhandled SIGTERM would
+      std::_Exit(128 + signal);
+    }
+  });
+}
+
+void StartupSignalWatch::stop() {
+  stopping_.store(true);
+  if (thread_.joinable()) thread_.join();
+  if (hup_pending_.exchange(false)) ::kill(::getpid(), SIGHUP);
 }
 
 }  // namespace facecap::daemon

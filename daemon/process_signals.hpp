@@ -2,8 +2,10 @@
 // The signals facecapd handles, in one place: SIGTERM and SIGINT stop it, SIGHUP reloads
 // its configuration. They are blocked in every thread and taken synchronously by the
 // supervisor (wait_for_control_signal); no asynchronous handler runs anywhere.
+#include <atomic>
 #include <cstdint>
 #include <string>
+#include <thread>
 
 #include <signal.h>
 
@@ -32,5 +34,23 @@ std::string pin_library_thread_pools();
 
 // Waits up to timeout_ns for a control signal: the signal, or 0 on timeout.
 int wait_for_control_signal(int64_t timeout_ns);
+
+// From construction until stop(): SIGTERM or SIGINT ends the process at once, by that
+// signal, with a line on stderr, so that loading the configuration, the rig and the
+// source's files stays stoppable whatever it reads; the run loop takes the signals over
+// after stop(). A SIGHUP, or a signal arriving as stop() is called, is left to the run loop.
+class StartupSignalWatch {
+ public:
+  StartupSignalWatch();
+  ~StartupSignalWatch() { stop(); }
+  StartupSignalWatch(const StartupSignalWatch&) = delete;
+  StartupSignalWatch& operator=(const StartupSignalWatch&) = delete;
+  void stop();
+
+ private:
+  std::atomic<bool> stopping_{false};
+  std::atomic<bool> hup_pending_{false};
+  std::thread thread_;
+};
 
 }  // namespace facecap::daemon

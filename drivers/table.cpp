@@ -22,6 +22,7 @@
 #include "drivers/usb/usb_source.hpp"
 #endif
 #if FACECAP_WITH_V4L2
+#include "drivers/v4l2/camera_calibration.hpp"
 #include "drivers/v4l2/v4l2_source.hpp"
 #endif
 
@@ -63,6 +64,11 @@ std::unique_ptr<MarkerSource> make_hid(const SourceConfig& config, const SourceC
 std::unique_ptr<MarkerSource> make_v4l2(const SourceConfig& config, const SourceContext&) {
   return std::make_unique<V4l2Source>(config.v4l2);
 }
+std::string check_v4l2_files(const SourceConfig& config) {
+  if (config.v4l2.calibration.empty()) return "";
+  const v4l2::CameraCalibration calibration = v4l2::read_camera_calibration(config.v4l2.calibration);
+  return fmt::format("camera calibration {} ({} cameras)", config.v4l2.calibration, calibration.cameras.size());
+}
 #endif
 
 const DriverEntry kDrivers[] = {
@@ -85,7 +91,7 @@ const DriverEntry kDrivers[] = {
 #endif
 #if FACECAP_WITH_V4L2
     {DriverId::kV4l2, "two or more V4L2 cameras streaming GREY, YUYV or MJPEG (source.v4l2.devices) and their "
-                      "calibration (source.v4l2.calibration, docs/cameras.md); OpenCV", &make_v4l2},
+                      "calibration (source.v4l2.calibration, docs/cameras.md); OpenCV", &make_v4l2, &check_v4l2_files},
 #endif
 };
 
@@ -97,6 +103,11 @@ const DriverEntry* find_driver(DriverId id) noexcept {
   for (const DriverEntry& entry : kDrivers)
     if (entry.id == id) return &entry;
   return nullptr;
+}
+
+std::string check_source_files(const SourceConfig& config) {
+  const DriverEntry* entry = find_driver(config.driver);
+  return entry && entry->check_files ? entry->check_files(config) : "";
 }
 
 std::unique_ptr<MarkerSource> make_source(const SourceConfig& config, const SourceContext& context) {

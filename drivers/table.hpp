@@ -5,6 +5,7 @@
 // (docs/architecture.md, "Adding a driver"); nothing registers itself.
 #include <memory>
 #include <span>
+#include <string>
 #include <string_view>
 
 #include "drivers/api/driver_id.hpp"
@@ -26,6 +27,9 @@ struct DriverEntry {
   DriverId id;
   std::string_view needs;  // what it needs to run, for --list-drivers and its errors
   std::unique_ptr<MarkerSource> (*make)(const SourceConfig& config, const SourceContext& context);
+  // Reads the files the driver would read when opened (facecapd --check-config); null when
+  // it reads none. Returns what it found; throws Error.
+  std::string (*check_files)(const SourceConfig& config) = nullptr;
 
   std::string_view name() const noexcept { return kDriverIds.name(id); }
 };
@@ -38,6 +42,9 @@ const DriverEntry* find_driver(DriverId id) noexcept;
 
 // Creates (does not open) the configured source. Throws Error for a driver this build
 // lacks.
+// The configured driver's check_files ("" when it reads no files). Throws Error.
+std::string check_source_files(const SourceConfig& config);
+
 std::unique_ptr<MarkerSource> make_source(const SourceConfig& config, const SourceContext& context);
 
 }  // namespace facecap::drivers

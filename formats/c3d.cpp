@@ -323,8 +323,14 @@ MarkerTake read_c3d(std::span<const char> bytes, const std::string& name) {
   const uint64_t frame_bytes = (uint64_t(points) * 4 + uint64_t(analog_per_frame)) * word_bytes;
   const std::size_t data_offset = (std::size_t(data_start) - 1) * kBlockBytes;
   const uint64_t available = bytes.size() - std::min(bytes.size(), data_offset);
-  if (frame_count > 0 &&
-      (frame_bytes == 0 ? uint64_t(frame_count) > bytes.size() : uint64_t(frame_count) > available / frame_bytes)) {
+  // Frames of no points and no analog samples take no bytes in the file but memory in the
+  // take: a 4 KiB header could otherwise claim millions of them.
+  if (frame_count > 0 && frame_bytes == 0) {
+    reader.fail_at(data_offset, fmt::format("the file declares {} frames of 0 points and 0 analog words: frames "
+                                            "that hold nothing",
+                                            frame_count));
+  }
+  if (frame_count > 0 && uint64_t(frame_count) > available / frame_bytes) {
     reader.fail_at(
         data_offset,
         fmt::format("data section holds {} complete frames, but the file declares {} ({} points, "

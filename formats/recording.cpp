@@ -35,6 +35,7 @@ constexpr uint32_t fourcc(const char (&s)[5]) {
          (uint32_t(uint8_t(s[3])) << 24);
 }
 constexpr uint32_t kHeadChunk = fourcc("HEAD");
+constexpr uint32_t kHeadCopyChunk = fourcc("HCPY");
 constexpr uint32_t kMarkerChunk = fourcc("MRKF");
 constexpr uint32_t kSolvedChunk = fourcc("SLVF");
 constexpr uint32_t kStartStateChunk = fourcc("STAT");
@@ -258,6 +259,7 @@ RecordingWriter::RecordingWriter(const std::filesystem::path& path, const Record
   w.u32(0);  // reserved
   ByteWriter p(payload_);
   encode_header(p, header, header.created_unix_ns != 0 ? header.created_unix_ns : realtime_now_ns());
+  head_payload_ = payload_;
   append_chunk(kHeadChunk, payload_);
   try {
     flush();  // the header reaches the file at once: a recording killed early still names its rig
@@ -380,6 +382,7 @@ void RecordingWriter::close() {
   if (!is_open()) return;
   const bool failed_before = !failure_.empty();
   try {
+    append_chunk(kHeadCopyChunk, head_payload_);
     const uint64_t index_offset = bytes_written();
     payload_.clear();
     ByteWriter w(payload_);
@@ -413,37 +416,17 @@ void RecordingWriter::close() {
 // ---------------------------------------------------------------------------- reader
 
 struct RecordingReader::Mapping {
-  void* address = nullptr;
-  std::size_t size = 0;
-  ~Mapping() {
-    if (address) ::munmap(address, size);
-  }
+  MappedFile file;
 };
 
-RecordingReader::RecordingReader(const std::filesystem::path& path) : name_(path.string()) {
-  const int fd = ::open(name_.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throw file_error(name_, fmt::format("cannot open: {}", std::strerror(errno)));
-  struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-    ::close(fd);
-    throw file_error(name_, "not a regular file");
-  }
-  mapping_ = std::make_unique<Mapping>();
-  mapping_->size = std::size_t(st.st_size);
-  if (mapping_->size > 0) {
-    void* address = ::mmap(nullptr, mapping_->size, PROT_READ, MAP_PRIVATE, fd, 0);
-    if (address == MAP_FAILED) {
-      const int err = errno;
-      ::close(fd);
-      throw file_error(name_, fmt::format("cannot map: {}", std::strerror(err)));
-    }
-    mapping_->address = address;
-  }
-  ::close(fd);
-  open(std::span<const char>(static_cast<const char*>(mapping_->address), mapping_->size));
+RecordingReader::RecordingReader(const std::filesystem::path& path, Options options)
+    : name_(path.string()), options_(options) {
+  mapping_ = std::make_unique<Mapping>(Mapping{MappedFile(path, options.no_follow)});
+  open(mapping_->file.bytes());
 }
 
-RecordingReader::RecordingReader(std::span<const char> bytes, std::string name) : name_(std::move(name)) {
+RecordingReader::RecordingReader(std::span<const char> bytes, std::string name, Options options)
+    : name_(std::move(name)), options_(options) {
   open(bytes);
 }
 
@@ -506,17 +489,89 @@ void RecordingReader::open(std::span<const char> bytes) {
   }
   std::string why;
   const auto head = chunk_at(bytes, kPreambleBytes, why);
-  if (!head) r.fail_at(kPreambleBytes, fmt::format("recording header unreadable: {}", why));
-  if (head->code != kHeadChunk)
-    r.fail_at(kPreambleBytes, fmt::format("first chunk is {}, expected HEAD", fourcc_text(head->code)));
-  ByteReader header_reader(head->payload, name_ + " [HEAD]");
-  decode_header(header_reader, header_);
-  const std::size_t chunks_begin = kPreambleBytes + kChunkHeaderBytes + head->payload.size();
+  if (head && head->code != kHeadChunk) why = fmt::format("first chunk is {}, expected HEAD", fourcc_text(head->code));
+  std::size_t chunks_begin = 0;
+  if (head && head->code == kHeadChunk) {
+    try {
+      ByteReader header_reader(head->payload, name_ + " [HEAD]");
+      decode_header(header_reader, header_);
+      chunks_begin = kPreambleBytes + kChunkHeaderBytes + head->payload.size();
+    } catch (const Error& e) {  // its checksum holds, yet it does not decode
+      why = e.what();
+    }
+  }
+  if (chunks_begin == 0) chunks_begin = recover_header(why);
   read_start_state(chunks_begin);
   if (!load_index(chunks_begin)) scan(chunks_begin);
   for (std::size_t i = 0; i < index_.size(); ++i) {
     (index_[i].kind == ChunkKind::kMarkerFrame ? marker_entries_ : solved_entries_).push_back(i);
   }
+}
+
+std::size_t RecordingReader::recover_header(std::string_view why) {
+  const uint16_t format_version = header_.format_version, min_reader_version = header_.min_reader_version;
+  auto keep_versions = [&] {
+    header_.format_version = format_version;
+    header_.min_reader_version = min_reader_version;
+  };
+  // The copy close() wrote: the same payload, so HEAD's size tells where the chunks begin.
+  // close() writes it right before INDX: only a candidate followed by INDX is checksummed,
+  // and only a few, so that a file of fake copies costs no more than a scan.
+  constexpr int kMaxCopyCandidates = 8;
+  int candidates = 0;
+  std::string copy_why;
+  for (std::size_t at = kPreambleBytes; at + kChunkHeaderBytes <= bytes_.size() && candidates < kMaxCopyCandidates; ++at) {
+    uint32_t code = 0, size = 0, next = 0;
+    std::memcpy(&code, bytes_.data() + at, 4);  // little-endian, as written
+    if (code != kHeadCopyChunk) continue;
+    std::memcpy(&size, bytes_.data() + at + 4, 4);
+    const std::size_t end = at + kChunkHeaderBytes + size;
+    if (end > bytes_.size() || bytes_.size() - end < 4) continue;
+    std::memcpy(&next, bytes_.data() + end, 4);
+    if (next != kIndexChunk) continue;
+    ++candidates;
+    const auto copy = chunk_at(bytes_, at, copy_why);
+    if (!copy) continue;
+    try {
+      ByteReader copy_reader(copy->payload, fmt::format("{} [HCPY @ byte {}]", name_, at));
+      decode_header(copy_reader, header_);
+    } catch (const Error&) {
+      header_ = RecordingHeader{};
+      keep_versions();
+      continue;
+    }
+    keep_versions();
+    header_damage_ = fmt::format("HEAD damaged ({}); its fields read from the copy at byte {}", why, at);
+    return kPreambleBytes + kChunkHeaderBytes + copy->payload.size();
+  }
+  if (!options_.salvage) {
+    throw offset_error(name_, int64_t(kPreambleBytes),
+                       fmt::format("recording header unreadable: {}, and the file has no intact copy of it (a "
+                                   "recording not closed, or older than format 5); `facecap inspect --salvage` "
+                                   "reads its frames without it",
+                                   why));
+  }
+  // Salvaging: HEAD's own payload where it still decodes (its fields may be wrong), and
+  // the frames found by scanning from just after the HEAD chunk's header: its size may be
+  // the damaged field.
+  std::string decoded = "its fields are unknown";
+  if (bytes_.size() >= kPreambleBytes + kChunkHeaderBytes) {
+    uint32_t size = 0;
+    std::memcpy(&size, bytes_.data() + kPreambleBytes + 4, 4);
+    const std::size_t payload_at = kPreambleBytes + kChunkHeaderBytes;
+    try {
+      ByteReader damaged(bytes_.subspan(payload_at, std::min<std::size_t>(size, bytes_.size() - payload_at)),
+                         name_ + " [HEAD]");
+      decode_header(damaged, header_);
+      decoded = "its fields read from the damaged HEAD may be wrong";
+    } catch (const Error&) {
+      header_ = RecordingHeader{};
+    }
+  }
+  keep_versions();
+  header_damage_ = fmt::format("HEAD damaged ({}) and no intact copy: salvaged, {}; frames looked for from byte 32 on", why,
+                               decoded);
+  return kPreambleBytes + kChunkHeaderBytes;
 }
 
 void RecordingReader::read_start_state(std::size_t chunks_begin) {
@@ -626,11 +681,12 @@ void RecordingReader::scan(std::size_t chunks_begin) {
 }
 
 std::string RecordingReader::damage_summary() const {
-  std::string text;
+  std::string text = header_damage_;
   if (!skipped_.empty()) {
+    if (!text.empty()) text += "; ";
     uint64_t bytes = 0;
     for (const Skipped& s : skipped_) bytes += s.bytes;
-    text = fmt::format("{} damaged stretch{} skipped ({} bytes; the first: {})", skipped_.size(),
+    text += fmt::format("{} damaged stretch{} skipped ({} bytes; the first: {})", skipped_.size(),
                        skipped_.size() == 1 ? "" : "es", bytes, skipped_.front().why);
   }
   if (truncated_) text += fmt::format("{}cut off: {}", text.empty() ? "" : "; ", stop_reason_);
@@ -751,8 +807,9 @@ MarkerTake take_from_recording(const RecordingReader& reader, const ProgressFn& 
   take.first_frame = take.frames.empty() ? 1 : take.frames.front().frame_no;
   take.rate_hz = h.rate_hz;
   if (take.rate_hz <= 0 && take.frames.size() > 1) {
-    const int64_t span_ns = take.frames.back().source_time_ns - take.frames.front().source_time_ns;
-    if (span_ns > 0) take.rate_hz = double(take.frames.size() - 1) * 1e9 / double(span_ns);
+    // In double: the difference of two hostile i64 times overflows an i64.
+    const double span_ns = double(take.frames.back().source_time_ns) - double(take.frames.front().source_time_ns);
+    if (span_ns > 0) take.rate_hz = double(take.frames.size() - 1) * 1e9 / span_ns;
   }
   take.metadata = {
       {"format_version", fmt::format("{}", h.format_version)},

@@ -25,7 +25,9 @@ namespace facecap::formats {
 // 3: HEAD gains the slate: take, actor, scene, shot, notes (older readers skip them).
 // 4: an optional STAT chunk after HEAD holds the solve's state before the first frame;
 //    SLVF gains fold_deadline_rounds (older readers skip both).
-inline constexpr uint16_t kRecordingFormatVersion = 4;
+// 5: close() writes HCPY, a copy of HEAD, before INDX, so that a damaged HEAD costs no
+//    frames (older readers skip it).
+inline constexpr uint16_t kRecordingFormatVersion = 5;
 // Readers of this version understand files whose minimum reader version is <= this.
 inline constexpr uint16_t kRecordingReaderVersion = 1;
 
@@ -124,6 +126,7 @@ class RecordingWriter {
   std::vector<char> buffer_;
   std::vector<std::size_t> buffer_chunk_ends_;  // where each chunk in buffer_ ends
   std::vector<char> payload_;  // reused per frame
+  std::vector<char> head_payload_;  // written again at close (HCPY)
   std::vector<RecordingIndexEntry> index_;
   std::size_t marker_frames_ = 0;
   std::size_t solved_frames_ = 0;
@@ -131,15 +134,24 @@ class RecordingWriter {
   std::string failure_;
 };
 
+struct RecordingReadOptions {
+  // A HEAD that is damaged and has no intact copy (HCPY) is refused unless salvaging:
+  // then its fields are taken from the damaged payload where it still decodes (else left
+  // empty) and the frames are looked for from byte 32 on, with header_damage() saying so.
+  bool salvage = false;
+  bool no_follow = false;  // refuse a symlink rather than follow it (listing a directory)
+};
+
 // Reads a recording held in memory or mapped from a file. Frames are decoded on demand,
 // each chunk's checksum checked as it is read.
 class RecordingReader {
  public:
-  // Maps the file read-only. Throws Error (not a recording, newer than this reader,
-  // cut off before its header is complete).
-  explicit RecordingReader(const std::filesystem::path& path);
+  using Options = RecordingReadOptions;
+  // Maps the file read-only (a regular file only). Throws Error (not a recording, newer
+  // than this reader, cut off before its header is complete, HEAD damaged without salvage).
+  explicit RecordingReader(const std::filesystem::path& path, Options options = {});
   // Reads from a buffer the caller keeps alive (tests, fuzzing).
-  RecordingReader(std::span<const char> bytes, std::string name);
+  RecordingReader(std::span<const char> bytes, std::string name, Options options = {});
   ~RecordingReader();
   RecordingReader(RecordingReader&&) noexcept;
   RecordingReader& operator=(RecordingReader&&) noexcept;
@@ -165,6 +177,9 @@ class RecordingReader {
   // What could not be read, in one line ("" when the whole file was read): the stretches
   // skipped and where the file was cut off.
   std::string damage_summary() const;
+  // Why HEAD could not be read and where its fields came from instead ("" when HEAD was
+  // intact): its copy written at close, or (salvaging) the damaged HEAD itself or nothing.
+  const std::string& header_damage() const noexcept { return header_damage_; }
 
   // The STAT chunk's payload (RecordingWriter::append_start_state), empty when the
   // recording has none; start_state_damage() says why one could not be read ("" when
@@ -182,6 +197,9 @@ class RecordingReader {
  private:
   struct Mapping;
   void open(std::span<const char> bytes);
+  // When HEAD is damaged: the header from its copy, or salvaged; returns where the
+  // chunks after HEAD begin (or the first offset to scan from).
+  std::size_t recover_header(std::string_view why);
   // The STAT chunk, when the chunks begin with one.
   void read_start_state(std::size_t chunks_begin);
   bool load_index(std::size_t chunks_begin);
@@ -194,6 +212,7 @@ class RecordingReader {
                                       uint32_t expected_code) const;
 
   std::string name_;
+  Options options_;
   std::unique_ptr<Mapping> mapping_;  // owns the mapped file, when there is one
   std::span<const char> bytes_;
   RecordingHeader header_;
@@ -202,6 +221,7 @@ class RecordingReader {
   std::vector<std::size_t> solved_entries_;
   std::span<const char> start_state_;
   std::string start_state_damage_;
+  std::string header_damage_;
   bool index_rebuilt_ = false;
   bool truncated_ = false;
   std::string stop_reason_;

@@ -190,21 +190,16 @@ MarkerTake read_take(std::span<const char> bytes, const std::string& name) {
 }
 
 TakeFormat detect_file_format(const std::filesystem::path& path) {
-  char head[64];
-  std::size_t head_size = 0;
-  if (std::ifstream in(path, std::ios::binary); in) {
-    in.read(head, sizeof head);
-    head_size = std::size_t(in.gcount());
-  }
-  return detect_format(std::span<const char>(head, head_size), path);
+  const MappedFile file(path);
+  return detect_format(file.bytes().first(std::min<std::size_t>(file.bytes().size(), 64)), path);
 }
 
-MarkerTake read_take(const std::filesystem::path& path) {
-  if (detect_file_format(path) == TakeFormat::kRecording) {
-    return take_from_recording(RecordingReader(path));  // mapped, not read: recordings can be large
-  }
-  const auto bytes = read_file_bytes(path);
-  return read_take(std::span<const char>(bytes), path.string());
+MarkerTake read_take(const std::filesystem::path& path, const TakeReadOptions& options) {
+  const MappedFile file(path);
+  const std::span<const char> bytes = file.bytes();
+  if (detect_format(bytes.first(std::min<std::size_t>(bytes.size(), 64)), path) == TakeFormat::kRecording)
+    return take_from_recording(RecordingReader(bytes, path.string(), {.salvage = options.salvage_recording}));
+  return read_take(bytes, path.string());
 }
 
 void write_take(const std::filesystem::path& path, const MarkerTake& take, const ProgressFn& progress) {

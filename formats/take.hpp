@@ -93,7 +93,13 @@ void report_progress(const ProgressFn& progress, std::size_t done, std::size_t t
 // Reads a marker take in any supported format (chosen by content, then extension).
 // Live Link Face CSV holds blendshape weights, not markers, and is refused here (read it
 // with read_livelinkface), as is a NatNet capture (capture_take). Throws Error.
-MarkerTake read_take(const std::filesystem::path& path);
+// Files are mapped, not read: a reader that refuses a file from its header touches no
+// more of it. salvage_recording: a recording whose HEAD is damaged and has no intact
+// copy is read anyway (RecordingReader::Options::salvage), with a warning.
+struct TakeReadOptions {
+  bool salvage_recording = false;
+};
+MarkerTake read_take(const std::filesystem::path& path, const TakeReadOptions& options = {});
 MarkerTake read_take(std::span<const char> bytes, const std::string& name);
 
 // Writes a take in the format the extension names (.c3d, .trc, .fcrec), atomically.

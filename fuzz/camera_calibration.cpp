@@ -1,7 +1,8 @@
 // libFuzzer target: camera calibration files as the v4l2 driver reads them
-// (drivers/v4l2/camera_calibration.hpp: OpenCV-style YAML, XML or JSON through
-// cv::FileStorage). Bad input must give facecap::Error and nothing else; a calibration
-// that parses must be written and read back to the same cameras.
+// (drivers/v4l2/camera_calibration.hpp: OpenCV-style YAML read by our own parser of the
+// subset, calibration_yaml.hpp). Bad input must give facecap::Error and nothing else; a
+// calibration that parses must be written (by cv::FileStorage) and read back to the same
+// cameras.
 #include <cstdlib>
 #include <filesystem>
 

@@ -7,12 +7,17 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace facecap;
-  return fuzz::parse_refusing_errors([&] {
-    const formats::RecordingReader reader(fuzz::bytes_of(data, size), "fuzz.fcrec");
-    MarkerFrame markers;
-    for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) reader.read_marker_frame(i, markers);
-    SolvedFrame solved;
-    for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) reader.read_solved_frame(i, solved);
-    formats::take_from_recording(reader);
-  });
+  // As read normally, and salvaged (a HEAD that does not decode or is not first: its copy,
+  // or the damaged payload, then the scan).
+  for (const bool salvage : {false, true}) {
+    fuzz::parse_refusing_errors([&] {
+      const formats::RecordingReader reader(fuzz::bytes_of(data, size), "fuzz.fcrec", {.salvage = salvage});
+      MarkerFrame markers;
+      for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) reader.read_marker_frame(i, markers);
+      SolvedFrame solved;
+      for (std::size_t i = 0; i < reader.solved_frame_count(); ++i) reader.read_solved_frame(i, solved);
+      formats::take_from_recording(reader);
+    });
+  }
+  return 0;
 }

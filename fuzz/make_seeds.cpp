@@ -272,7 +272,8 @@ int main(int argc, char** argv) {
     const auto info = formats::device::encode_info({.marker_capacity = 64, .rate_mhz = 120000, .max_rate_mhz = 240000, .max_chunk_bytes = 64, .clock_hz = 1000000});
     write(out / "marker_device_packet/info.bin", std::string(info.begin(), info.end()));
     // Two cameras in the `cameras:` layout and OpenCV's stereo layout.
-    const std::string matrix = "!!opencv-matrix\n    rows: 3\n    cols: 3\n    dt: d\n    data: [800, 0, 320, 0, 800, 240, 0, 0, 1]\n";
+    const std::string matrix =
+        "!!opencv-matrix\n      rows: 3\n      cols: 3\n      dt: d\n      data: [800, 0, 320, 0, 800, 240, 0, 0, 1]\n";
     write(out / "camera_calibration/cameras.yaml",
           "%YAML:1.0\n---\nunits: mm\ncameras:\n  - name: left\n    image_width: 640\n    image_height: 480\n"
           "    camera_matrix: " + matrix + "    distortion_coefficients: [-0.1, 0.01, 0, 0, 0]\n"
@@ -280,6 +281,8 @@ int main(int argc, char** argv) {
           "    rotation: [0, -0.5, 0]\n    translation: [-250, 0, 60]\n");
     write(out / "camera_calibration/stereo.yml",
           "M1: " + matrix + "D1: [0, 0, 0, 0]\nM2: " + matrix + "D2: [0, 0, 0, 0]\nR: [0, 0.5, 0]\nT: [-25, 0, 3]\n");
+    // 48 bytes that keep OpenCV 4.6's FileStorage busy forever (our reader refuses them).
+    write(out / "camera_calibration/opencv_hang.json", "{\"a\":\"$base64$AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA\"}");
     const std::string profile = align::write_calibration_profile(small_calibration(rig));
     write(out / "calibration_profile/profile.toml", profile);
     // Without its checksum line, so that mutations are not all refused by the checksum.

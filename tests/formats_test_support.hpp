@@ -2,6 +2,8 @@
 // Helpers shared by the format tests: synthetic takes and point-by-point comparison.
 #include <cmath>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
@@ -11,9 +13,9 @@
 
 namespace facecap::test {
 
-// A 1 KB C3D (header block, parameter block) whose only parameter is a real-typed
-// POINT:USED; the header declares no frames.
-inline std::vector<char> c3d_with_real_point_count(float points) {
+// A 1 KB C3D (header block, parameter block) of no points whose only parameter is a
+// real-typed POINT:<name> (at most 15 characters); the header declares no frames.
+inline std::vector<char> c3d_with_real_point_parameter(std::string_view name, float value) {
   std::vector<char> file;
   formats::ByteWriter w(file);
   w.u8(2);     // parameter block
@@ -38,17 +40,19 @@ inline std::vector<char> c3d_with_real_point_count(float points) {
   w.bytes("POINT");
   w.i16(3);  // to the next entry, counted from this word
   w.u8(0);   // empty description
-  w.i8(4);
+  w.i8(int8_t(name.size()));
   w.i8(1);
-  w.bytes("USED");
+  w.bytes(name);
   w.i16(0);  // last entry
   w.i8(4);
   w.u8(0);
-  w.f32(points);
+  w.f32(value);
   w.u8(0);
   file.resize(1024, '\0');
   return file;
 }
+
+inline std::vector<char> c3d_with_real_point_count(float points) { return c3d_with_real_point_parameter("USED", points); }
 
 // A take whose positions are distinct functions of (frame, marker) and whose missing
 // markers follow a fixed pattern (every 7th sample), so comparisons catch shuffles.

@@ -107,6 +107,21 @@ TEST_CASE("read_file_bytes refuses a directory instead of sizing it as 2^63 byte
   CHECK_THROWS_WITH(read_file_bytes(dir), Catch::Contains(dir.string()) && Catch::Contains("is a directory"));
 }
 
+TEST_CASE("Only regular files are opened: a FIFO, a device or (with no_follow) a symlink is refused at once, naming it") {
+  const auto dir = test::scratch_dir("io-regular");
+  const auto fifo = dir / "shape.obj";
+  REQUIRE(::mkfifo(fifo.c_str(), 0644) == 0);  // no writer: opening it blocking would wait forever
+  CHECK_THROWS_WITH(read_file_bytes(fifo), Catch::Contains(fifo.string()) && Catch::Contains("is a FIFO (named pipe), not a regular file"));
+  CHECK_THROWS_WITH(MappedFile(fifo), Catch::Contains("is a FIFO"));
+  CHECK_THROWS_WITH(read_file_bytes("/dev/zero"), Catch::Contains("/dev/zero") && Catch::Contains("is a character device"));
+  test::write_text(dir / "real.txt", "twelve bytes");
+  std::filesystem::create_symlink(dir / "real.txt", dir / "link.txt");
+  CHECK(MappedFile(dir / "link.txt").bytes().size() == 12);  // followed by default
+  CHECK_THROWS_WITH(MappedFile(dir / "link.txt", true), Catch::Contains("is a symbolic link"));
+  const MappedFile mapped(dir / "real.txt", true);
+  CHECK(std::string(mapped.bytes().begin(), mapped.bytes().end()) == "twelve bytes");
+}
+
 TEST_CASE("TOML text is checked to be UTF-8 first, at the line and column of the first bad byte") {
   CHECK_NOTHROW(check_utf8("name = \"a\xc3\xa9\xe2\x82\xac\xf0\x9f\x98\x80\"\n", "ok.toml"));  // é € 😀
   const std::pair<const char*, const char*> bad[] = {

@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <sys/mman.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -22,6 +23,7 @@
 #include "solver/builtin_face.hpp"
 #include "solver/kernels/kernels.hpp"
 #include "tests/daemon_test_support.hpp"
+#include "tests/formats_test_support.hpp"
 #include "tests/process_test_support.hpp"
 
 using namespace facecap;
@@ -633,6 +635,119 @@ TEST_CASE("the capture quality sees marker noise from the data: 0.1 mm good, 1 m
     if (level.state != "good") {
       REQUIRE(std::regex_search(reasons, figure, std::regex(R"(marker noise ([0-9.]+) mm)")));
       CHECK(std::stod(figure[1]) == Approx(level.noise_mm).epsilon(0.15));
+    }
+  }
+}
+
+// ---------------------------------------------------------------- hostile files (issue 35)
+
+namespace {
+
+// A program of the build tree run to its end, measured: exit code, wall time and peak RSS
+// (wait4). Its address space is capped, so a reader that would allocate gigabytes fails
+// inside the cap instead of taking the shared machine down; killed after 10 s (a hang).
+struct Measured {
+  int exit_code = -1;  // 128 + signal when killed
+  double seconds = 0;
+  long max_rss_kb = 0;
+  std::string output;
+};
+Measured run_measured(const std::string& program, const std::vector<std::string>& args, const fs::path& log) {
+  const std::string path = std::string(FACECAP_BINARY_DIR) + "/" + program;
+  std::vector<std::string> argv_storage = {path};
+  argv_storage.insert(argv_storage.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : argv_storage) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  const int64_t start = monotonic_now_ns();
+  const pid_t pid = ::fork();
+  REQUIRE(pid >= 0);
+  if (pid == 0) {
+    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, 1);
+    ::dup2(fd, 2);
+    const rlimit address_space{4ul << 30, 4ul << 30};
+    ::setrlimit(RLIMIT_AS, &address_space);
+    ::execv(path.c_str(), argv.data());
+    ::_exit(127);
+  }
+  Measured m;
+  int status = 0;
+  rusage usage{};
+  for (;;) {
+    if (::wait4(pid, &status, WNOHANG, &usage) == pid) break;
+    if (monotonic_now_ns() - start > 10 * kNsPerSecond) ::kill(pid, SIGKILL);
+    usleep(1000);
+  }
+  m.seconds = double(monotonic_now_ns() - start) / 1e9;
+  m.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  m.max_rss_kb = usage.ru_maxrss;
+  m.output = slurp(log);
+  return m;
+}
+
+// A directory rig of one triangle whose shape `open` is `shape` (relative to dir).
+void write_triangle_rig(const fs::path& dir, const std::string& shape) {
+  write_text(dir / "neutral.obj", "v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 3\n");
+  write_text(dir / "rig.toml", fmt::format("neutral = \"neutral.obj\"\n[shapes]\nopen = \"{}\"\n", shape));
+}
+
+}  // namespace
+
+TEST_CASE("A FIFO named as a rig shape is refused within a second by inspect-rig and --check-config, naming it",
+          "[hostile]") {
+  const fs::path dir = scratch_dir("hostile-fifo-rig");
+  write_triangle_rig(dir / "rig", "open.obj");
+  REQUIRE(::mkfifo((dir / "rig" / "open.obj").c_str(), 0644) == 0);  // no writer ever opens it
+  write_text(dir / "facecapd.toml", fmt::format("version = 1\n[rig]\npath = \"{}\"\n", (dir / "rig").string()));
+  const Measured inspect = run_measured("tools/facecap", {"inspect-rig", "--no-cache", (dir / "rig").string()}, dir / "inspect.log");
+  const Measured check = run_measured("daemon/facecapd", {"--check-config", (dir / "facecapd.toml").string()}, dir / "check.log");
+  for (const Measured* m : {&inspect, &check}) {
+    INFO(m->output);
+    CHECK(m->exit_code == 1);
+    CHECK(m->seconds < 1.0);  // a hang check: waiting on the FIFO never ends
+    CHECK_THAT(m->output, Contains((dir / "rig" / "open.obj").string()) && Contains("is a FIFO (named pipe), not a regular file"));
+  }
+}
+
+TEST_CASE("A camera calibration that keeps OpenCV's reader busy forever is refused within a second by --check-config",
+          "[hostile][cameras]") {
+  const fs::path dir = scratch_dir("hostile-calibration");
+  // 48 bytes: OpenCV 4.6's cv::FileStorage spins on it forever (a base64 header of zeros);
+  // our own reader of the YAML subset refuses a flow mapping at once.
+  write_text(dir / "cameras.yaml", "{\"a\":\"$base64$AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA\"}");
+  REQUIRE(fs::file_size(dir / "cameras.yaml") == 48);
+  write_text(dir / "facecapd.toml", "version = 1\n");
+  const Measured check = run_measured("daemon/facecapd",
+                                      {"--check-config", (dir / "facecapd.toml").string(), "--set", "source.driver=v4l2",
+                                       "--set", "source.v4l2.calibration=" + (dir / "cameras.yaml").string()},
+                                      dir / "check.log");
+  INFO(check.output);
+  CHECK(check.exit_code == 1);
+  CHECK(check.seconds < 1.0);
+  CHECK_THAT(check.output, Contains((dir / "cameras.yaml").string() + ":1") && Contains("flow mappings"));
+}
+
+TEST_CASE("A sparse C3D claiming millions of empty frames is refused from its header within 50 MB", "[hostile][c3d]") {
+  const fs::path dir = scratch_dir("hostile-sparse-c3d");
+  // A valid header and parameter section of no points, POINT:LONG_FRAMES claiming 16.7
+  // million frames (4 KiB on disk, 16 MiB long), and a 300 MiB variant claiming 300 million.
+  const std::pair<float, uint64_t> variants[] = {{16.7e6f, 16ull << 20}, {3e8f, 300ull << 20}};
+  for (const auto& [frames, size] : variants) {
+    const fs::path file = dir / fmt::format("sparse-{}.c3d", size >> 20);
+    const std::vector<char> head = c3d_with_real_point_parameter("LONG_FRAMES", frames);
+    write_text(file, std::string(head.begin(), head.end()));
+    REQUIRE(::truncate(file.c_str(), off_t(size)) == 0);
+    for (const std::string command : {"inspect", "convert"}) {
+      std::vector<std::string> args = {command, file.string()};
+      if (command == "convert") args.push_back((dir / "out.trc").string());
+      const Measured m = run_measured("tools/facecap", args, dir / "run.log");
+      INFO(command << " " << file << ": " << m.output);
+      CHECK(m.exit_code == 1);
+      CHECK_THAT(m.output, Contains(file.string()) && Contains(fmt::format("declares {} frames of 0 points", int64_t(frames))));
+      CHECK(m.max_rss_kb < 50 * 1024);
+      WARN(fmt::format("facecap {} of {} ({} MiB sparse): peak RSS {:.1f} MB, {:.3f} s", command, file.filename().string(),
+                       size >> 20, m.max_rss_kb / 1024.0, m.seconds));
     }
   }
 }

@@ -296,3 +296,31 @@ TEST_CASE("facecap inspect and convert read a damaged recording's other frames a
   CHECK_THAT(csv.err, Catch::Contains("damaged: 2 damaged stretches skipped"));
   CHECK(read_livelinkface(dir / "out.csv").frames.size() == 119);
 }
+
+TEST_CASE("facecap inspect and convert --salvage read a recording whose HEAD is damaged and has no copy", "[tools][salvage]") {
+  const auto dir = facecap::test::scratch_dir("tool-salvage");
+  write_take(dir / "take.fcrec", facecap::test::synthetic_take(50, 5, 60.0));
+  std::vector<char> bytes = read_file_bytes(dir / "take.fcrec");
+  // As a writer killed before close() leaves it (no HEAD copy), less the last frame, and
+  // HEAD's first string made 4,096 bytes longer than the chunk.
+  bytes.resize(std::size_t(RecordingReader(bytes, "take").index().back().offset));
+  bytes[33] = char(bytes[33] ^ 0x10);
+  write_file_atomically(dir / "damaged.fcrec", bytes);
+
+  const Run refused = run_facecap(dir, {"inspect", (dir / "damaged.fcrec").string()});
+  CHECK(refused.exit_code == 1);
+  CHECK_THAT(refused.err, Catch::Contains("damaged.fcrec @ byte 16") && Catch::Contains("--salvage"));
+  const Run inspect = run_facecap(dir, {"inspect", "--salvage", "--json", (dir / "damaged.fcrec").string()});
+  INFO(inspect.err);
+  REQUIRE(inspect.exit_code == 0);
+  const auto j = nlohmann::json::parse(inspect.out);
+  CHECK(j["frames"] == 49);
+  CHECK(j["markers"] == 5);
+  CHECK_THAT(j["warnings"].dump(), Catch::Contains("HEAD damaged") && Catch::Contains("salvaged"));
+  const Run convert = run_facecap(dir, {"convert", "--salvage", (dir / "damaged.fcrec").string(), (dir / "repaired.fcrec").string()});
+  INFO(convert.err);
+  REQUIRE(convert.exit_code == 0);
+  const RecordingReader repaired(dir / "repaired.fcrec");
+  CHECK(repaired.header_damage().empty());
+  CHECK(repaired.marker_frame_count() == 49);
+}

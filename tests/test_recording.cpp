@@ -4,7 +4,10 @@
 #include <cerrno>
 #include <csignal>
 #include <cstring>
+#include <cmath>
 #include <functional>
+#include <limits>
+#include <random>
 
 #include <sched.h>
 #include <sys/mount.h>
@@ -197,11 +200,13 @@ TEST_CASE("Recording cut off at every byte reads back up to its last complete ch
   const RecordingReader full(bytes, "full");
   uint64_t index_offset = 0;
   std::memcpy(&index_offset, bytes.data() + bytes.size() - 16, 8);
+  const uint64_t header_end = full.index().front().offset;
+  // The last frame chunk ends where HCPY (HEAD's copy, as long as HEAD) begins.
+  const uint64_t head_copy_offset = index_offset - (header_end - 16);
   std::vector<uint64_t> chunk_end;
   for (std::size_t c = 0; c < full.index().size(); ++c) {
-    chunk_end.push_back(c + 1 < full.index().size() ? full.index()[c + 1].offset : index_offset);
+    chunk_end.push_back(c + 1 < full.index().size() ? full.index()[c + 1].offset : head_copy_offset);
   }
-  const uint64_t header_end = full.index().front().offset;
 
   MarkerFrame marker_frame;
   SolvedFrame solved_frame;
@@ -223,7 +228,8 @@ TEST_CASE("Recording cut off at every byte reads back up to its last complete ch
     REQUIRE(reader.header().rig_name == "ict-narrow");
     REQUIRE(reader.marker_frame_count() == want_markers);
     REQUIRE(reader.solved_frame_count() == want_solved);
-    const bool at_boundary = cut == header_end || cut == bytes.size() - 32 /* INDX end, TAIL start */ ||
+    const bool at_boundary = cut == header_end || cut == index_offset /* HCPY end */ ||
+                             cut == bytes.size() - 32 /* INDX end, TAIL start */ ||
                              std::find(chunk_end.begin(), chunk_end.end(), cut) != chunk_end.end();
     CHECK(reader.truncated() == !at_boundary);
     for (std::size_t i = 0; i < reader.marker_frame_count(); ++i) {
@@ -376,6 +382,92 @@ TEST_CASE("Recording: flipped bits anywhere in frame chunks lose those frames on
     const MarkerTake take = take_from_recording(reader);
     CHECK(take.frames.size() == want_markers);
   }
+}
+
+TEST_CASE("Recording: 20 random bit flips in HEAD lose no frame (its copy), and --salvage reads an unclosed one",
+          "[recording][salvage]") {
+  const auto path = facecap::test::scratch_dir("recording-head-bits") / "take.fcrec";
+  constexpr int64_t kFrames = 92;  // 184 frame chunks, as the take of issue 35
+  {
+    RecordingWriter writer(path, test_header());
+    for (int64_t i = 0; i < kFrames; ++i) {
+      writer.append_marker_frame(test_marker_frame(i));
+      writer.append_solved_frame(test_solved_frame(i));
+    }
+    writer.close();
+  }
+  const std::vector<char> clean = read_file_bytes(path);
+  const RecordingReader intact(clean, "intact");
+  const std::size_t head_end = std::size_t(intact.index().front().offset);  // preamble, HEAD's header and payload
+  CHECK(intact.header_damage().empty());
+  auto check_all_frames = [&](const RecordingReader& reader, int64_t frames) {
+    REQUIRE(reader.marker_frame_count() == std::size_t(frames));
+    REQUIRE(reader.solved_frame_count() == std::size_t(frames));
+    MarkerFrame marker;
+    SolvedFrame solved;
+    for (std::size_t i = 0; i < std::size_t(frames); ++i) {
+      reader.read_marker_frame(i, marker);
+      check_marker_frame(marker, test_marker_frame(int64_t(i)));
+      reader.read_solved_frame(i, solved);
+      check_solved_frame(solved, test_solved_frame(int64_t(i)));
+    }
+  };
+  std::mt19937 rng(35);
+  std::uniform_int_distribution<std::size_t> byte_in_head(16, head_end - 1);  // HEAD: its chunk header and payload
+  for (int flip = 0; flip < 20; ++flip) {
+    std::vector<char> bytes = clean;  // a fresh copy for every flip
+    const std::size_t at = byte_in_head(rng);
+    const int bit = int(rng() % 8);
+    bytes[at] = char(bytes[at] ^ (1 << bit));
+    INFO("bit " << bit << " of byte " << at);
+    const RecordingReader reader(bytes, "flipped.fcrec");
+    CHECK_THAT(reader.header_damage(), Catch::Contains("HEAD damaged") && Catch::Contains("from the copy at byte"));
+    CHECK_THAT(reader.damage_summary(), Catch::Contains("HEAD damaged"));
+    CHECK(reader.header().rig_name == "ict-narrow");
+    CHECK(reader.header().shape_names == test_header().shape_names);
+    CHECK_FALSE(reader.index_rebuilt());
+    check_all_frames(reader, kFrames);
+  }
+
+  // Killed before close: no copy. Refused, naming --salvage; salvaged, every frame is read.
+  std::vector<char> unclosed(clean.begin(), clean.begin() + std::ptrdiff_t(intact.index().back().offset));
+  unclosed[33] = char(unclosed[33] ^ 0x10);  // HEAD payload: the rig name is 4,106 bytes long
+  CHECK_THROWS_WITH(RecordingReader(unclosed, "unclosed.fcrec"),
+                    Catch::Contains("unclosed.fcrec @ byte 16") && Catch::Contains("no intact copy") &&
+                        Catch::Contains("--salvage"));
+  const RecordingReader salvaged(unclosed, "unclosed.fcrec", {.salvage = true});
+  CHECK_THAT(salvaged.header_damage(), Catch::Contains("salvaged") && Catch::Contains("frames looked for from byte 32 on"));
+  CHECK(salvaged.index_rebuilt());
+  CHECK(salvaged.header().rig_name.empty());  // HEAD no longer decodes: its fields are unknown
+  REQUIRE(salvaged.marker_frame_count() == std::size_t(kFrames));
+  REQUIRE(salvaged.solved_frame_count() == std::size_t(kFrames - 1));  // the cut took the last solved frame
+  check_all_frames(salvaged, kFrames - 1);
+  const MarkerTake take = take_from_recording(salvaged);
+  CHECK(take.frames.size() == std::size_t(kFrames));
+  CHECK(take.labels == test_header().marker_labels);  // from the frames' own labels
+}
+
+TEST_CASE("Recording: a take from frames timed at both ends of i64 gets a finite rate, no signed overflow",
+          "[recording]") {
+  // Found by the fcrec fuzz target under UBSan: last minus first source time overflowed.
+  const auto path = facecap::test::scratch_dir("recording-time-span") / "span.fcrec";
+  RecordingHeader header = test_header();
+  header.rate_hz = 0;  // unknown: the rate comes from the frames' times
+  {
+    RecordingWriter writer(path, header);
+    MarkerFrame frame = test_marker_frame(0);
+    frame.source_time_ns = std::numeric_limits<int64_t>::min() + 1;
+    writer.append_marker_frame(frame);
+    frame.source_time_ns = std::numeric_limits<int64_t>::max();
+    writer.append_marker_frame(frame);
+    writer.close();
+  }
+  const MarkerTake take = take_from_recording(RecordingReader(path));
+  // One interval of 1.8e19 ns: about 5.4e-11 Hz, which cannot time the take (a wrapped
+  // difference was negative: no rate, and no word of it).
+  CHECK(take.rate_hz == 0);
+  REQUIRE(take.warnings.size() == 1);
+  CHECK_THAT(take.warnings[0], Catch::Contains("frame rate 5.42") && Catch::Contains("e-11 Hz is not usable"));
 }
 
 TEST_CASE("Recording: a file for a newer reader is refused; a bad magic is named", "[recording]") {

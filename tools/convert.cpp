@@ -24,6 +24,7 @@ void add_convert_command(CLI::App& app, int& exit_code) {
     std::string output;
     bool progress = false;
     bool force = false;
+    bool salvage = false;
   };
   auto opts = std::make_shared<Options>();
   auto* cmd = app.add_subcommand("convert", "Convert marker takes between C3D, TRC and .fcrec recordings, or a "
@@ -33,6 +34,8 @@ void add_convert_command(CLI::App& app, int& exit_code) {
                                        "solved weights of a .fcrec as Live Link Face)")->required();
   cmd->add_flag("--progress", opts->progress, "Show progress on stderr (default: on a terminal, for long takes)");
   cmd->add_flag("--force", opts->force, "Replace the output file if it exists");
+  cmd->add_flag("--salvage", opts->salvage,
+                "Read a recording whose HEAD is damaged and has no intact copy (as facecap inspect --salvage)");
   cmd->callback([opts, &exit_code] {
     const std::filesystem::path input(opts->input), output(opts->output);
     std::error_code ec;
@@ -49,7 +52,7 @@ void add_convert_command(CLI::App& app, int& exit_code) {
       exit_code = 0;
       return;
     }
-    const formats::MarkerTake take = formats::read_take(input);
+    const formats::MarkerTake take = formats::read_take(input, {.salvage_recording = opts->salvage});
     for (const auto& warning : take.warnings) fmt::print(stderr, "facecap: warning: {}\n", warning);
     const bool show = opts->progress || (stderr_is_terminal() && take.frames.size() >= kLongTakeFrames);
     ProgressBar bar(fmt::format("writing {}", output.filename().string()), show);

@@ -55,8 +55,8 @@ struct LoadedFile {
 };
 
 // nullopt for a recording without solved frames. Throws Error on a damaged frame.
-std::optional<SolvedSummary> summarise_solved(const std::filesystem::path& path) {
-  const formats::RecordingReader reader(path);
+std::optional<SolvedSummary> summarise_solved(const std::filesystem::path& path, bool salvage) {
+  const formats::RecordingReader reader(path, {.salvage = salvage});
   const std::size_t count = reader.solved_frame_count();
   if (count == 0) return std::nullopt;
   const auto& names = reader.header().shape_names;
@@ -93,7 +93,8 @@ std::optional<SolvedSummary> summarise_solved(const std::filesystem::path& path)
   return summary;
 }
 
-LoadedFile load(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options) {
+LoadedFile load(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options,
+               bool salvage) {
   LoadedFile loaded;
   const TakeFormat format = formats::detect_file_format(path);
   if (format == TakeFormat::kNatNetCapture) {
@@ -101,8 +102,8 @@ LoadedFile load(const std::filesystem::path& path, const formats::natnet::Captur
   } else if (format == TakeFormat::kLiveLinkFace) {
     loaded.face = formats::read_livelinkface(path);
   } else {
-    loaded.markers = formats::read_take(path);
-    if (loaded.markers->format == TakeFormat::kRecording) loaded.solved = summarise_solved(path);
+    loaded.markers = formats::read_take(path, {.salvage_recording = salvage});
+    if (loaded.markers->format == TakeFormat::kRecording) loaded.solved = summarise_solved(path, salvage);
   }
   return loaded;
 }
@@ -115,11 +116,11 @@ struct ReadTimes {
 
 // Reads the file `reads` more times and reports min and median wall time of one read.
 ReadTimes time_reads(const std::filesystem::path& path, const formats::natnet::CaptureOptions& capture_options,
-                     int reads) {
+                     int reads, bool salvage) {
   std::vector<double> ms;
   for (int i = 0; i < reads; ++i) {
     const auto start = std::chrono::steady_clock::now();
-    const LoadedFile loaded = load(path, capture_options);
+    const LoadedFile loaded = load(path, capture_options, salvage);
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
   }
   std::sort(ms.begin(), ms.end());
@@ -272,6 +273,7 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
     bool time = false;
     int repeat = 10;
     bool frames = false;
+    bool salvage = false;
     std::string natnet_version;
   };
   auto opts = std::make_shared<Options>();
@@ -286,6 +288,9 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
   cmd->add_flag("--frames", opts->frames, "Captures: list every frame of data in the JSON (frame_list)");
+  cmd->add_flag("--salvage", opts->salvage,
+                "Recordings: read the frames of one whose HEAD is damaged and has no intact copy (its fields "
+                "taken from the damaged HEAD where it still decodes, else left empty; frames found by scanning)");
   cmd->add_option("--natnet-version", opts->natnet_version,
                   "Captures: the NatNet bitstream when the capture holds no session start [default: 3.0, Motive 2.x]")
       ->check([](const std::string& text) -> std::string {
@@ -299,12 +304,12 @@ void add_inspect_command(CLI::App& app, int& exit_code) {
     if (!opts->natnet_version.empty()) {
       capture_options.default_bitstream = *formats::natnet::parse_version(opts->natnet_version);
     }
-    const LoadedFile loaded = load(path, capture_options);
+    const LoadedFile loaded = load(path, capture_options, opts->salvage);
     if (!loaded.capture && (opts->frames || !opts->natnet_version.empty())) {
       throw file_error(path.string(), "--frames and --natnet-version apply to pcap/pcapng captures only");
     }
     std::optional<ReadTimes> times;
-    if (opts->time) times = time_reads(path, capture_options, opts->repeat);
+    if (opts->time) times = time_reads(path, capture_options, opts->repeat, opts->salvage);
     if (opts->json) {
       nlohmann::json j = loaded.capture   ? capture_json(*loaded.capture, opts->frames)
                          : loaded.markers ? markers_json(path, *loaded.markers)

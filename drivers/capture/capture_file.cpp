@@ -1,13 +1,14 @@
 #include "drivers/capture/capture_file.hpp"
 
 #include <cstdio>
-#include <fstream>
 #include <vector>
 
 #include <fmt/format.h>
 #include <pcap/pcap.h>
+#include <unistd.h>
 
 #include "core/error.hpp"
+#include "core/io.hpp"
 
 namespace facecap::capture {
 
@@ -36,10 +37,21 @@ struct UdpCapture::State {
 
 UdpCapture::UdpCapture(const std::filesystem::path& path) {
   char head[4] = {};
-  std::ifstream(path, std::ios::binary).read(head, sizeof head);
+  // A regular file only (a FIFO would keep libpcap waiting), read through the descriptor checked.
+  const int fd = open_regular_file(path);
+  FILE* file = ::fdopen(fd, "rb");
+  if (!file) {
+    ::close(fd);
+    throw file_error(path.string(), "cannot open as a stream");
+  }
+  if (std::fread(head, 1, sizeof head, file) < sizeof head) head[0] = head[1] = head[2] = head[3] = 0;
+  std::rewind(file);
   char error[PCAP_ERRBUF_SIZE] = {};
-  pcap_t* pcap = pcap_open_offline_with_tstamp_precision(path.c_str(), PCAP_TSTAMP_PRECISION_NANO, error);
-  if (!pcap) throw file_error(path.string(), fmt::format("not a readable pcap or pcapng capture: {}", error));
+  pcap_t* pcap = pcap_fopen_offline_with_tstamp_precision(file, PCAP_TSTAMP_PRECISION_NANO, error);  // owns file
+  if (!pcap) {
+    std::fclose(file);
+    throw file_error(path.string(), fmt::format("not a readable pcap or pcapng capture: {}", error));
+  }
   state_ = std::make_unique<State>(pcap, path.string(), formats::capture_file_format(head));
 }
 

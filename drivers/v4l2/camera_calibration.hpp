@@ -1,8 +1,9 @@
 #pragma once
 // The calibration of the cameras the v4l2 driver triangulates with: per camera the
 // intrinsics (camera matrix), OpenCV's distortion coefficients and the extrinsics (world
-// to camera), read from an OpenCV-style YAML file (or its XML/JSON forms) through OpenCV's
-// own reader, cv::FileStorage. Two layouts are accepted (docs/cameras.md):
+// to camera), read from an OpenCV-style YAML file by our own reader of the subset OpenCV
+// writes (calibration_yaml.hpp; cv::FileStorage's reader can spin forever on hostile
+// bytes). Two layouts are accepted (docs/cameras.md):
 //
 //   - `cameras:` a sequence of maps (name, image_width, image_height, camera_matrix,
 //     distortion_coefficients, rotation, translation), any number of cameras, each
