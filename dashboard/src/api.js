@@ -37,6 +37,9 @@ export function toLogin() {
   location.replace(`./login.html?next=${encodeURIComponent(here)}`);
 }
 
+// A viewer's page: its command controls stay disabled.
+export const readOnly = () => document.body.dataset.role === 'viewer';
+
 // Who this page is (GET /session; a 401 goes to the login page): shows the role and a
 // Log out button in the header, and marks the page read-only for a viewer.
 export async function startSession() {

@@ -1,6 +1,6 @@
 // The live page: the WebSocket stream of solved frames drawn by FaceView, the status
 // facecapd sends once a second in the counters and the graph, and the controls.
-import { act, call, fmt, formatSeconds, show, startSession, streamUrl } from './api.js';
+import { act, call, fmt, formatSeconds, readOnly, show, startSession, streamUrl } from './api.js';
 import { FaceView, yawPitchRoll } from './face_view.js';
 import { SolveGraph } from './graph.js';
 
@@ -101,8 +101,8 @@ function onStatus(s) {
 // ------------------------------------------------------------------ recording
 
 function showRecording(r) {
-  $('record-start').disabled = r.active;
-  $('record-stop').disabled = !r.active;
+  $('record-start').disabled = r.active || readOnly();
+  $('record-stop').disabled = !r.active || readOnly();
   $('record-length').textContent = r.active ? `REC ${formatSeconds(r.seconds)} · ${r.frames_written} frames · ${r.take}` : '';
 }
 
