@@ -333,6 +333,17 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   CHECK_THAT(raw_exchange(port, "GARBAGE\r\n\r\n"), Contains("HTTP/1.1 400 Bad Request") && Contains("malformed HTTP request"));
   CHECK_THAT(raw_exchange(port, fmt::format("POST /actor HTTP/1.1\r\nContent-Length: {}\r\n\r\n", 1 << 20)),
              Contains("HTTP/1.1 413"));
+  // Issue 35 through the server: a rebound name (421), a page's text/plain POST (415), another origin (403).
+  const std::string bearer = "Authorization: Bearer s3cret\r\nConnection: close\r\n";
+  CHECK_THAT(raw_exchange(port, fmt::format("GET /status HTTP/1.1\r\nHost: attacker.example:{}\r\n{}\r\n", port, bearer)),
+             Contains("HTTP/1.1 421") && !Contains("\"version\""));
+  CHECK_THAT(raw_exchange(port, "POST /record/start HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: text/plain\r\n"
+                                "Content-Length: 2\r\n" + bearer + "\r\n{}"),
+             Contains("HTTP/1.1 415"));
+  CHECK_THAT(raw_exchange(port, "POST /record/start HTTP/1.1\r\nHost: 127.0.0.1\r\nOrigin: http://127.0.0.1:1\r\n"
+                                "Content-Type: application/json\r\nContent-Length: 2\r\n" + bearer + "\r\n{}"),
+             Contains("HTTP/1.1 403"));
+  CHECK_FALSE(get_json(client, "/status")["recording"]["active"].get<bool>());
 
   json status = get_json(client, "/status");
   CHECK(status["version"] == "facecapd test");
