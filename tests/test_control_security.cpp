@@ -114,7 +114,7 @@ TEST_CASE("the Host must name this facecapd: DNS rebinding gets 421 on every rou
   CHECK(v6.status(request(http::verb::get, "/status", {.host = "[0:0:0:0:0:0:0:1]:8765"})) == 200);
 }
 
-TEST_CASE("pages of other origins cannot command nor open the stream; POST needs JSON") {
+TEST_CASE("pages of other origins cannot command nor open the stream, and POST needs JSON") {
   Api api;
   const std::string own = "http://127.0.0.1:8765";
   // The issue's attack: fetch(..., {mode: 'no-cors', headers: {'Content-Type': 'text/plain'}}) from another port.
@@ -149,7 +149,7 @@ TEST_CASE("pages of other origins cannot command nor open the stream; POST needs
   CHECK(api.queued() == 5);
 }
 
-TEST_CASE("login: the token for an HttpOnly SameSite=Strict session cookie; logout ends it; viewers only read") {
+TEST_CASE("login: the token for an HttpOnly SameSite=Strict session cookie, logout ends it, viewers only read") {
   Api api;
   api.context.access.operator_token = "op-s3cret";
   api.context.access.viewer_token = "view-s3cret";
@@ -207,7 +207,7 @@ TEST_CASE("login: the token for an HttpOnly SameSite=Strict session cookie; logo
   CHECK(api.context.sessions.size() == 1);
 }
 
-TEST_CASE("wrong tokens: 5 a minute per address, then 429 even for the right one; other addresses unaffected") {
+TEST_CASE("wrong tokens: 5 a minute per address, then 429 even for the right one, other addresses unaffected") {
   Api api;
   api.context.access.operator_token = "op-s3cret";
   const std::string own = "http://127.0.0.1:8765";
@@ -286,7 +286,7 @@ TEST_CASE("lower findings: stream rate bounds, profile names, no path for /actor
   CHECK(api.queued() == 2);
 }
 
-TEST_CASE("token files others may read are refused, like ssh keys; the lists are checked") {
+TEST_CASE("token files others may read are refused, like ssh keys, and the lists are checked") {
   const fs::path dir = test::scratch_dir("control-security-config");
   const fs::path token = dir / "token";
   test::write_text(token, "s3cret\n");
