@@ -7,6 +7,7 @@
 #include <tuple>
 
 #include <arpa/inet.h>
+#include <sys/stat.h>
 #include <fmt/format.h>
 #include <net/if.h>
 #include <netinet/in.h>
@@ -17,6 +18,21 @@
 
 namespace facecap::config {
 namespace fs = std::filesystem;
+
+std::vector<std::string> split_comma_list(std::string_view text) {
+  std::vector<std::string> items;
+  std::string item;
+  for (const char c : text) {
+    if (c == ',' || c == ' ' || c == '\t') {
+      if (!item.empty()) items.push_back(std::move(item));
+      item.clear();
+    } else {
+      item.push_back(c);
+    }
+  }
+  if (!item.empty()) items.push_back(std::move(item));
+  return items;
+}
 namespace {
 
 std::size_t key_index(const KeySpec& key) { return std::size_t(&key - config_schema().data()); }
@@ -122,6 +138,14 @@ class Loader {
       std::error_code ec;
       if (!fs::exists(value, ec)) problem(where(key), fmt::format("\"{}\" does not exist", value));
     }
+    // Secrets, like ssh's keys: refused when others may read them.
+    for (const std::string* secret : {&out_.values.control.http.token_file, &out_.values.control.http.viewer_token_file}) {
+      struct stat info {};
+      if (secret->empty() || ::stat(secret->c_str(), &info) != 0 || (info.st_mode & 077) == 0) continue;
+      problem(where(secret == &out_.values.control.http.token_file ? "control.http.token_file" : "control.http.viewer_token_file"),
+              fmt::format("\"{}\" holds a token but group or others may access it (mode {:04o}): chmod 600 it", *secret,
+                          info.st_mode & 07777));
+    }
   }
 
   // Rules that involve more than one key.
@@ -196,6 +220,18 @@ class Loader {
         problem(where("control.http.token_file"),
                 fmt::format("the control API listens on {}, which is not loopback: a bearer token is required "
                             "(set control.http.token_file)", c.control.http.address));
+      if (!c.control.http.viewer_token_file.empty() && c.control.http.token_file.empty())
+        problem(where("control.http.viewer_token_file"),
+                "a viewer's token needs the operator's (control.http.token_file): without it every client is the operator");
+      for (const std::string& origin : split_comma_list(c.control.http.allowed_origins))
+        if (!(origin.starts_with("http://") || origin.starts_with("https://")) ||
+            origin.find('/', origin.find("//") + 2) != std::string::npos)
+          problem(where("control.http.allowed_origins"),
+                  fmt::format("\"{}\" is not an origin (scheme://host[:port], no path, as in http://tablet.lan:8080)", origin));
+      for (const std::string& host : split_comma_list(c.control.http.allowed_hosts))
+        if (host.find_first_of(":/[]@") != std::string::npos)
+          problem(where("control.http.allowed_hosts"),
+                  fmt::format("\"{}\" is not a host name (no port, scheme or path: stage-box.local)", host));
     }
     const QualitySection& q = c.quality;
     if (q.markers_used_bad > q.markers_used_degraded)

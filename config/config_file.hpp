@@ -66,6 +66,9 @@ std::string render_markdown_reference();
 // The keys whose values differ.
 std::vector<const KeySpec*> changed_keys(const DaemonConfig& before, const DaemonConfig& after);
 
+// The entries of a comma-separated list setting ("a, b c" -> {"a", "b", "c"}).
+std::vector<std::string> split_comma_list(std::string_view text);
+
 // The closest of `candidates` to `word` when it is close enough to be a likely typo.
 std::string closest_match(std::string_view word, const std::vector<std::string>& candidates);
 

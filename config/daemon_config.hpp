@@ -143,6 +143,10 @@ struct HttpSection {
   std::string address;
   int64_t port = 0;
   std::string token_file;
+  std::string viewer_token_file;
+  std::string allowed_hosts;    // comma-separated
+  std::string allowed_origins;  // comma-separated
+  int64_t session_max_age_s = 0;
   std::string dashboard_dir;  // "": the built or installed dashboard (daemon/dashboard_location)
 };
 

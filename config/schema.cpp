@@ -423,8 +423,23 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(control.http.port), .default_value = int64_t{8765}, .min = 0, .max = 65535,
        .description = "TCP port of the control API; 0 picks a free one (logged)."},
       {FACECAP_KEY(control.http.token_file), .default_value = std::string(), .names_input_file = true,
-       .description = "File holding the bearer token every request must carry (`Authorization: Bearer <token>`); "
-                      "required when the address is not loopback. Empty: no token on loopback."},
+       .description = "File holding the operator's token: API clients send it as `Authorization: Bearer <token>`, the "
+                      "dashboard's login page exchanges it for a session cookie. Required when the address is not "
+                      "loopback; refused when group or others may read it (chmod 600). Empty: no token, every local "
+                      "client is the operator."},
+      {FACECAP_KEY(control.http.viewer_token_file), .default_value = std::string(), .names_input_file = true,
+       .description = "File holding a viewer's token (needs control.http.token_file): read-only access, status, "
+                      "metrics, recordings and the stream but no commands. Refused when group or others may read it."},
+      {FACECAP_KEY(control.http.allowed_hosts), .default_value = std::string(),
+       .description = "Further host names the box is reached by, comma-separated (`stage-box.local, facecap.lan`): a "
+                      "request's Host must be the address listened on, `localhost` on loopback, or one of these "
+                      "(keeps DNS rebinding out)."},
+      {FACECAP_KEY(control.http.allowed_origins), .default_value = std::string(),
+       .description = "Further web origins whose pages may send commands and open the stream, comma-separated "
+                      "(`http://tablet-ui.lan:8080`); the dashboard served by facecapd itself needs no entry."},
+      {FACECAP_KEY(control.http.session_max_age_s), .default_value = int64_t{43200}, .unit = "s", .min = 60,
+       .max = 30 * 86400,
+       .description = "How long a dashboard login lasts (the session cookie's Max-Age)."},
       {FACECAP_KEY(control.http.dashboard_dir), .default_value = std::string(),
        .description = "Directory of the operator dashboard's built files, served at / (docs/dashboard.md). Empty: "
                       "the dashboard built with this facecapd (in its build tree) or installed with it "

@@ -11,6 +11,7 @@
 
 #include "control/recordings.hpp"
 #include "control/static_files.hpp"
+#include "core/time.hpp"
 
 namespace facecap::control {
 namespace http = boost::beast::http;
@@ -23,29 +24,102 @@ constexpr std::size_t kMaxNotesBytes = 4000;
 constexpr double kMinCalibrationSeconds = 0.5;
 constexpr double kMaxCalibrationSeconds = 30.0;
 
-// Equal in time independent of where the first difference is.
-bool same_secret(std::string_view a, std::string_view b) noexcept {
-  unsigned char diff = a.size() == b.size() ? 0 : 1;
-  for (std::size_t i = 0; i < a.size(); ++i) diff |= (unsigned char)(a[i] ^ (i < b.size() ? b[i] : 0));
-  return diff == 0;
+// Refused for a while after too many wrong tokens from one address.
+HttpResponse too_many_failures(const HttpRequest& request, const ApiContext& context, int64_t wait_s) {
+  HttpResponse response = make_response(
+      request, error_reply(429, fmt::format("too many wrong tokens from this address: try again in {} s", wait_s)),
+      context.version);
+  response.set(http::field::retry_after, std::to_string(wait_s));
+  return response;
 }
 
-// nullopt when the request may proceed, else the 401 (RFC 6750: missing or invalid token).
-std::optional<HttpResponse> check_token(const HttpRequest& request, const ApiContext& context) {
-  if (context.token.empty()) return std::nullopt;
-  const auto header = request.find(http::field::authorization);
-  std::string_view given;
-  if (header != request.end()) given = std::string_view(header->value().data(), header->value().size());
+std::string_view header_value(const HttpRequest& request, http::field field) {
+  const auto it = request.find(field);
+  return it == request.end() ? std::string_view() : std::string_view(it->value().data(), it->value().size());
+}
+
+// Who is asking, from a bearer token or a session cookie.
+struct Caller {
+  Role role = Role::kNone;
+  bool presented_bearer = false;
+};
+
+// The session id in the request's cookie, "" when none.
+std::string_view session_cookie(const HttpRequest& request, const std::string& name) {
+  for (auto it = request.find(http::field::cookie); it != request.end() && it->name() == http::field::cookie; ++it) {
+    std::string_view cookies(it->value().data(), it->value().size());
+    while (!cookies.empty()) {
+      std::string_view pair = cookies.substr(0, cookies.find(';'));
+      cookies.remove_prefix(std::min(cookies.size(), pair.size() + 1));
+      while (!pair.empty() && pair.front() == ' ') pair.remove_prefix(1);
+      if (pair.size() > name.size() && pair.starts_with(name) && pair[name.size()] == '=') return pair.substr(name.size() + 1);
+    }
+  }
+  return {};
+}
+
+// The caller's role, or the 401 (wrong bearer token, RFC 6750) or 429 (too many wrong
+// ones from this address) refusing it. No token configured: everyone is the operator.
+std::variant<Caller, HttpResponse> identify(const HttpRequest& request, ApiContext& context, const std::string& peer) {
+  const AccessOptions& access = context.access;
+  if (access.operator_token.empty()) return Caller{Role::kOperator, false};
+  const std::string_view given = header_value(request, http::field::authorization);
   constexpr std::string_view kScheme = "Bearer ";
   const bool has_bearer = given.size() > kScheme.size() && std::equal(kScheme.begin(), kScheme.end(), given.begin(),
       [](char a, char b) { return std::tolower((unsigned char)a) == std::tolower((unsigned char)b); });
-  if (has_bearer && same_secret(given.substr(kScheme.size()), context.token)) return std::nullopt;
+  if (!given.empty()) {
+    const int64_t now = monotonic_now_ns();
+    if (const int64_t wait = context.throttle.wait_seconds(peer, now)) return too_many_failures(request, context, wait);
+    const std::string_view token = has_bearer ? given.substr(kScheme.size()) : std::string_view();
+    const bool is_operator = same_secret(token, access.operator_token);
+    const bool is_viewer = !access.viewer_token.empty() && same_secret(token, access.viewer_token);
+    if (has_bearer && (is_operator || is_viewer)) return Caller{is_operator ? Role::kOperator : Role::kViewer, true};
+    context.throttle.failed(peer, now);
+    HttpResponse response = make_response(
+        request, error_reply(401, has_bearer ? "the bearer token is wrong" : "the Authorization header must be \"Bearer <token>\""),
+        context.version);
+    response.set(http::field::www_authenticate, "Bearer realm=\"facecap\", error=\"invalid_token\"");
+    return response;
+  }
+  const std::string_view session = session_cookie(request, session_cookie_name(access));
+  return Caller{session.empty() ? Role::kNone : context.sessions.find(session, monotonic_now_ns()), false};
+}
+
+// The 401 of a request with no (or an expired) credential.
+HttpResponse unauthenticated(const HttpRequest& request, const ApiContext& context) {
   HttpResponse response = make_response(
-      request, error_reply(401, has_bearer ? "the bearer token is wrong" : "a bearer token is required (Authorization: Bearer <token>)"),
+      request, error_reply(401, "log in first (POST /login, or the dashboard's login page) or send Authorization: Bearer <token>"),
       context.version);
-  response.set(http::field::www_authenticate,
-               has_bearer ? "Bearer realm=\"facecap\", error=\"invalid_token\"" : "Bearer realm=\"facecap\"");
+  response.set(http::field::www_authenticate, "Bearer realm=\"facecap\"");
   return response;
+}
+
+// The Host and Origin rules (docs/control-api.md#access): nullopt when the request may
+// proceed. `from_page_matters`: a command or the WebSocket upgrade, where a page's Referer
+// stands in for a missing Origin. A request with neither is not from a web page (browsers
+// send Origin with every POST and WebSocket handshake), so tokens alone decide it.
+std::optional<HttpResponse> check_source(const HttpRequest& request, const ApiContext& context, bool from_page_matters) {
+  const std::string_view host = header_value(request, http::field::host);
+  if (host.empty()) return make_response(request, error_reply(400, "a Host header is required"), context.version);
+  if (!host_allowed(host, context.access))
+    return make_response(request,
+                         error_reply(421, fmt::format("Host \"{}\" is not this facecapd: use its address, or add the name to "
+                                                      "control.http.allowed_hosts", host)),
+                         context.version);
+  std::string_view origin = header_value(request, http::field::origin);
+  std::string_view header_name = "Origin";
+  if (origin.empty() && from_page_matters) {
+    const std::string_view referer = header_value(request, http::field::referer);
+    if (referer.empty()) return std::nullopt;
+    origin = url_origin(referer);
+    if (origin.empty()) origin = referer;  // no URL: matches nothing
+    header_name = "Referer";
+  }
+  if (origin.empty() || origin_allowed(origin, host, context.access)) return std::nullopt;
+  return make_response(request,
+                       error_reply(403, fmt::format("a page of {} ({}) may not use this facecapd: open the dashboard from it, "
+                                                    "or add the origin to control.http.allowed_origins", origin, header_name)),
+                       context.version);
 }
 
 // A request body's JSON object, its fields read by name; unknown fields are errors.
@@ -99,6 +173,17 @@ class Body {
   json object_;
 };
 
+// Why the field `key` cannot name a file in the profiles directory, or nullopt ("" is
+// checked elsewhere). Decided on the text alone: no answer tells what exists elsewhere.
+std::optional<std::string> file_name_problem(std::string_view key, std::string_view name) {
+  const bool bad = !name.empty() && (name.front() == '.' || std::any_of(name.begin(), name.end(), [](char c) {
+                     return c == '/' || c == '\\' || (unsigned char)c < 0x20 || c == 0x7f;
+                   }));
+  if (!bad) return std::nullopt;
+  return fmt::format("\"{}\" must be a file name in the profiles directory: no '/' or '\\', no control characters, "
+                     "not starting with '.'", key);
+}
+
 // The command a POST body describes, or the 400 refusing it.
 std::variant<Request, Reply> parse_command(std::string_view path, const std::string& body_text) {
   auto first_error = [](std::initializer_list<std::optional<std::string>> errors) -> std::optional<Reply> {
@@ -113,8 +198,7 @@ std::variant<Request, Reply> parse_command(std::string_view path, const std::str
     SelectActor actor;
     if (auto e = first_error({body.text("name", actor.name), body.text("file", actor.file, 4096)})) return *e;
     if (actor.name.empty() == actor.file.empty()) return error_reply(400, "give one of \"name\" (a profile) and \"file\"");
-    if (!actor.name.empty() && (actor.name.find('/') != std::string::npos || actor.name.front() == '.'))
-      return error_reply(400, fmt::format("\"{}\" is not a profile name (no '/', not starting with '.')", actor.name));
+    if (auto e = first_error({file_name_problem("name", actor.name), file_name_problem("file", actor.file)})) return *e;
     return Request{actor};
   }
   if (path == "/calibrate") {
@@ -126,8 +210,7 @@ std::variant<Request, Reply> parse_command(std::string_view path, const std::str
                               body.text("save", calibrate.save), body.flag("replace", calibrate.replace)}))
       return *e;
     if (calibrate.replace && calibrate.save.empty()) return error_reply(400, "\"replace\" needs \"save\": the profile to replace");
-    if (!calibrate.save.empty() && (calibrate.save.find('/') != std::string::npos || calibrate.save.front() == '.'))
-      return error_reply(400, fmt::format("\"{}\" is not a profile name (no '/', not starting with '.')", calibrate.save));
+    if (auto e = first_error({file_name_problem("save", calibrate.save)})) return *e;
     return Request{calibrate};
   }
   if (path == "/record/start") {
@@ -222,26 +305,90 @@ HttpResponse make_response(const HttpRequest& request, const Reply& reply, std::
   return response;
 }
 
+std::string session_cookie_name(const AccessOptions& access) {
+  return access.port == 0 ? std::string("facecap_session") : fmt::format("facecap_session_{}", access.port);
+}
+
+namespace {
+
+// POST /login {"token": "..."}: a session cookie for the token's role.
+HttpResponse login(const HttpRequest& request, ApiContext& context, const std::string& peer) {
+  auto answer = [&](const Reply& reply) { return make_response(request, reply, context.version); };
+  const AccessOptions& access = context.access;
+  if (access.operator_token.empty())
+    return answer(error_reply(400, "this facecapd needs no login: control.http.token_file is not set"));
+  auto parsed = Body::parse(request.body(), {"token"});
+  if (auto* refused = std::get_if<Reply>(&parsed)) return answer(*refused);
+  std::string token;
+  if (auto e = std::get<Body>(parsed).text("token", token, 4096)) return answer(error_reply(400, *e));
+  const int64_t now = monotonic_now_ns();
+  if (const int64_t wait = context.throttle.wait_seconds(peer, now)) return too_many_failures(request, context, wait);
+  const bool is_operator = same_secret(token, access.operator_token);
+  const bool is_viewer = !access.viewer_token.empty() && same_secret(token, access.viewer_token);
+  if (token.empty() || !(is_operator || is_viewer)) {
+    context.throttle.failed(peer, now);
+    return answer(error_reply(401, "the token is wrong"));
+  }
+  context.throttle.succeeded(peer);
+  const Role role = is_operator ? Role::kOperator : Role::kViewer;
+  const std::string id = context.sessions.open(role, now, access.session_max_age_s * kNsPerSecond);
+  HttpResponse response = answer({200, {{"role", role_name(role)}, {"max_age_s", access.session_max_age_s}}});
+  response.set(http::field::set_cookie, fmt::format("{}={}; Path=/; Max-Age={}; HttpOnly; SameSite=Strict",
+                                                    session_cookie_name(access), id, access.session_max_age_s));
+  return response;
+}
+
+// POST /logout: the request's session ends and its cookie is cleared.
+HttpResponse logout(const HttpRequest& request, ApiContext& context) {
+  const std::string name = session_cookie_name(context.access);
+  const bool ended = context.sessions.close(session_cookie(request, name));
+  HttpResponse response = make_response(request, {200, {{"logged_out", ended}}}, context.version);
+  response.set(http::field::set_cookie, fmt::format("{}=; Path=/; Max-Age=0; HttpOnly; SameSite=Strict", name));
+  return response;
+}
+
+bool is_json_media_type(std::string_view content_type) {
+  std::string_view type = content_type.substr(0, content_type.find(';'));
+  while (!type.empty() && type.back() == ' ') type.remove_suffix(1);
+  constexpr std::string_view kJson = "application/json";
+  return type.size() == kJson.size() && std::equal(type.begin(), type.end(), kJson.begin(), [](char a, char b) {
+           return std::tolower((unsigned char)a) == b;
+         });
+}
+
+}  // namespace
+
 std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContext& context,
-                                           std::function<void(HttpResponse)> respond) {
-  if (auto refused = check_token(request, context)) return refused;
+                                           std::function<void(HttpResponse)> respond, const std::string& peer) {
+  auto answer = [&](const Reply& reply) { return make_response(request, reply, context.version); };
+  const bool command = request.method() != http::verb::get && request.method() != http::verb::head;
+  if (auto refused = check_source(request, context, command)) return refused;
+  if (request.method() == http::verb::post && !is_json_media_type(header_value(request, http::field::content_type)))
+    return answer(error_reply(415, "a POST's body must be JSON, sent with Content-Type: application/json"));
   const std::string_view target(request.target().data(), request.target().size());
   const std::string_view path = target_path(target);
+  if (request.method() == http::verb::post && path == "/login") return login(request, context, peer);
+  if (request.method() == http::verb::post && path == "/logout") return logout(request, context);
   const Route* route = std::find_if(std::begin(kRoutes), std::end(kRoutes), [&](const Route& r) { return r.path == path; });
-  if (route == std::end(kRoutes)) {
-    if (request.method() == http::verb::get) return serve_static_file(request, path, context.dashboard_dir, context.version);
-    return make_response(request, error_reply(404, fmt::format("no route {}", path)), context.version);
-  }
+  // The dashboard's files hold no secrets: its login page must load before a login.
+  if (route == std::end(kRoutes) && request.method() == http::verb::get && path != "/session")
+    return serve_static_file(request, path, context.dashboard_dir, context.version);
+  auto identified = identify(request, context, peer);
+  if (auto* refused = std::get_if<HttpResponse>(&identified)) return std::move(*refused);
+  const Caller caller = std::get<Caller>(identified);
+  if (caller.role == Role::kNone) return unauthenticated(request, context);
+  if (path == "/session" && request.method() == http::verb::get)
+    return answer({200, {{"role", role_name(caller.role)}, {"login", !context.access.operator_token.empty()}}});
+  if (route == std::end(kRoutes)) return answer(error_reply(404, fmt::format("no route {}", path)));
   if (request.method() != route->method) {
-    HttpResponse response = make_response(
-        request,
-        error_reply(405, fmt::format("{} takes {}, not {}", path, std::string(http::to_string(route->method)),
-                                     std::string(request.method_string()))),
-        context.version);
+    HttpResponse response = answer(error_reply(405, fmt::format("{} takes {}, not {}", path, std::string(http::to_string(route->method)),
+                                                                std::string(request.method_string()))));
     response.set(http::field::allow, std::string(http::to_string(route->method)));
     return response;
   }
-  auto answer = [&](const Reply& reply) { return make_response(request, reply, context.version); };
+  if (route->method != http::verb::get && caller.role != Role::kOperator)
+    return answer(error_reply(403, fmt::format("{} is a command, and this {} is a viewer's: log in with the operator's token",
+                                               path, caller.presented_bearer ? "token" : "session")));
   if (path == "/stream") return answer(error_reply(400, "/stream is a WebSocket: send an Upgrade request"));
   const bool queued_read = path == "/actors" || path == "/recordings" || path == "/recordings/frames";
   if (route->method == http::verb::get && !queued_read) {
@@ -253,17 +400,17 @@ std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContex
     response.prepare_payload();
     return response;
   }
-  Request command = ListActors{};
+  Request queued = ListActors{};
   if (path == "/recordings") {
-    command = ListRecordings{};
+    queued = ListRecordings{};
   } else if (path == "/recordings/frames") {
     auto parsed = parse_recording_query(target);
     if (auto* refused = std::get_if<Reply>(&parsed)) return answer(*refused);
-    command = std::get<Request>(std::move(parsed));
+    queued = std::get<Request>(std::move(parsed));
   } else if (path != "/actors") {
     auto parsed = parse_command(path, request.body());
     if (auto* refused = std::get_if<Reply>(&parsed)) return answer(*refused);
-    command = std::get<Request>(std::move(parsed));
+    queued = std::get<Request>(std::move(parsed));
   }
   // The reply copies what it needs of the request: the request itself is gone by then.
   ReplyFn reply = [respond = std::move(respond), version = request.version(), keep_alive = request.keep_alive(),
@@ -273,13 +420,18 @@ std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContex
     shape.keep_alive(keep_alive);
     respond(make_response(shape, reply, server));
   };
-  if (!context.commands.push({std::move(command), reply}))
+  if (!context.commands.push({std::move(queued), reply}))
     return answer(error_reply(503, "facecapd is busy with other commands; try again"));
   return std::nullopt;
 }
 
-std::variant<StreamRequest, HttpResponse> accept_stream(const HttpRequest& request, const ApiContext& context) {
-  if (auto refused = check_token(request, context)) return *refused;
+std::variant<StreamRequest, HttpResponse> accept_stream(const HttpRequest& request, ApiContext& context,
+                                                        const std::string& peer) {
+  // WebSockets have no same-origin policy: the Origin check is all that keeps pages out.
+  if (auto refused = check_source(request, context, true)) return *refused;
+  auto identified = identify(request, context, peer);
+  if (auto* refused = std::get_if<HttpResponse>(&identified)) return std::move(*refused);
+  if (std::get<Caller>(identified).role == Role::kNone) return unauthenticated(request, context);
   StreamRequest stream;
   const std::string_view target(request.target().data(), request.target().size());
   for (const auto& [key, value] : query_items(target)) {
@@ -287,8 +439,9 @@ std::variant<StreamRequest, HttpResponse> accept_stream(const HttpRequest& reque
     if (key == "rate") {
       double hz = 0;
       const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), hz);
-      if (ec != std::errc() || end != value.data() + value.size() || !(hz > 0) || hz > kMaxStreamRateHz)
-        return bad(fmt::format("rate must be a number above 0 and at most {:g} (frames per second)", kMaxStreamRateHz));
+      // Also what keeps 1e9 / rate an int64_t (1e-300 would overflow it).
+      if (ec != std::errc() || end != value.data() + value.size() || !(hz >= kMinStreamRateHz) || !(hz <= kMaxStreamRateHz))
+        return bad(fmt::format("rate must be a number from {:g} to {:g} (frames per second)", kMinStreamRateHz, kMaxStreamRateHz));
       stream.rate_hz = hz;
     } else if (key == "vertices") {
       if (value != "0" && value != "1") return bad("vertices must be 0 or 1");

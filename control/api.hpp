@@ -15,6 +15,7 @@
 #include <boost/beast/http/message.hpp>
 #include <boost/beast/http/string_body.hpp>
 
+#include "control/access.hpp"
 #include "control/commands.hpp"
 #include "control/status.hpp"
 
@@ -28,32 +29,40 @@ inline constexpr std::size_t kMaxHeaderBytes = 8 * 1024;
 inline constexpr std::size_t kMaxBodyBytes = 64 * 1024;
 // The WebSocket stream's rates, frames per second.
 inline constexpr double kDefaultStreamRateHz = 30.0;
+inline constexpr double kMinStreamRateHz = 0.1;
 inline constexpr double kMaxStreamRateHz = 120.0;
 
 struct ApiContext {
   const StatusBoard& board;
   CommandQueue& commands;
-  std::string token;    // required as "Authorization: Bearer <token>"; empty: none required
   std::string version;  // for the Server header
   std::string dashboard_dir;  // the dashboard's files, served at "/" (docs/dashboard.md); "": none
+  AccessOptions access;       // tokens, Host and Origin allow-lists, session lifetime
+  SessionTable sessions;
+  LoginThrottle throttle;
 };
+
+// The name of the session cookie: one per port, since browsers share cookies across ports.
+std::string session_cookie_name(const AccessOptions& access);
 
 // A JSON (or, for /metrics, text) response to `request` with its keep-alive.
 HttpResponse make_response(const HttpRequest& request, const Reply& reply, std::string_view server);
 
-// Handles one request: returns the response when it is known at once, else nullopt after
-// handing a command to the supervisor, whose answer comes through `respond` (from any
-// thread, once). /stream is answered here only when it is refused.
+// Handles one request from `peer` (the client's address, for the throttle on wrong
+// tokens): returns the response when it is known at once, else nullopt after handing a
+// command to the supervisor, whose answer comes through `respond` (from any thread,
+// once). /stream is answered here only when it is refused.
 std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContext& context,
-                                           std::function<void(HttpResponse)> respond);
+                                           std::function<void(HttpResponse)> respond, const std::string& peer = {});
 
 // What GET /stream asks for (query: rate=<Hz>, vertices=0|1).
 struct StreamRequest {
   double rate_hz = kDefaultStreamRateHz;
   bool vertices = false;
 };
-// The stream's parameters, or the 4xx response refusing it (bad token, bad query).
-std::variant<StreamRequest, HttpResponse> accept_stream(const HttpRequest& request, const ApiContext& context);
+// The stream's parameters, or the 4xx response refusing it (Host, Origin, token, query).
+std::variant<StreamRequest, HttpResponse> accept_stream(const HttpRequest& request, ApiContext& context,
+                                                        const std::string& peer = {});
 
 // The path of a request target without its query ("/stream?rate=30" -> "/stream").
 std::string_view target_path(std::string_view target) noexcept;

@@ -27,7 +27,8 @@ Reply error_reply(int status, std::string what);
 using ReplyFn = std::function<void(Reply)>;
 
 struct ListActors {};
-// An actor's profile by name (in calibration.profiles_directory) or by path.
+// An actor's profile by name ("alice": alice.toml) or file name ("alice-cal.toml"), both
+// in calibration.profiles_directory.
 struct SelectActor {
   std::string name;
   std::string file;

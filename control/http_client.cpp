@@ -33,13 +33,12 @@ HttpResult HttpClient::request(std::string_view method, std::string_view target,
   const std::string where = fmt::format("http://{}:{}{}", address_, port_, target);
   http::request<http::string_body> request{http::string_to_verb(beast::string_view(method.data(), method.size())),
                                            beast::string_view(target.data(), target.size()), 11};
-  request.set(http::field::host, address_);
+  request.set(http::field::host, fmt::format("{}:{}", address_.find(':') == std::string::npos ? address_ : "[" + address_ + "]", port_));
   request.set(http::field::user_agent, "facecap-ctl");
   if (!token_.empty()) request.set(http::field::authorization, "Bearer " + token_);
-  if (!json_body.empty()) {
-    request.set(http::field::content_type, "application/json");
-    request.body() = std::string(json_body);
-  }
+  // facecapd refuses a POST of any other type (docs/control-api.md#access).
+  if (request.method() == http::verb::post) request.set(http::field::content_type, "application/json");
+  request.body() = std::string(json_body);
   request.keep_alive(true);
   request.prepare_payload();
   // A kept-alive connection the server has since closed fails on first use: try once more

@@ -41,7 +41,7 @@ class StreamSession;
 
 struct ControlServer::Impl : std::enable_shared_from_this<ControlServer::Impl> {
   Impl(net::io_context& io, ServerOptions o, const StatusBoard& board, CommandQueue& commands, StreamSink* sink)
-      : acceptor(io), pump_timer(io), options(std::move(o)), context{board, commands, options.token, options.version, options.dashboard_dir},
+      : acceptor(io), pump_timer(io), options(std::move(o)), context{board, commands, options.version, options.dashboard_dir, options.access},
         stream(sink) {}
 
   void accept();
@@ -173,7 +173,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     HttpRequest request = parser_->release();
     if (websocket::is_upgrade(request) && target_path(std::string_view(request.target().data(), request.target().size())) == "/stream") {
       if (!server_->stream) return write(make_response(request, error_reply(404, "no stream in this facecapd"), server_->options.version));
-      auto accepted = accept_stream(request, server_->context);
+      auto accepted = accept_stream(request, server_->context, peer_address());
       if (auto* refused = std::get_if<HttpResponse>(&accepted)) return write(std::move(*refused));
       std::make_shared<StreamSession>(std::move(stream_), std::get<StreamRequest>(accepted), server_)->start(std::move(request));
       return;
@@ -181,7 +181,13 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     auto respond = [self = shared_from_this(), executor = stream_.get_executor()](HttpResponse response) {
       net::post(executor, [self, response = std::move(response)]() mutable { self->write(std::move(response)); });
     };
-    if (auto immediate = handle_request(request, server_->context, std::move(respond))) write(std::move(*immediate));
+    if (auto immediate = handle_request(request, server_->context, std::move(respond), peer_address())) write(std::move(*immediate));
+  }
+
+  std::string peer_address() const {
+    beast::error_code ec;
+    const tcp::endpoint peer = stream_.socket().remote_endpoint(ec);
+    return ec ? std::string() : peer.address().to_string();
   }
 
   void write(HttpResponse response) {
@@ -311,6 +317,8 @@ ControlServer::ControlServer(net::io_context& io, ServerOptions options, const S
   if (!ec) acceptor.listen(net::socket_base::max_listen_connections, ec);
   if (ec) throw Error(fmt::format("control API cannot listen on {}: {}", where, ec.message()));
   port_ = acceptor.local_endpoint().port();
+  impl_->context.access.address = impl_->options.address;
+  impl_->context.access.port = port_;
   impl_->accept();
 }
 

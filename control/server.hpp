@@ -19,7 +19,7 @@ namespace facecap::control {
 struct ServerOptions {
   std::string address = "127.0.0.1";
   uint16_t port = 0;    // 0: any free port
-  std::string token;    // empty: none required
+  AccessOptions access;  // tokens, allow-lists (its address and port are set from the above)
   std::string version;  // "facecapd 0.1.0 (git ...)", for the Server header
   std::string dashboard_dir;  // the dashboard's files, served at "/"; "": none (a 404 page says so)
 };

@@ -192,8 +192,9 @@ std::string Controller::conflict_for_calibration() const {
 
 void Controller::select_actor(const control::SelectActor& request, ReplyFn reply) {
   if (const std::string conflict = conflict_for_calibration(); !conflict.empty()) return reply(error_reply(409, conflict));
-  const fs::path file = request.name.empty() ? fs::path(request.file)
-                                             : fs::path(parts_.config->calibration.profiles_directory) / (request.name + ".toml");
+  // Both only name a file in the profiles directory (the API refuses paths).
+  const fs::path file = fs::path(parts_.config->calibration.profiles_directory) /
+                        (request.name.empty() ? request.file : request.name + ".toml");
   std::error_code ec;
   if (!fs::is_regular_file(file, ec))
     return reply(error_reply(404, request.name.empty() ? fmt::format("no file {}", file.string())

@@ -23,6 +23,7 @@
 #include "outputs/recording/recorder.hpp"
 #include "outputs/table.hpp"
 #include "pipeline/recording_header.hpp"
+#include "config/config_file.hpp"
 #include "control/status.hpp"
 #include "pipeline/settings.hpp"
 #include "solver/builtin_face.hpp"
@@ -211,24 +212,33 @@ void Daemon::start_io_thread(const config::DaemonConfig& c) {
 
 void Daemon::start_control() {
   const config::HttpSection& http = config_.values.control.http;
-  std::string token;
-  if (!http.token_file.empty()) {
-    const std::vector<char> bytes = read_file_bytes(http.token_file);
-    token.assign(bytes.begin(), bytes.end());
+  // The config's checks refused token files others may read.
+  auto read_token = [](const std::string& file) {
+    if (file.empty()) return std::string();
+    const std::vector<char> bytes = read_file_bytes(file);
+    std::string token(bytes.begin(), bytes.end());
     token.erase(token.find_last_not_of(" \t\r\n") + 1);
     token.erase(0, token.find_first_not_of(" \t\r\n"));
-    if (token.empty()) throw file_error(http.token_file, "the control API's token file is empty");
-  }
+    if (token.empty()) throw file_error(file, "the control API's token file is empty");
+    return token;
+  };
+  control::AccessOptions access{.operator_token = read_token(http.token_file),
+                                .viewer_token = read_token(http.viewer_token_file),
+                                .allowed_hosts = config::split_comma_list(http.allowed_hosts),
+                                .allowed_origins = config::split_comma_list(http.allowed_origins),
+                                .session_max_age_s = http.session_max_age_s};
+  if (!access.viewer_token.empty() && access.viewer_token == access.operator_token)
+    throw file_error(http.viewer_token_file, "the viewer's token is the operator's: give the viewer a token of its own");
   publish_status(monotonic_now_ns());
   const std::string dashboard = http.dashboard_dir.empty() ? default_dashboard_dir() : http.dashboard_dir;
   server_ = std::make_unique<control::ControlServer>(
       io_->context(),
-      control::ServerOptions{.address = http.address, .port = uint16_t(http.port), .token = std::move(token),
+      control::ServerOptions{.address = http.address, .port = uint16_t(http.port), .access = std::move(access),
                              .version = options_.version.empty() ? std::string("facecapd") : options_.version,
                              .dashboard_dir = dashboard},
       board_, commands_, stream_);
   spdlog::info("control API on http://{}:{}{}", http.address.find(':') == std::string::npos ? http.address : "[" + http.address + "]",
-               server_->port(), http.token_file.empty() ? "" : " (bearer token required)");
+               server_->port(), http.token_file.empty() ? "" : " (token or login required)");
 }
 
 uint16_t Daemon::control_port() const noexcept { return server_ ? server_->port() : 0; }

@@ -1,4 +1,4 @@
-// The dashboard's build: two pages (the live view and the replay page) with relative asset
+// The dashboard's build: three pages (the live view, the replay page and the login page) with relative asset
 // paths, so facecapd can serve the output directory at "/" (docs/dashboard.md).
 // `npm run build -- --outDir DIR` builds elsewhere (CMake builds into the build tree).
 import { resolve } from 'node:path';
@@ -14,6 +14,7 @@ export default defineConfig({
       input: {
         live: resolve(import.meta.dirname, 'index.html'),
         replay: resolve(import.meta.dirname, 'replay.html'),
+        login: resolve(import.meta.dirname, 'login.html'),
       },
     },
   },

@@ -1,6 +1,7 @@
 // The control API's request handling on bytes: Beast's HTTP parser with the server's
-// limits, then authorisation, routing, JSON bodies and the stream's query, as the I/O
-// thread runs them (control/api.hpp). A queued command is answered at once, as the
+// limits, then the Host, Origin and Content-Type checks, tokens, login, session cookies
+// and logout, routing, JSON bodies and the stream's query, as the I/O thread runs them
+// (control/api.hpp, control/access.hpp). A queued command is answered at once, as the
 // supervisor would, so that the reply path runs too. Nothing here may throw: the API
 // answers every malformed request with a 4xx.
 #include <boost/beast/core/flat_buffer.hpp>
@@ -24,14 +25,37 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
 
   static control::StatusBoard board;
   static control::CommandQueue queue(1);
-  control::ApiContext context{board, queue, (size % 2) ? "s3cret" : "", "fuzz"};
-  std::optional<control::HttpResponse> later;
-  const auto response = control::handle_request(request, context, [&](control::HttpResponse r) { later = std::move(r); });
-  if (!response) {
-    std::optional<control::Command> command = queue.pop();
-    if (command) command->reply({200, {{"ok", true}}});
+  // Inputs of odd length meet the tokens, the login and its sessions; seeds name Host x.
+  control::ApiContext context{board, queue, "fuzz"};
+  context.access.allowed_hosts = {"x"};
+  context.access.allowed_origins = {"http://x"};
+  if (size % 2) {
+    context.access.operator_token = "s3cret";
+    context.access.viewer_token = "v1ewer";
   }
+  auto handle = [&](const control::HttpRequest& r) {
+    std::optional<control::HttpResponse> later;
+    auto response = control::handle_request(r, context, [&](control::HttpResponse answer) { later = std::move(answer); }, "fuzz");
+    if (!response) {
+      std::optional<control::Command> command = queue.pop();
+      if (command) command->reply({200, {{"ok", true}}});
+    }
+    return response;
+  };
+  const auto response = handle(request);
   if (control::target_path({request.target().data(), request.target().size()}) == "/stream")
-    control::accept_stream(request, context);
+    control::accept_stream(request, context, "fuzz");
+  // A login that succeeded: its cookie on the same request again, then on a logout.
+  if (response && response->count(http::field::set_cookie) && response->result_int() == 200) {
+    const std::string set_cookie((*response)[http::field::set_cookie]);
+    control::HttpRequest again = request;
+    again.set(http::field::cookie, set_cookie.substr(0, set_cookie.find(';')));
+    handle(again);
+    again.target("/logout");
+    handle(again);
+    again.method(http::verb::get);
+    again.target("/session");
+    handle(again);
+  }
   return 0;
 }

@@ -303,6 +303,17 @@ int main(int argc, char** argv) {
       write(out / fmt::format("control_request/{}.http", name),
             fmt::format("POST {} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{}",
                         target, std::string_view(body).size(), body));
+    // Login, a session cookie, logout, and pages of this and another origin.
+    for (const auto& [name, target, headers, body] :
+         {std::tuple{"login", "/login", "Origin: http://x\r\n", R"({"token": "s3cret"})"},
+          {"login_viewer", "/login", "", R"({"token": "v1ewer"})"},
+          {"logout", "/logout", "Cookie: a=b; facecap_session=0123456789abcdef0123456789abcdef0123456789abcdef0123456789abcdef\r\n", "{}"},
+          {"record_other_origin", "/record/start", "Origin: http://127.0.0.1:9999\r\nReferer: http://x/index.html\r\n", "{}"}})
+      write(out / fmt::format("control_request/{}.http", name),
+            fmt::format("POST {} HTTP/1.1\r\nHost: x\r\n{}Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{}",
+                        target, headers, std::string_view(body).size(), body));
+    write(out / "control_request/session.http",
+          "GET /session HTTP/1.1\r\nHost: 127.0.0.1:8765\r\nCookie: facecap_session=00\r\n\r\n");
     write_dictionaries(out / "dict");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "fuzz_seeds: %s\n", e.what());

@@ -39,8 +39,11 @@ namespace http = boost::beast::http;
 
 namespace {
 
+// A request as facecap ctl sends it: Host the address, a POST's body JSON.
 control::HttpRequest request(http::verb method, std::string target, std::string body = {}, std::string token = {}) {
   control::HttpRequest r{method, target, 11};
+  r.set(http::field::host, "127.0.0.1");
+  if (method == http::verb::post) r.set(http::field::content_type, "application/json");
   if (!token.empty()) r.set(http::field::authorization, "Bearer " + token);
   r.body() = std::move(body);
   r.prepare_payload();
@@ -50,7 +53,7 @@ control::HttpRequest request(http::verb method, std::string target, std::string 
 struct Api {
   control::StatusBoard board;
   control::CommandQueue queue{2};
-  control::ApiContext context{board, queue, "", "test"};
+  control::ApiContext context{board, queue, "test"};
   std::optional<control::HttpResponse> later;
 
   std::optional<control::HttpResponse> handle(const control::HttpRequest& r) {
@@ -242,7 +245,7 @@ TEST_CASE("the dashboard's files are served from its directory and never from ou
 
 TEST_CASE("a bearer token is required when one is set: missing and wrong give 401, right passes") {
   Api api;
-  api.context.token = "s3cret";
+  api.context.access.operator_token = "s3cret";
   auto missing = api.handle(request(http::verb::get, "/status"));
   REQUIRE(missing);
   CHECK(missing->result_int() == 401);
@@ -309,6 +312,7 @@ TEST_CASE("metrics text passes promtool check metrics") {
 TEST_CASE("control API end to end on the sim: status, metrics, takes, calibration, actor swap, stream, tokens") {
   const fs::path dir = test::scratch_dir("control-e2e");
   test::write_text(dir / "token", "s3cret\n");
+  fs::permissions(dir / "token", fs::perms::owner_read | fs::perms::owner_write);
   // A 60 Hz source under a 120 Hz loop, with the sim's default dropouts (0.5% per marker:
   // hardly a 0.25 s stretch has every marker in every frame).
   RunningDaemon d({"outputs.shm.name=" + unique_shm("control"), "control.http.enabled=true", "control.http.port=0",
@@ -329,6 +333,17 @@ TEST_CASE("control API end to end on the sim: status, metrics, takes, calibratio
   CHECK_THAT(raw_exchange(port, "GARBAGE\r\n\r\n"), Contains("HTTP/1.1 400 Bad Request") && Contains("malformed HTTP request"));
   CHECK_THAT(raw_exchange(port, fmt::format("POST /actor HTTP/1.1\r\nContent-Length: {}\r\n\r\n", 1 << 20)),
              Contains("HTTP/1.1 413"));
+  // Issue 35 through the server: a rebound name (421), a page's text/plain POST (415), another origin (403).
+  const std::string bearer = "Authorization: Bearer s3cret\r\nConnection: close\r\n";
+  CHECK_THAT(raw_exchange(port, fmt::format("GET /status HTTP/1.1\r\nHost: attacker.example:{}\r\n{}\r\n", port, bearer)),
+             Contains("HTTP/1.1 421") && !Contains("\"version\""));
+  CHECK_THAT(raw_exchange(port, "POST /record/start HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: text/plain\r\n"
+                                "Content-Length: 2\r\n" + bearer + "\r\n{}"),
+             Contains("HTTP/1.1 415"));
+  CHECK_THAT(raw_exchange(port, "POST /record/start HTTP/1.1\r\nHost: 127.0.0.1\r\nOrigin: http://127.0.0.1:1\r\n"
+                                "Content-Type: application/json\r\nContent-Length: 2\r\n" + bearer + "\r\n{}"),
+             Contains("HTTP/1.1 403"));
+  CHECK_FALSE(get_json(client, "/status")["recording"]["active"].get<bool>());
 
   json status = get_json(client, "/status");
   CHECK(status["version"] == "facecapd test");
@@ -524,7 +539,7 @@ TEST_CASE("the replay page's routes: takes listed, and a take's solved frames re
   const control::HttpResult page = client.request("GET", "/");
   CHECK(page.status == 200);
   CHECK(page.body == "<title>live</title>");
-  const std::string escaped = raw_exchange(port, "GET /../secret.txt HTTP/1.1\r\nConnection: close\r\n\r\n");
+  const std::string escaped = raw_exchange(port, "GET /../secret.txt HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
   CHECK_THAT(escaped, Contains("HTTP/1.1 404") && !Contains("SECRET"));
 
   CHECK(get_json(client, "/recordings")["recordings"].empty());
@@ -745,6 +760,7 @@ void copy_without_start_state(const fs::path& from, const fs::path& to) {
 TEST_CASE("a take started mid-run re-solves to itself from its first frame: the recording stores the solve's start state") {
   const fs::path dir = test::scratch_dir("control-midrun");
   test::write_text(dir / "token", "s3cret\n");
+  fs::permissions(dir / "token", fs::perms::owner_read | fs::perms::owner_write);
   // facecapd's defaults: the temporal filter on, a 120 Hz source under a 120 Hz fixed-rate loop.
   RunningDaemon d({"outputs.shm.name=" + unique_shm("midrun"), "control.http.enabled=true", "control.http.port=0",
                    "control.http.token_file=" + (dir / "token").string(),

@@ -148,7 +148,7 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
   });
   auto* actor = ctl->add_subcommand("actor", "Solve with an actor's profile from now on (no restart, no frame lost)");
   actor->add_option("name", o->actor_name, "Profile name (in calibration.profiles_directory)");
-  actor->add_option("--file", o->actor_file, "A profile or calibration file instead, as facecapd sees its path");
+  actor->add_option("--file", o->actor_file, "A profile or calibration file of calibration.profiles_directory instead, by its file name");
   actor->callback([o, done] {
     json body = o->actor_file.empty() ? json{{"name", o->actor_name}} : json{{"file", o->actor_file}};
     done(call(*o, "POST", "/actor", body), [](const json& a) {

@@ -26,8 +26,44 @@ export async function call(path, body) {
   } catch {
     throw new ApiError(response.status, `${path}: HTTP ${response.status} without a JSON answer`);
   }
+  if (response.status === 401 && path !== '/login') toLogin();
   if (!response.ok) throw new ApiError(response.status, `${answer.error ?? 'refused'} (HTTP ${response.status})`);
   return answer;
+}
+
+// The login page, coming back here after it.
+export function toLogin() {
+  const here = `./${location.pathname.split('/').pop()}${location.search}`;
+  location.replace(`./login.html?next=${encodeURIComponent(here)}`);
+}
+
+// A viewer's page: its command controls stay disabled.
+export const readOnly = () => document.body.dataset.role === 'viewer';
+
+// Who this page is (GET /session; a 401 goes to the login page): shows the role and a
+// Log out button in the header, and marks the page read-only for a viewer.
+export async function startSession() {
+  const session = await call('/session');
+  document.body.dataset.role = session.role;
+  const header = document.querySelector('header');
+  const who = document.createElement('span');
+  who.id = 'session';
+  who.className = 'muted';
+  who.textContent = session.role === 'viewer' ? 'viewer (read-only)' : '';
+  header.append(who);
+  if (session.login) {
+    const logout = document.createElement('button');
+    logout.id = 'logout';
+    logout.textContent = 'Log out';
+    logout.addEventListener('click', async () => {
+      await call('/logout', {}).catch(() => {});
+      toLogin();
+    });
+    header.append(logout);
+  }
+  if (session.role === 'viewer')
+    for (const control of document.querySelectorAll('[data-command] :is(button, input, select)')) control.disabled = true;
+  return session;
 }
 
 // Shows a control's outcome in its message element: an error in red, else a note.

@@ -1,6 +1,6 @@
 // The live page: the WebSocket stream of solved frames drawn by FaceView, the status
 // facecapd sends once a second in the counters and the graph, and the controls.
-import { act, call, fmt, formatSeconds, show, streamUrl } from './api.js';
+import { act, call, fmt, formatSeconds, readOnly, show, startSession, streamUrl } from './api.js';
 import { FaceView, yawPitchRoll } from './face_view.js';
 import { SolveGraph } from './graph.js';
 
@@ -30,7 +30,8 @@ function connect() {
     $('connection').textContent = 'stream closed: reconnecting...';
     $('quality').className = 'quality unknown';
     $('quality').textContent = 'no stream';
-    setTimeout(connect, 1000);
+    // A session that ended (logout, expiry) sends this page to the login page.
+    setTimeout(() => call('/session').then(connect, () => setTimeout(connect, 1000)), 1000);
   };
 }
 
@@ -100,8 +101,8 @@ function onStatus(s) {
 // ------------------------------------------------------------------ recording
 
 function showRecording(r) {
-  $('record-start').disabled = r.active;
-  $('record-stop').disabled = !r.active;
+  $('record-start').disabled = r.active || readOnly();
+  $('record-stop').disabled = !r.active || readOnly();
   $('record-length').textContent = r.active ? `REC ${formatSeconds(r.seconds)} · ${r.frames_written} frames · ${r.take}` : '';
 }
 
@@ -195,5 +196,7 @@ $('calibrate').onclick = () => act($('calibrate'), $('calibrate-message'), async
     (c.notes.length ? `\n${c.notes.join('\n')}` : '');
 });
 
-loadActors().catch((e) => show($('actor-message'), e));
-connect();
+startSession().then(() => {
+  loadActors().catch((e) => show($('actor-message'), e));
+  connect();
+}, (e) => show($('record-message'), e));

@@ -1,7 +1,7 @@
 // The replay page: facecapd lists its recordings and hands out a recording's solved
 // frames (GET /recordings, GET /recordings/frames); the page scrubs through them and plays
 // them back at the recorded rate, drawn by the live view's FaceView.
-import { act, call, fmt, formatSeconds, show } from './api.js';
+import { act, call, fmt, formatSeconds, show, startSession } from './api.js';
 import { FaceView, yawPitchRoll } from './face_view.js';
 
 // Playback shows at most this many frames a second, fetched this many at a time.
@@ -162,4 +162,4 @@ async function list() {
 $('recordings-refresh').onclick = () => act($('recordings-refresh'), $('replay-message'), async () => {
   await list();
 });
-list().catch((e) => show($('replay-message'), e));
+startSession().then(list).catch((e) => show($('replay-message'), e));

@@ -197,9 +197,9 @@ try {
   await waitFor('the page to show actor bob', async () => (await page.textContent('#actor')) === 'bob', 5000);
 
   // ---------------------------------------------------------------- a bad profile file
-  const bad = join(work, 'bad-profile.toml');
-  writeFileSync(bad, 'this is [not a profile\n');
-  await page.fill('#profile-file', bad);
+  // Named by its file name: /actor reads only the profiles directory.
+  writeFileSync(join(work, 'profiles', 'bad-profile.toml'), 'this is [not a profile\n');
+  await page.fill('#profile-file', 'bad-profile.toml');
   await page.click('#profile-load');
   await page.waitForFunction(() => document.getElementById('actor-message').classList.contains('error'), null,
                              { timeout: 30000 });

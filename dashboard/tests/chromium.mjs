@@ -16,7 +16,8 @@ export function missingBrowser() {
   return '';
 }
 
-export function launchChromium() {
+// extraArgs: more chromium switches (e.g. --host-resolver-rules for a DNS-rebinding test).
+export function launchChromium(extraArgs = []) {
   const { chromium } = createRequire(import.meta.url)('playwright-core');
   return chromium.launch({
     executablePath: chromiumPath,
@@ -24,6 +25,6 @@ export function launchChromium() {
     // As root in a container: no sandbox. No background traffic on a closed network.
     // WebGL through SwiftShader where there is no GPU.
     args: ['--no-sandbox', '--disable-background-networking', '--disable-component-update', '--disable-sync',
-           '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+           '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', ...extraArgs],
   });
 }
