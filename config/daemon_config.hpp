@@ -144,6 +144,9 @@ struct HttpSection {
   int64_t port = 0;
   std::string token_file;
   std::string dashboard_dir;  // "": the built or installed dashboard (daemon/dashboard_location)
+  int64_t max_connections = 0;
+  int64_t max_connections_per_address = 0;
+  int64_t max_stream_clients = 0;
 };
 
 struct ControlSection {

@@ -217,9 +217,14 @@ HttpResponse make_response(const HttpRequest& request, const Reply& reply, std::
     response.set(http::field::content_type, "application/json");
     response.body() = reply.body.dump(-1, ' ', false, json::error_handler_t::replace) + "\n";
   }
+  if (reply.retry_after_s > 0) response.set(http::field::retry_after, std::to_string(reply.retry_after_s));
   response.keep_alive(request.keep_alive());
   response.prepare_payload();
   return response;
+}
+
+bool request_authenticated(const HttpRequest& request, const ApiContext& context) {
+  return !check_token(request, context).has_value();
 }
 
 std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContext& context,

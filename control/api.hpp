@@ -41,6 +41,10 @@ struct ApiContext {
 // A JSON (or, for /metrics, text) response to `request` with its keep-alive.
 HttpResponse make_response(const HttpRequest& request, const Reply& reply, std::string_view server);
 
+// Whether the request carries the credentials handle_request asks for (always, with no
+// token configured); the server keeps some connections for such clients.
+bool request_authenticated(const HttpRequest& request, const ApiContext& context);
+
 // Handles one request: returns the response when it is known at once, else nullopt after
 // handing a command to the supervisor, whose answer comes through `respond` (from any
 // thread, once). /stream is answered here only when it is refused.
