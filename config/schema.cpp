@@ -430,8 +430,8 @@ const std::vector<KeySpec>& schema_rows() {
                       "kept for clients that have sent an authenticated request, and the oldest connection that has "
                       "not yet makes way for a new one (docs/control-api.md, \"Limits\")."},
       {FACECAP_KEY(control.http.max_connections_per_address), .default_value = int64_t{16}, .min = 1, .max = 4096,
-       .description = "Most connections one client address may hold; its oldest unauthenticated one makes way for a "
-                      "new one."},
+       .description = "Most connections one client address may hold before it has sent an authenticated request; "
+                      "beyond it, that address's oldest such connection makes way for its new one."},
       {FACECAP_KEY(control.http.max_stream_clients), .default_value = int64_t{16}, .min = 0, .max = 4096,
        .description = "Most WebSocket /stream clients at once (at most control.http.max_connections - 8); more are "
                       "answered 503."},

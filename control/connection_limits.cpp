@@ -12,13 +12,12 @@ std::optional<ConnectionTable::Id> ConnectionTable::oldest_anonymous(const std::
 
 ConnectionTable::Admission ConnectionTable::admit(const std::string& address) {
   Admission admission;
-  const auto count = per_address_.find(address);
-  const std::size_t from_address = count == per_address_.end() ? 0 : count->second;
+  const auto count = anonymous_per_address_.find(address);
+  const std::size_t anonymous_from_address = count == anonymous_per_address_.end() ? 0 : count->second;
   const std::size_t anonymous_room =
       limits_.max_connections - std::min(limits_.kept_for_authenticated, limits_.max_connections);
-  if (from_address >= limits_.max_per_address) {
+  if (anonymous_from_address >= limits_.max_per_address) {
     admission.evicted = oldest_anonymous(&address);
-    if (!admission.evicted) return admission;
   } else if (connections_.size() >= limits_.max_connections || anonymous_order_.size() >= anonymous_room) {
     admission.evicted = oldest_anonymous(nullptr);
     if (!admission.evicted) return admission;
@@ -27,16 +26,21 @@ ConnectionTable::Admission ConnectionTable::admit(const std::string& address) {
   const Id id = next_id_++;
   anonymous_order_.push_back(id);
   connections_.emplace(id, Connection{address, false, std::prev(anonymous_order_.end()), true});
-  ++per_address_[address];
+  ++anonymous_per_address_[address];
   admission.admitted = id;
   return admission;
 }
 
+void ConnectionTable::no_longer_anonymous(Connection& connection) {
+  anonymous_order_.erase(connection.anonymous_at);
+  connection.anonymous = false;
+  const auto count = anonymous_per_address_.find(connection.address);
+  if (--count->second == 0) anonymous_per_address_.erase(count);
+}
+
 void ConnectionTable::authenticated(Id id) {
   const auto found = connections_.find(id);
-  if (found == connections_.end() || !found->second.anonymous) return;
-  anonymous_order_.erase(found->second.anonymous_at);
-  found->second.anonymous = false;
+  if (found != connections_.end() && found->second.anonymous) no_longer_anonymous(found->second);
 }
 
 bool ConnectionTable::become_stream_client(Id id) {
@@ -55,10 +59,8 @@ bool ConnectionTable::become_stream_client(Id id) {
 void ConnectionTable::remove(Id id) {
   const auto found = connections_.find(id);
   if (found == connections_.end()) return;
-  if (found->second.anonymous) anonymous_order_.erase(found->second.anonymous_at);
+  if (found->second.anonymous) no_longer_anonymous(found->second);
   if (found->second.stream_client) --stream_clients_;
-  const auto count = per_address_.find(found->second.address);
-  if (--count->second == 0) per_address_.erase(count);
   connections_.erase(found);
 }
 

@@ -5,7 +5,8 @@
 // at a limit. Connections that have not yet shown credentials ("anonymous": nothing read
 // from them yet, or only requests without the token) may fill all but a few slots kept
 // for authenticated ones, and the oldest anonymous connection makes way for a new one, so
-// idle or trickling connections (slowloris) cannot lock the API out. Also the back-off of
+// idle or trickling connections (slowloris) cannot lock the API out. One address may hold
+// only so many anonymous connections, so that its new ones evict its own, not others'. Also the back-off of
 // failing accept() calls. docs/control-api.md, "Limits". Not real-time code.
 #include <cstddef>
 #include <cstdint>
@@ -20,7 +21,7 @@ namespace facecap::control {
 struct ConnectionLimits {
   std::size_t max_connections = 64;     // HTTP and WebSocket together
   std::size_t kept_for_authenticated = 8;  // of max_connections, never given to anonymous ones
-  std::size_t max_per_address = 16;
+  std::size_t max_per_address = 16;     // anonymous connections of one address
   std::size_t max_stream_clients = 16;  // WebSocket /stream clients (at most max_connections - kept_for_authenticated)
 };
 
@@ -37,7 +38,8 @@ class ConnectionTable {
 
   // From `address` (any text naming the peer's address). Admits it when there is room;
   // else makes room by evicting the oldest anonymous connection (of the same address when
-  // that address is at its limit); else refuses it (no id).
+  // that address has max_per_address anonymous ones); else (every connection
+  // authenticated) refuses it (no id).
   Admission admit(const std::string& address);
   // The connection sent an authenticated request: it is no longer evicted for new ones.
   void authenticated(Id id);
@@ -58,12 +60,13 @@ class ConnectionTable {
     bool anonymous = true;
   };
   std::optional<Id> oldest_anonymous(const std::string* address) const;
+  void no_longer_anonymous(Connection& connection);
 
   ConnectionLimits limits_;
   Id next_id_ = 1;
   std::unordered_map<Id, Connection> connections_;
   std::list<Id> anonymous_order_;  // oldest first
-  std::map<std::string, std::size_t> per_address_;
+  std::map<std::string, std::size_t> anonymous_per_address_;
   std::size_t stream_clients_ = 0;
 };
 

@@ -209,10 +209,10 @@ def attack_emfile(d, args):
             except OSError:
                 break
         time.sleep(0.5)
-    missed = d.missed() - before
-    for s in held:
+    for s in held:  # the API cannot answer while facecapd has no descriptor left
         s.close()
     time.sleep(1.5)  # the back-off's longest wait
+    missed = d.missed() - before
     answered, probes = probe_status(d, 3)
     text = open(d.log_path, errors="replace").read()
     warnings = text.count("accepting a connection failed")
@@ -252,15 +252,16 @@ def attack_replay(d, args):
     rss_peak = rss_before
     time.sleep(3)
     start_s, stop_s = [], []
-    for _ in range(3):
+    for n in range(3):
         t0 = time.monotonic()
-        status_start, _ = d.request("POST", "/record/start", {"take": "during"}, timeout=60)
+        status_start, _ = d.request("POST", "/record/start", {"take": f"during{n}"}, timeout=60)
         start_s.append(time.monotonic() - t0)
         time.sleep(1)
         rss_peak = max(rss_peak, rss_mb(d.proc.pid))
         t0 = time.monotonic()
         status_stop, _ = d.request("POST", "/record/stop", {}, timeout=60)
         stop_s.append(time.monotonic() - t0)
+        print(f"  take {n}: start {status_start} in {start_s[-1]:.3f} s, stop {status_stop} in {stop_s[-1]:.3f} s", flush=True)
         assert status_start == 200 and status_stop == 200, (status_start, status_stop)
         rss_peak = max(rss_peak, rss_mb(d.proc.pid))
         time.sleep(1)
