@@ -286,7 +286,9 @@ TEST_CASE("a failing accept() backs off from 50 ms to 1 s and warns once per 10 
   CHECK(warnings.size() == Approx(1000).margin(2));
   uint64_t counted = 0;
   for (const uint64_t w : warnings) counted += w;
-  CHECK(counted == 10'000);
+  // All but the last few (at most 10 s of them, waiting for the next warning) were counted.
+  CHECK(counted <= 10'000);
+  CHECK(counted > 10'000 - 11);
   CHECK(warnings.front() == 1);
   backoff.succeeded();
   CHECK(backoff.failed(now).delay_ns == 50 * kNsPerMs);
