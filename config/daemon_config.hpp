@@ -148,6 +148,9 @@ struct HttpSection {
   std::string allowed_origins;  // comma-separated
   int64_t session_max_age_s = 0;
   std::string dashboard_dir;  // "": the built or installed dashboard (daemon/dashboard_location)
+  int64_t max_connections = 0;
+  int64_t max_connections_per_address = 0;
+  int64_t max_stream_clients = 0;
 };
 
 struct ControlSection {

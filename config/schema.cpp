@@ -440,6 +440,16 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(control.http.session_max_age_s), .default_value = int64_t{43200}, .unit = "s", .min = 60,
        .max = 30 * 86400,
        .description = "How long a dashboard login lasts (the session cookie's Max-Age)."},
+      {FACECAP_KEY(control.http.max_connections), .default_value = int64_t{64}, .min = 16, .max = 4096,
+       .description = "Most connections the control API holds at once, HTTP and WebSocket together; 8 of them are "
+                      "kept for clients that have sent an authenticated request, and the oldest connection that has "
+                      "not yet makes way for a new one (docs/control-api.md, \"Limits\")."},
+      {FACECAP_KEY(control.http.max_connections_per_address), .default_value = int64_t{16}, .min = 1, .max = 4096,
+       .description = "Most connections one client address may hold before it has sent an authenticated request; "
+                      "beyond it, that address's oldest such connection makes way for its new one."},
+      {FACECAP_KEY(control.http.max_stream_clients), .default_value = int64_t{16}, .min = 0, .max = 4096,
+       .description = "Most WebSocket /stream clients at once (at most control.http.max_connections - 8); more are "
+                      "answered 503."},
       {FACECAP_KEY(control.http.dashboard_dir), .default_value = std::string(),
        .description = "Directory of the operator dashboard's built files, served at / (docs/dashboard.md). Empty: "
                       "the dashboard built with this facecapd (in its build tree) or installed with it "

@@ -58,25 +58,37 @@ std::string_view session_cookie(const HttpRequest& request, const std::string& n
   return {};
 }
 
+// The token of an "Authorization: Bearer <token>" header (the scheme in any case).
+std::optional<std::string_view> bearer_token(const HttpRequest& request) {
+  const std::string_view given = header_value(request, http::field::authorization);
+  constexpr std::string_view kScheme = "Bearer ";
+  const bool has_bearer = given.size() > kScheme.size() && std::equal(kScheme.begin(), kScheme.end(), given.begin(),
+      [](char a, char b) { return std::tolower((unsigned char)a) == std::tolower((unsigned char)b); });
+  if (!has_bearer) return std::nullopt;
+  return given.substr(kScheme.size());
+}
+
+// The role a token grants: kNone when it is neither the operator's nor the viewer's.
+Role bearer_role(std::string_view token, const AccessOptions& access) {
+  if (same_secret(token, access.operator_token)) return Role::kOperator;
+  if (!access.viewer_token.empty() && same_secret(token, access.viewer_token)) return Role::kViewer;
+  return Role::kNone;
+}
+
 // The caller's role, or the 401 (wrong bearer token, RFC 6750) or 429 (too many wrong
 // ones from this address) refusing it. No token configured: everyone is the operator.
 std::variant<Caller, HttpResponse> identify(const HttpRequest& request, ApiContext& context, const std::string& peer) {
   const AccessOptions& access = context.access;
   if (access.operator_token.empty()) return Caller{Role::kOperator, false};
-  const std::string_view given = header_value(request, http::field::authorization);
-  constexpr std::string_view kScheme = "Bearer ";
-  const bool has_bearer = given.size() > kScheme.size() && std::equal(kScheme.begin(), kScheme.end(), given.begin(),
-      [](char a, char b) { return std::tolower((unsigned char)a) == std::tolower((unsigned char)b); });
-  if (!given.empty()) {
+  if (!header_value(request, http::field::authorization).empty()) {
     const int64_t now = monotonic_now_ns();
     if (const int64_t wait = context.throttle.wait_seconds(peer, now)) return too_many_failures(request, context, wait);
-    const std::string_view token = has_bearer ? given.substr(kScheme.size()) : std::string_view();
-    const bool is_operator = same_secret(token, access.operator_token);
-    const bool is_viewer = !access.viewer_token.empty() && same_secret(token, access.viewer_token);
-    if (has_bearer && (is_operator || is_viewer)) return Caller{is_operator ? Role::kOperator : Role::kViewer, true};
+    const auto token = bearer_token(request);
+    const Role role = token ? bearer_role(*token, access) : Role::kNone;
+    if (role != Role::kNone) return Caller{role, true};
     context.throttle.failed(peer, now);
     HttpResponse response = make_response(
-        request, error_reply(401, has_bearer ? "the bearer token is wrong" : "the Authorization header must be \"Bearer <token>\""),
+        request, error_reply(401, token ? "the bearer token is wrong" : "the Authorization header must be \"Bearer <token>\""),
         context.version);
     response.set(http::field::www_authenticate, "Bearer realm=\"facecap\", error=\"invalid_token\"");
     return response;
@@ -300,6 +312,7 @@ HttpResponse make_response(const HttpRequest& request, const Reply& reply, std::
     response.set(http::field::content_type, "application/json");
     response.body() = reply.body.dump(-1, ' ', false, json::error_handler_t::replace) + "\n";
   }
+  if (reply.retry_after_s > 0) response.set(http::field::retry_after, std::to_string(reply.retry_after_s));
   response.keep_alive(request.keep_alive());
   response.prepare_payload();
   return response;
@@ -323,14 +336,12 @@ HttpResponse login(const HttpRequest& request, ApiContext& context, const std::s
   if (auto e = std::get<Body>(parsed).text("token", token, 4096)) return answer(error_reply(400, *e));
   const int64_t now = monotonic_now_ns();
   if (const int64_t wait = context.throttle.wait_seconds(peer, now)) return too_many_failures(request, context, wait);
-  const bool is_operator = same_secret(token, access.operator_token);
-  const bool is_viewer = !access.viewer_token.empty() && same_secret(token, access.viewer_token);
-  if (token.empty() || !(is_operator || is_viewer)) {
+  const Role role = token.empty() ? Role::kNone : bearer_role(token, access);
+  if (role == Role::kNone) {
     context.throttle.failed(peer, now);
     return answer(error_reply(401, "the token is wrong"));
   }
   context.throttle.succeeded(peer);
-  const Role role = is_operator ? Role::kOperator : Role::kViewer;
   const std::string id = context.sessions.open(role, now, access.session_max_age_s * kNsPerSecond);
   HttpResponse response = answer({200, {{"role", role_name(role)}, {"max_age_s", access.session_max_age_s}}});
   response.set(http::field::set_cookie, fmt::format("{}={}; Path=/; Max-Age={}; HttpOnly; SameSite=Strict",
@@ -357,6 +368,13 @@ bool is_json_media_type(std::string_view content_type) {
 }
 
 }  // namespace
+
+bool request_authenticated(const HttpRequest& request, ApiContext& context) {
+  if (context.access.operator_token.empty()) return true;
+  if (auto token = bearer_token(request)) return bearer_role(*token, context.access) != Role::kNone;
+  const std::string_view session = session_cookie(request, session_cookie_name(context.access));
+  return !session.empty() && context.sessions.find(session, monotonic_now_ns()) != Role::kNone;
+}
 
 std::optional<HttpResponse> handle_request(const HttpRequest& request, ApiContext& context,
                                            std::function<void(HttpResponse)> respond, const std::string& peer) {

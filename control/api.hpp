@@ -48,6 +48,10 @@ std::string session_cookie_name(const AccessOptions& access);
 // A JSON (or, for /metrics, text) response to `request` with its keep-alive.
 HttpResponse make_response(const HttpRequest& request, const Reply& reply, std::string_view server);
 
+// Whether the request carries the credentials handle_request asks for (a bearer token or a session
+// cookie; always, with no token configured); the server keeps some connections for such clients.
+bool request_authenticated(const HttpRequest& request, ApiContext& context);
+
 // Handles one request from `peer` (the client's address, for the throttle on wrong
 // tokens): returns the response when it is known at once, else nullopt after handing a
 // command to the supervisor, whose answer comes through `respond` (from any thread,

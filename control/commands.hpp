@@ -21,6 +21,7 @@ namespace facecap::control {
 struct Reply {
   int status = 200;
   nlohmann::json body;
+  int retry_after_s = 0;  // > 0: sent as Retry-After (a 503 of a busy facecapd)
 };
 // {"error": what} with a 4xx/5xx status.
 Reply error_reply(int status, std::string what);
@@ -64,13 +65,19 @@ struct Command {
   ReplyFn reply;
 };
 
+// Reads of recordings (the replay page) are the one request many clients send at once.
+bool is_recording_read(const Request& request) noexcept;
+
+// Operator commands come first: reads of recordings may fill the queue only up to
+// kSlotsKeptForCommands short of its capacity, and pop() hands out commands before reads.
 class CommandQueue {
  public:
+  static constexpr std::size_t kSlotsKeptForCommands = 8;
   explicit CommandQueue(std::size_t capacity) : capacity_(capacity) {}
 
-  // False (the command not taken) when the queue is full. Any thread.
+  // False (the command not taken) when the queue is full for its kind. Any thread.
   bool push(Command command);
-  // The oldest command, if any. Any thread.
+  // The oldest command other than a read of a recording, else the oldest read, if any. Any thread.
   std::optional<Command> pop();
 
  private:

@@ -94,10 +94,12 @@ Reply recording_frames(const std::string& directory, const ReadRecording& reques
     const bool same_rig = h.rig_hash == rig.hash && rig.vertex_count > 0;
     StreamSchema schema{h.rig_name, h.rig_units, h.shape_names, {}, same_rig ? rig.vertex_count : 0, {}};
     if (same_rig) schema.triangles = rig.triangles;
+    const uint64_t count = same_rig ? std::clamp<uint64_t>(kMaxRecordingVerticesPerReply / rig.vertex_count, 1, request.count)
+                                    : request.count;
     StreamSink::Entry entry;
     std::string vertices_from = "none";
     json frames = json::array();
-    for (uint64_t i = request.first, n = 0; i < total && n < request.count; i += request.step, ++n) {
+    for (uint64_t i = request.first, n = 0; i < total && n < count; i += request.step, ++n) {
       reader.read_solved_frame(std::size_t(i), entry.solved);
       if (entry.solved.vertices.cols() == Eigen::Index(schema.vertex_count) && schema.vertex_count > 0) {
         vertices_from = "recorded";

@@ -18,6 +18,9 @@ namespace facecap::control {
 
 // The most frames one GET /recordings/frames answers (each may carry the mesh).
 inline constexpr std::size_t kMaxRecordingFramesPerRequest = 60;
+// The most mesh vertices one answer carries (a few MB of JSON): with a large mesh it holds
+// fewer frames than asked, so that its size does not grow with count x the mesh.
+inline constexpr std::size_t kMaxRecordingVerticesPerReply = 200'000;
 
 // {"directory", "recordings": [{"name", "file", "bytes", "take", "actor", "scene", "shot",
 // "notes", "rig", "rate_hz", "created_unix_ns", "marker_frames", "solved_frames",
@@ -35,7 +38,8 @@ struct ReplayRig {
 
 // {"schema": the stream's schema message for the recording (the mesh only when it was
 // solved on `rig`), "vertices_from": "recorded" | "blend" | "none", "solved_frames",
-// "frames": [frame messages of solved frames first, first + step, ... (at most count)]}.
+// "frames": [frame messages of solved frames first, first + step, ... (at most count, and
+// at most kMaxRecordingVerticesPerReply vertices in all, at least one frame)]}.
 // 404: no such recording; 416: `first` is past its last solved frame; 422: unreadable.
 Reply recording_frames(const std::string& directory, const ReadRecording& request, const ReplayRig& rig);
 

@@ -4,6 +4,7 @@
 #include <future>
 #include <optional>
 #include <set>
+#include <unordered_map>
 
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/post.hpp>
@@ -26,11 +27,16 @@ using tcp = net::ip::tcp;
 
 namespace {
 
-// An idle HTTP connection is closed after this long.
-constexpr auto kIdleTimeout = std::chrono::seconds(30);
-// Connections beyond this are closed at once: a client opening sockets in a loop
-// cannot exhaust the process's descriptors.
-constexpr std::size_t kMaxSessions = 64;
+// A new connection has this long to send its request's whole header (slowloris), and a
+// kept-alive one this long to send the next; a body and an answer this long each.
+constexpr auto kHeaderTimeout = std::chrono::seconds(5);
+constexpr auto kKeepAliveTimeout = std::chrono::seconds(15);
+constexpr auto kBodyTimeout = std::chrono::seconds(10);
+constexpr auto kWriteTimeout = std::chrono::seconds(10);
+// A stream client that has answered no ping for this long is closed (Beast pings at half
+// of it), and so is one whose last message has not gone out for kStalledWriteTimeout.
+constexpr auto kStreamIdleTimeout = std::chrono::seconds(20);
+constexpr int64_t kStalledWriteTimeoutNs = 10 * kNsPerSecond;
 // The stream's I/O-thread pump: how often it drains the sink, and status messages.
 constexpr auto kPumpInterval = std::chrono::milliseconds(5);
 constexpr int64_t kStatusMessageIntervalNs = kNsPerSecond;
@@ -39,12 +45,25 @@ constexpr int64_t kStatusMessageIntervalNs = kNsPerSecond;
 
 class StreamSession;
 
+// What the server can close to make room: an HTTP session or a stream client.
+class Connection {
+ public:
+  virtual ~Connection() = default;
+  virtual void abort() = 0;
+};
+
 struct ControlServer::Impl : std::enable_shared_from_this<ControlServer::Impl> {
   Impl(net::io_context& io, ServerOptions o, const StatusBoard& board, CommandQueue& commands, StreamSink* sink)
-      : acceptor(io), pump_timer(io), options(std::move(o)), context{board, commands, options.version, options.dashboard_dir, options.access},
-        stream(sink) {}
+      : acceptor(io), accept_timer(io), pump_timer(io), options(std::move(o)),
+        context{board, commands, options.version, options.dashboard_dir, options.access}, stream(sink),
+        table(options.limits) {}
 
   void accept();
+  void accept_failed(const beast::error_code& ec);
+  void forget(ConnectionTable::Id id) {
+    table.remove(id);
+    live.erase(id);
+  }
   void add_client(const std::shared_ptr<StreamSession>& client);
   void remove_client(const std::shared_ptr<StreamSession>& client);
   void update_stream_rate();
@@ -52,11 +71,14 @@ struct ControlServer::Impl : std::enable_shared_from_this<ControlServer::Impl> {
   void close_all();
 
   tcp::acceptor acceptor;
+  net::steady_timer accept_timer;
   net::steady_timer pump_timer;
   ServerOptions options;
   ApiContext context;
   StreamSink* stream;
-  std::size_t sessions = 0;
+  ConnectionTable table;
+  std::unordered_map<ConnectionTable::Id, std::weak_ptr<Connection>> live;  // to abort the evicted
+  AcceptBackoff accept_backoff;
   std::set<std::shared_ptr<StreamSession>> clients;
   bool pumping = false;
   bool closed = false;
@@ -74,14 +96,21 @@ HttpResponse unreadable_request(int status, std::string what, const std::string&
 
 }  // namespace
 
-class StreamSession : public std::enable_shared_from_this<StreamSession> {
+class StreamSession : public Connection, public std::enable_shared_from_this<StreamSession> {
  public:
-  StreamSession(beast::tcp_stream&& stream, StreamRequest request, std::shared_ptr<ControlServer::Impl> server)
-      : ws_(std::move(stream)), request_(request), server_(std::move(server)) {}
+  StreamSession(beast::tcp_stream&& stream, StreamRequest request, std::shared_ptr<ControlServer::Impl> server,
+                ConnectionTable::Id id)
+      : ws_(std::move(stream)), request_(request), server_(std::move(server)), id_(id) {}
+  ~StreamSession() override { server_->forget(id_); }
 
   void start(HttpRequest upgrade) {
+    server_->live[id_] = weak_from_this();
     beast::get_lowest_layer(ws_).expires_never();
-    ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
+    websocket::stream_base::timeout timeout;
+    timeout.handshake_timeout = kWriteTimeout;
+    timeout.idle_timeout = kStreamIdleTimeout;
+    timeout.keep_alive_pings = true;
+    ws_.set_option(timeout);
     ws_.async_accept(upgrade, [self = shared_from_this()](beast::error_code ec) {
       if (ec) return;
       // The schema first: frames and status messages only follow it.
@@ -100,9 +129,12 @@ class StreamSession : public std::enable_shared_from_this<StreamSession> {
   void sent_status(int64_t now_ns) noexcept { next_status_ns_ = now_ns + kStatusMessageIntervalNs; }
   bool vertices() const noexcept { return request_.vertices; }
   double rate_hz() const noexcept { return request_.rate_hz; }
+  // Whether its last message has waited too long to go out (a client that does not read).
+  bool stalled(int64_t now_ns) const noexcept { return writing_ && now_ns - write_started_ns_ > kStalledWriteTimeoutNs; }
   void send(std::string text) {
     if (writing_) return;
     writing_ = true;
+    write_started_ns_ = monotonic_now_ns();
     out_ = std::move(text);
     ws_.text(true);
     ws_.async_write(net::buffer(out_), [self = shared_from_this()](beast::error_code ec, std::size_t) {
@@ -114,6 +146,7 @@ class StreamSession : public std::enable_shared_from_this<StreamSession> {
     beast::error_code ec;
     beast::get_lowest_layer(ws_).socket().close(ec);
   }
+  void abort() override { close(); }
 
  private:
   // Reads (and ignores) what the client sends, to see it close.
@@ -133,33 +166,60 @@ class StreamSession : public std::enable_shared_from_this<StreamSession> {
   std::shared_ptr<ControlServer::Impl> server_;
   beast::flat_buffer in_;
   std::string out_;
+  ConnectionTable::Id id_;
   bool writing_ = false;
+  int64_t write_started_ns_ = 0;
   int64_t next_due_ns_ = 0;
   int64_t next_status_ns_ = 0;
 };
 
 namespace {
 
-class HttpSession : public std::enable_shared_from_this<HttpSession> {
- public:
-  HttpSession(tcp::socket&& socket, std::shared_ptr<ControlServer::Impl> server)
-      : stream_(std::move(socket)), server_(std::move(server)) {
-    ++server_->sessions;
-  }
-  ~HttpSession() { --server_->sessions; }
+// Whether a request's Transfer-Encoding is absent or exactly "chunked": anything else
+// ("chunked, identity", "gzip") is refused rather than guessed at (request smuggling).
+bool acceptable_transfer_encoding(const http::request_parser<http::string_body>& parser) {
+  const auto& header = parser.get();
+  const auto field = header.find(http::field::transfer_encoding);
+  if (field == header.end()) return true;
+  return beast::iequals(field->value(), "chunked") && header.count(http::field::transfer_encoding) == 1;
+}
 
-  void read() {
+class HttpSession : public Connection, public std::enable_shared_from_this<HttpSession> {
+ public:
+  HttpSession(tcp::socket&& socket, std::shared_ptr<ControlServer::Impl> server, ConnectionTable::Id id)
+      : stream_(std::move(socket)), server_(std::move(server)), id_(id) {}
+  ~HttpSession() override {
+    if (!handed_over_) server_->forget(id_);
+  }
+
+  void start() {
+    server_->live[id_] = weak_from_this();
+    read(kHeaderTimeout);
+  }
+  void abort() override {
+    beast::error_code ec;
+    stream_.socket().close(ec);
+  }
+
+ private:
+  // The next request's header within `header_timeout`, then its body.
+  void read(std::chrono::seconds header_timeout) {
     if (server_->closed) return;
     parser_.emplace();
     parser_->header_limit(kMaxHeaderBytes);
     parser_->body_limit(kMaxBodyBytes);
-    stream_.expires_after(kIdleTimeout);
-    http::async_read(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, std::size_t) {
-      self->on_read(ec);
+    stream_.expires_after(header_timeout);
+    http::async_read_header(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, std::size_t) {
+      if (ec) return self->on_read(ec);
+      if (!acceptable_transfer_encoding(*self->parser_))
+        return self->write(unreadable_request(400, "Transfer-Encoding must be absent or exactly \"chunked\"",
+                                              self->server_->options.version));
+      self->stream_.expires_after(kBodyTimeout);
+      http::async_read(self->stream_, self->buffer_, *self->parser_,
+                       [self](beast::error_code ec, std::size_t) { self->on_read(ec); });
     });
   }
 
- private:
   void on_read(beast::error_code ec) {
     if (ec == http::error::end_of_stream || ec == net::error::operation_aborted || ec == beast::error::timeout ||
         ec == net::error::connection_reset || server_->closed)
@@ -171,11 +231,19 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (ec) return write(unreadable_request(400, fmt::format("malformed HTTP request: {}", ec.message()), server_->options.version));
 
     HttpRequest request = parser_->release();
+    if (request_authenticated(request, server_->context)) server_->table.authenticated(id_);
     if (websocket::is_upgrade(request) && target_path(std::string_view(request.target().data(), request.target().size())) == "/stream") {
       if (!server_->stream) return write(make_response(request, error_reply(404, "no stream in this facecapd"), server_->options.version));
       auto accepted = accept_stream(request, server_->context, peer_address());
       if (auto* refused = std::get_if<HttpResponse>(&accepted)) return write(std::move(*refused));
-      std::make_shared<StreamSession>(std::move(stream_), std::get<StreamRequest>(accepted), server_)->start(std::move(request));
+      if (!server_->table.become_stream_client(id_)) {
+        Reply full = error_reply(503, fmt::format("{} stream clients are connected already (control.http.max_stream_clients)",
+                                                  server_->table.stream_clients()));
+        full.retry_after_s = 5;
+        return write(make_response(request, full, server_->options.version));
+      }
+      handed_over_ = true;
+      std::make_shared<StreamSession>(std::move(stream_), std::get<StreamRequest>(accepted), server_, id_)->start(std::move(request));
       return;
     }
     auto respond = [self = shared_from_this(), executor = stream_.get_executor()](HttpResponse response) {
@@ -192,10 +260,11 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
   void write(HttpResponse response) {
     response_ = std::move(response);
-    stream_.expires_after(kIdleTimeout);
+    stream_.expires_after(kWriteTimeout);
     http::async_write(stream_, response_, [self = shared_from_this()](beast::error_code ec, std::size_t) {
       if (ec || !self->response_.keep_alive()) return self->close();
-      self->read();
+      self->response_ = {};  // an answer of a recording's frames can be megabytes
+      self->read(kKeepAliveTimeout);
     });
   }
 
@@ -206,6 +275,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
   beast::tcp_stream stream_;
   std::shared_ptr<ControlServer::Impl> server_;
+  ConnectionTable::Id id_;
+  bool handed_over_ = false;  // to a StreamSession, with its id
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   HttpResponse response_;
@@ -215,18 +286,40 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
 void ControlServer::Impl::accept() {
   acceptor.async_accept([self = shared_from_this()](beast::error_code ec, tcp::socket socket) {
-    if (self->closed) return;
-    if (!ec) {
-      if (self->sessions >= kMaxSessions) {
-        beast::error_code ignored;
-        socket.close(ignored);
-      } else {
-        std::make_shared<HttpSession>(std::move(socket), self)->read();
+    if (self->closed || ec == net::error::operation_aborted) return;
+    if (ec) return self->accept_failed(ec);
+    self->accept_backoff.succeeded();
+    beast::error_code peer_error;
+    const tcp::endpoint peer = socket.remote_endpoint(peer_error);
+    const ConnectionTable::Admission admission =
+        self->table.admit(peer_error ? std::string("?") : peer.address().to_string());
+    if (admission.evicted) {
+      const auto evicted = self->live.find(*admission.evicted);
+      if (evicted != self->live.end()) {
+        if (const auto connection = evicted->second.lock()) connection->abort();
+        self->live.erase(evicted);
       }
-    } else if (ec != net::error::operation_aborted) {
-      spdlog::warn("control API: accepting a connection failed: {}", ec.message());
+    }
+    if (admission.admitted) {
+      std::make_shared<HttpSession>(std::move(socket), self, *admission.admitted)->start();
+    } else {
+      beast::error_code ignored;
+      socket.close(ignored);
     }
     self->accept();
+  });
+}
+
+// Out of descriptors (EMFILE) or memory, accept() would fail again at once: wait, and warn
+// once in a while with the count instead of at every failure.
+void ControlServer::Impl::accept_failed(const beast::error_code& ec) {
+  const AcceptBackoff::Step step = accept_backoff.failed(monotonic_now_ns());
+  if (step.warn_with_count > 0)
+    spdlog::warn("control API: accepting a connection failed {} time(s) since the last warning: {}; next try in {} ms "
+                 "({} connections open)", step.warn_with_count, ec.message(), step.delay_ns / kNsPerMs, table.connections());
+  accept_timer.expires_after(std::chrono::nanoseconds(step.delay_ns));
+  accept_timer.async_wait([self = shared_from_this()](beast::error_code wait_error) {
+    if (!wait_error && !self->closed) self->accept();
   });
 }
 
@@ -277,8 +370,11 @@ void ControlServer::Impl::pump() {
     if (undelivered) stream->count_undelivered();
     stream->pop();
   }
-  // Each client's status once a second, when its last message has gone.
+  // Each client's status once a second, when its last message has gone; a client that
+  // reads nothing is closed (its pending write then fails and removes it).
   const int64_t now = monotonic_now_ns();
+  for (const auto& client : clients)
+    if (client->stalled(now)) client->close();
   std::string status;
   for (const auto& client : clients) {
     if (!client->status_due(now)) continue;
@@ -296,7 +392,10 @@ void ControlServer::Impl::close_all() {
   closed = true;
   beast::error_code ec;
   acceptor.close(ec);
+  accept_timer.cancel();
   pump_timer.cancel();
+  for (const auto& [id, connection] : live)
+    if (const auto alive = connection.lock()) alive->abort();
   for (const auto& client : clients) client->close();
   clients.clear();
   if (stream) stream->set_rate(0);

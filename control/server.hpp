@@ -8,6 +8,7 @@
 #include <string>
 
 #include "control/api.hpp"
+#include "control/connection_limits.hpp"
 #include "control/stream_sink.hpp"
 
 namespace boost::asio {
@@ -22,6 +23,7 @@ struct ServerOptions {
   AccessOptions access;  // tokens, allow-lists (its address and port are set from the above)
   std::string version;  // "facecapd 0.1.0 (git ...)", for the Server header
   std::string dashboard_dir;  // the dashboard's files, served at "/"; "": none (a 404 page says so)
+  ConnectionLimits limits;     // control.http.max_connections and the like
 };
 
 class ControlServer {

@@ -439,9 +439,31 @@ void Controller::report(control::StatusReport& r) const {
 
 // ---------------------------------------------------------------- recordings
 
+void Controller::read_on_worker(std::function<Reply()> read, ReplyFn reply) {
+  // The reply is shared: run and drop each may be the one to answer.
+  auto answer = std::make_shared<ReplyFn>(std::move(reply));
+  const bool queued = replay_workers_.try_submit(
+      [read = std::move(read), answer] {
+        Reply result;
+        try {
+          result = read();
+        } catch (const std::exception& e) {
+          result = error_reply(500, fmt::format("reading the recording failed: {}", e.what()));
+        }
+        (*answer)(std::move(result));
+      },
+      [answer] { (*answer)(error_reply(503, "facecapd is stopping")); });
+  if (!queued) {
+    Reply busy = error_reply(503, fmt::format("{} reads of recordings are already running or waiting; try again",
+                                              kReplayWorkers + kReplayQueue));
+    busy.retry_after_s = 1;
+    (*answer)(std::move(busy));
+  }
+}
+
 void Controller::list_recordings(ReplyFn reply) {
-  jobs_.push_back({std::async(std::launch::async, control::list_recordings, parts_.config->outputs.recording.directory),
-                   std::move(reply)});
+  read_on_worker([directory = parts_.config->outputs.recording.directory] { return control::list_recordings(directory); },
+                 std::move(reply));
 }
 
 void Controller::read_recording(const control::ReadRecording& request, ReplyFn reply) {
@@ -455,11 +477,9 @@ void Controller::read_recording(const control::ReadRecording& request, ReplyFn r
     };
     replay_rig_ = std::move(rig);
   }
-  jobs_.push_back({std::async(std::launch::async,
-                              [directory = parts_.config->outputs.recording.directory, request, rig = replay_rig_] {
-                                return control::recording_frames(directory, request, *rig);
-                              }),
-                   std::move(reply)});
+  read_on_worker([directory = parts_.config->outputs.recording.directory, request, rig = replay_rig_] {
+    return control::recording_frames(directory, request, *rig);
+  }, std::move(reply));
 }
 
 }  // namespace facecap::daemon

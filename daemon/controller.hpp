@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "config/daemon_config.hpp"
+#include "control/bounded_workers.hpp"
 #include "control/commands.hpp"
 #include "control/recordings.hpp"
 #include "control/status.hpp"
@@ -34,6 +35,11 @@ struct ControllerParts {
   outputs::TakeRecorder* takes = nullptr;  // null: no recording output
   const config::DaemonConfig* config = nullptr;  // the running configuration; reloads change it
 };
+
+// Reads of recordings run at most this many at a time, and this many more wait; beyond
+// that a read is answered 503 with Retry-After (docs/control-api.md, "Limits").
+inline constexpr std::size_t kReplayWorkers = 2;
+inline constexpr std::size_t kReplayQueue = 8;
 
 class Controller {
  public:
@@ -75,9 +81,11 @@ class Controller {
   void calibrate(const control::Calibrate& request, control::ReplyFn reply);
   void start_recording(const control::StartRecording& request, control::ReplyFn reply);
   void stop_recording(control::ReplyFn reply);
-  // The replay page's reads of outputs.recording.directory, on worker threads.
+  // The replay page's reads of outputs.recording.directory, on replay_workers_; a worker
+  // answers itself, so that neither the read nor its answer's encoding waits for this thread.
   void list_recordings(control::ReplyFn reply);
   void read_recording(const control::ReadRecording& request, control::ReplyFn reply);
+  void read_on_worker(std::function<control::Reply()> read, control::ReplyFn reply);
   // Builds a solve pipeline aside (one at a time) from what `make` returns.
   void build(std::string what, std::function<Built()> make, control::ReplyFn reply);
   void adopt_built();
@@ -110,6 +118,9 @@ class Controller {
   std::chrono::steady_clock::time_point take_started_;
   std::vector<control::ReplyFn> stop_replies_;  // answered once the take is closed
   bool stop_pending_ = false;                  // stop asked while the take was still starting
+
+  // Last, so that it stops (its queued reads answered 503) before anything else goes.
+  control::BoundedWorkers replay_workers_{kReplayWorkers, kReplayQueue};
 };
 
 }  // namespace facecap::daemon

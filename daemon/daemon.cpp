@@ -235,7 +235,10 @@ void Daemon::start_control() {
       io_->context(),
       control::ServerOptions{.address = http.address, .port = uint16_t(http.port), .access = std::move(access),
                              .version = options_.version.empty() ? std::string("facecapd") : options_.version,
-                             .dashboard_dir = dashboard},
+                             .dashboard_dir = dashboard,
+                             .limits = {.max_connections = std::size_t(http.max_connections),
+                                        .max_per_address = std::size_t(http.max_connections_per_address),
+                                        .max_stream_clients = std::size_t(http.max_stream_clients)}},
       board_, commands_, stream_);
   spdlog::info("control API on http://{}:{}{}", http.address.find(':') == std::string::npos ? http.address : "[" + http.address + "]",
                server_->port(), http.token_file.empty() ? "" : " (token or login required)");

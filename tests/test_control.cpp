@@ -4,6 +4,7 @@
 // WebSocket stream; the capture-quality state of the issue's motivating failure; --version.
 #include <algorithm>
 #include <cstdio>
+#include <future>
 #include <regex>
 #include <thread>
 
@@ -19,6 +20,8 @@
 
 #include "config/config_file.hpp"
 #include "control/api.hpp"
+#include "control/bounded_workers.hpp"
+#include "control/connection_limits.hpp"
 #include "control/http_client.hpp"
 #include "control/static_files.hpp"
 #include "core/error.hpp"
@@ -187,6 +190,151 @@ TEST_CASE("the API answers malformed requests with the right 4xx and a JSON erro
   REQUIRE(metrics);
   CHECK(metrics->body() == "m 1\n");
   CHECK((*metrics)[http::field::content_type].starts_with("text/plain; version=0.0.4"));
+}
+
+TEST_CASE("connections: the oldest anonymous one makes way, authenticated ones keep their slots, one address is capped") {
+  control::ConnectionTable table({.max_connections = 20, .kept_for_authenticated = 4, .max_per_address = 6,
+                                  .max_stream_clients = 100});
+  // One address: 6, then each new one evicts that address's oldest.
+  std::vector<control::ConnectionTable::Id> from_a;
+  for (int i = 0; i < 6; ++i) {
+    const auto admission = table.admit("10.0.0.1");
+    REQUIRE(admission.admitted);
+    CHECK_FALSE(admission.evicted);
+    from_a.push_back(*admission.admitted);
+  }
+  auto admission = table.admit("10.0.0.1");
+  CHECK(admission.admitted);
+  CHECK(admission.evicted == from_a[0]);
+  CHECK(table.connections() == 6);
+  // Authenticated connections do not count against their address: a 7th comes in freely.
+  for (int i = 1; i < 6; ++i) table.authenticated(from_a[std::size_t(i)]);
+  table.authenticated(*admission.admitted);
+  CHECK(table.anonymous() == 0);
+  admission = table.admit("10.0.0.1");
+  CHECK(admission.admitted);
+  CHECK_FALSE(admission.evicted);
+  table.remove(*admission.admitted);
+
+  // Anonymous ones from many addresses fill 20 - 4 slots less the 6 authenticated: 14 more
+  // would reach the 20; anonymous may hold only 16 of them, and the total is 20.
+  std::vector<control::ConnectionTable::Id> others;
+  for (int i = 0; i < 14; ++i) {
+    admission = table.admit(fmt::format("10.0.1.{}", i));
+    REQUIRE(admission.admitted);
+    CHECK_FALSE(admission.evicted);
+    others.push_back(*admission.admitted);
+  }
+  CHECK(table.connections() == 20);
+  admission = table.admit("10.0.2.1");  // full: the oldest anonymous goes
+  CHECK(admission.admitted);
+  CHECK(admission.evicted == others[0]);
+  CHECK(table.connections() == 20);
+  // Every slot authenticated: a new one is refused.
+  for (std::size_t i = 1; i < others.size(); ++i) table.authenticated(others[i]);
+  table.authenticated(*admission.admitted);
+  admission = table.admit("10.0.2.2");
+  CHECK_FALSE(admission.admitted);
+  CHECK_FALSE(admission.evicted);
+  // Leaving frees a slot.
+  table.remove(others[1]);
+  CHECK(table.admit("10.0.2.3").admitted);
+
+  // Anonymous connections alone stop at max - kept, leaving the kept slots to authenticated ones.
+  control::ConnectionTable anonymous({.max_connections = 20, .kept_for_authenticated = 4, .max_per_address = 100});
+  std::vector<control::ConnectionTable::Id> idle;
+  for (int i = 0; i < 16; ++i) idle.push_back(*anonymous.admit("127.0.0.1").admitted);
+  admission = anonymous.admit("127.0.0.1");
+  CHECK(admission.evicted == idle[0]);
+  CHECK(anonymous.connections() == 16);
+}
+
+TEST_CASE("stream clients are capped, and leave the kept slots to HTTP") {
+  control::ConnectionTable table({.max_connections = 20, .kept_for_authenticated = 4, .max_per_address = 100,
+                                  .max_stream_clients = 3});
+  std::vector<control::ConnectionTable::Id> ids;
+  for (int i = 0; i < 5; ++i) ids.push_back(*table.admit("127.0.0.1").admitted);
+  for (int i = 0; i < 3; ++i) CHECK(table.become_stream_client(ids[std::size_t(i)]));
+  CHECK_FALSE(table.become_stream_client(ids[3]));
+  table.remove(ids[0]);
+  CHECK(table.become_stream_client(ids[3]));
+  CHECK(table.stream_clients() == 3);
+
+  control::ConnectionTable wide({.max_connections = 20, .kept_for_authenticated = 4, .max_per_address = 100,
+                                 .max_stream_clients = 100});
+  int streams = 0;
+  for (int i = 0; i < 20; ++i) {
+    const auto id = wide.admit(fmt::format("10.0.0.{}", i)).admitted;
+    REQUIRE(id);
+    wide.authenticated(*id);
+    streams += wide.become_stream_client(*id);
+  }
+  CHECK(streams == 16);
+}
+
+TEST_CASE("a failing accept() backs off from 50 ms to 1 s and warns once per 10 s with the count") {
+  control::AcceptBackoff backoff;
+  std::vector<int64_t> delays_ms;
+  std::vector<uint64_t> warnings;
+  int64_t now = 1'000'000'000;
+  // 10,000 failures, each followed by its wait: the waits and the warnings they cost.
+  for (int i = 0; i < 10'000; ++i) {
+    const control::AcceptBackoff::Step step = backoff.failed(now);
+    if (delays_ms.size() < 8) delays_ms.push_back(step.delay_ns / kNsPerMs);
+    if (step.warn_with_count > 0) warnings.push_back(step.warn_with_count);
+    now += step.delay_ns;
+  }
+  CHECK(delays_ms == std::vector<int64_t>{50, 100, 200, 400, 800, 1000, 1000, 1000});
+  // 10,000 failures take about 10,000 s at 1 s each: one warning per 10 s, counting all.
+  CHECK(warnings.size() == Approx(1000).margin(2));
+  uint64_t counted = 0;
+  for (const uint64_t w : warnings) counted += w;
+  // All but the last few (at most 10 s of them, waiting for the next warning) were counted.
+  CHECK(counted <= 10'000);
+  CHECK(counted > 10'000 - 11);
+  CHECK(warnings.front() == 1);
+  backoff.succeeded();
+  CHECK(backoff.failed(now).delay_ns == 50 * kNsPerMs);
+}
+
+TEST_CASE("bounded workers: at most threads + queue jobs taken, the rest refused; queued ones dropped at the end") {
+  std::promise<void> open;
+  const std::shared_future<void> gate = open.get_future().share();
+  std::atomic<int> ran{0}, dropped{0};
+  int taken = 0, refused = 0;
+  {
+    control::BoundedWorkers workers(2, 3);
+    auto blocked = [&] {
+      gate.wait();
+      ++ran;
+    };
+    // The two workers take a job each (and block), three wait, the rest are refused.
+    for (int i = 0; i < 2; ++i) taken += workers.try_submit(blocked, [&] { ++dropped; });
+    while (workers.queued() > 0) std::this_thread::yield();
+    for (int i = 0; i < 8; ++i) (workers.try_submit(blocked, [&] { ++dropped; }) ? taken : refused)++;
+    CHECK(workers.queued() == 3);
+    open.set_value();
+  }
+  CHECK(taken == 5);
+  CHECK(refused == 5);
+  // Stopping let the running two finish and dropped the three waiting, or ran some of them.
+  CHECK(ran + dropped == 5);
+  CHECK(ran >= 2);
+}
+
+TEST_CASE("the command queue keeps room for commands and hands them out before reads of recordings") {
+  control::CommandQueue queue(10);
+  std::vector<int> answered;
+  int reads = 0;
+  while (queue.push({control::ReadRecording{}, nullptr})) ++reads;
+  CHECK(reads == 10 - int(control::CommandQueue::kSlotsKeptForCommands));
+  CHECK(queue.push({control::StopRecording{}, nullptr}));
+  CHECK(queue.push({control::StartRecording{}, nullptr}));
+  const auto first = queue.pop();
+  REQUIRE(first);
+  CHECK(std::holds_alternative<control::StopRecording>(first->request));
+  CHECK(std::holds_alternative<control::StartRecording>(queue.pop()->request));
+  CHECK(std::holds_alternative<control::ReadRecording>(queue.pop()->request));
 }
 
 TEST_CASE("the dashboard's files are served from its directory and never from outside it") {
@@ -610,6 +758,74 @@ TEST_CASE("the replay page's routes: takes listed, and a take's solved frames re
   const auto junk = refused("/recordings/frames?name=junk.fcrec");
   CHECK(junk.first == 422);
   CHECK_THAT(junk.second, Contains("junk.fcrec"));
+  CHECK(d.stop() == 0);
+}
+
+namespace {
+
+// A connection that sends half a request header and then nothing (slowloris).
+boost::asio::ip::tcp::socket idle_connection(boost::asio::io_context& io, uint16_t port) {
+  boost::asio::ip::tcp::socket socket(io);
+  socket.connect({boost::asio::ip::make_address("127.0.0.1"), port});
+  boost::asio::write(socket, boost::asio::buffer(std::string_view("GET /status HTTP/1.1\r\nHost: 127.0.0.1\r\n")));
+  return socket;
+}
+
+// Whether the server closed `socket` (EOF or reset) within `seconds`.
+bool closed_by_server_within(boost::asio::ip::tcp::socket& socket, int seconds) {
+  const timeval timeout{seconds, 0};
+  ::setsockopt(socket.native_handle(), SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  char byte;
+  const ssize_t n = ::recv(socket.native_handle(), &byte, 1, 0);
+  return n == 0 || (n < 0 && errno == ECONNRESET);
+}
+
+}  // namespace
+
+TEST_CASE("the API holds against idle connections, a WebSocket flood and a doubtful Transfer-Encoding") {
+  RunningDaemon d({"outputs.shm.name=" + unique_shm("bounded"), "control.http.enabled=true", "control.http.port=0",
+                   "control.http.max_stream_clients=10"});
+  const uint16_t port = d->control_port();
+  REQUIRE(port != 0);
+  boost::asio::io_context io;
+
+  // 64 slowloris connections, the API's whole default cap.
+  std::vector<boost::asio::ip::tcp::socket> idle;
+  for (int i = 0; i < 64; ++i) idle.push_back(idle_connection(io, port));
+
+  // 30 WebSocket clients that read nothing: 10 let in, the others answered 503.
+  namespace websocket = boost::beast::websocket;
+  std::vector<std::unique_ptr<websocket::stream<boost::asio::ip::tcp::socket>>> streams;
+  int declined = 0;
+  for (int i = 0; i < 30; ++i) {
+    boost::asio::ip::tcp::socket socket(io);
+    socket.connect({boost::asio::ip::make_address("127.0.0.1"), port});
+    auto ws = std::make_unique<websocket::stream<boost::asio::ip::tcp::socket>>(std::move(socket));
+    boost::system::error_code ec;
+    ws->handshake("127.0.0.1", "/stream", ec);
+    if (ec == websocket::error::upgrade_declined) ++declined;
+    else if (!ec) streams.push_back(std::move(ws));
+    else FAIL("stream handshake: " << ec.message());
+  }
+  CHECK(streams.size() == 10);
+  CHECK(declined == 20);
+
+  // Every /status probe on a new connection is answered.
+  int answered = 0;
+  for (int i = 0; i < 20; ++i) answered += control::HttpClient("127.0.0.1", port, "", 5.0).request("GET", "/status").status == 200;
+  CHECK(answered == 20);
+
+  CHECK_THAT(raw_exchange(port, "POST /record/stop HTTP/1.1\r\nTransfer-Encoding: chunked, identity\r\n\r\n0\r\n\r\n"),
+             Contains("HTTP/1.1 400") && Contains("Transfer-Encoding must be absent or exactly"));
+  CHECK_THAT(raw_exchange(port, "POST /record/stop HTTP/1.1\r\nTransfer-Encoding: gzip\r\n\r\n"), Contains("HTTP/1.1 400"));
+
+  // A new connection that sends half a header is closed after the 5 s header timeout.
+  const int64_t opened_ns = monotonic_now_ns();
+  boost::asio::ip::tcp::socket late = idle_connection(io, port);
+  CHECK(closed_by_server_within(late, 8));
+  const double closed_after_s = double(monotonic_now_ns() - opened_ns) / kNsPerSecond;
+  CHECK(closed_after_s > 4.5);
+  CHECK(closed_after_s < 7.0);
   CHECK(d.stop() == 0);
 }
 
