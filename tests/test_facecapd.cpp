@@ -719,8 +719,8 @@ TEST_CASE("A camera calibration that keeps OpenCV's reader busy forever is refus
   REQUIRE(fs::file_size(dir / "cameras.yaml") == 48);
   write_text(dir / "facecapd.toml", "version = 1\n");
   const Measured check = run_measured("daemon/facecapd",
-                                      {"--check-config", (dir / "facecapd.toml").string(), "--set", "source.driver=v4l2",
-                                       "--set", "source.v4l2.calibration=" + (dir / "cameras.yaml").string()},
+                                      {"--check-config", (dir / "facecapd.toml").string(), "--set", "source.driver=v4l2", "--set",
+                                       "source.v4l2.devices=/dev/video0,/dev/video1", "--set", "source.v4l2.calibration=" + (dir / "cameras.yaml").string()},
                                       dir / "check.log");
   INFO(check.output);
   CHECK(check.exit_code == 1);
