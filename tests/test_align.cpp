@@ -563,6 +563,30 @@ TEST_CASE("Auto-neutral tolerates dropouts: each marker present in most of the s
                                                   search.min_presence, present);
   CHECK(std::count(present.begin(), present.end(), 1) == std::ptrdiff_t(dropped.labels.size()));
   CHECK(mean.allFinite());
+  {
+    // A stable marker lost in the requested anchor frame (a dropout at the moment an
+    // operator presses "calibrate neutral"): the head frame comes from its nearest complete
+    // neighbour, and the average has the same shape (the head frame it is expressed in may
+    // move rigidly) to within the head fit's noise.
+    auto holed = dropped.frames;
+    holed[n.frame_index].markers[std::size_t(stable[0])].flags = kMarkerMissing;
+    std::vector<uint8_t> holed_present;
+    const Eigen::Matrix3Xd holed_mean = average_positions(holed, n.window_start, n.window_frames, n.frame_index, stable,
+                                                          search.min_presence, holed_present);
+    CHECK(holed_present == present);
+    double worst_distance_change = 0;
+    for (Eigen::Index i = 0; i < mean.cols(); ++i)
+      for (Eigen::Index j = i + 1; j < mean.cols(); ++j)
+        worst_distance_change = std::max(worst_distance_change, std::abs((holed_mean.col(i) - holed_mean.col(j)).norm() -
+                                                                         (mean.col(i) - mean.col(j)).norm()));
+    CHECK(worst_distance_change < 0.2);
+    // With a stable marker gone from every averaged frame there is no head frame: named.
+    for (std::size_t f = n.window_start; f < n.window_start + n.window_frames; ++f)
+      holed[f].markers[std::size_t(stable[0])].flags = kMarkerMissing;
+    CHECK_THROWS_WITH(average_positions(holed, n.window_start, n.window_frames, n.frame_index, stable, search.min_presence,
+                                        holed_present),
+                      Catch::Contains("has every stable marker"));
+  }
 
   // One marker missing in 2 of every 5 frames: present in most of the take (so not left
   // out as a ghost slot), but in at most 60% of any stretch: named.

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "core/error.hpp"
 #include "solver/align/stabilise.hpp"
@@ -186,14 +187,27 @@ Eigen::Matrix3Xd average_positions(std::span<const MarkerFrame> frames, std::siz
   if (count == 0 || first + count > frames.size() || anchor >= frames.size())
     throw Error(fmt::format("average: frames {}..{} (anchor {}) outside the take's {}", first, first + count, anchor, frames.size()));
   const std::size_t K = frames[anchor].markers.size();
-  Eigen::Matrix3Xd reference(3, Eigen::Index(stable_slots.size()));
-  for (std::size_t i = 0; i < stable_slots.size(); ++i) {
-    const int s = stable_slots[i];
+  for (const int s : stable_slots)
     if (s < 0 || std::size_t(s) >= K) throw Error("average: stable marker index out of range");
-    const Marker& m = frames[anchor].markers[std::size_t(s)];
-    if (!usable(m)) throw Error(fmt::format("average: stable marker {} is missing in the anchor frame", s));
-    reference.col(Eigen::Index(i)) = m.position;
+  // A dropout in the requested anchor must not fail the calibration: the head frame is taken
+  // from the frame nearest to it, within the averaged frames, that has every stable marker.
+  auto has_every_stable = [&](std::size_t f) {
+    return frames[f].markers.size() == K &&
+           std::all_of(stable_slots.begin(), stable_slots.end(), [&](int s) { return usable(frames[f].markers[std::size_t(s)]); });
+  };
+  std::size_t reference_frame = frames.size();
+  for (std::size_t step = 0; reference_frame == frames.size() && step < count; ++step) {
+    if (anchor >= step && anchor - step >= first && anchor - step < first + count && has_every_stable(anchor - step))
+      reference_frame = anchor - step;
+    else if (anchor + step >= first && anchor + step < first + count && has_every_stable(anchor + step))
+      reference_frame = anchor + step;
   }
+  if (reference_frame == frames.size())
+    throw Error(fmt::format("average: no frame in {}..{} has every stable marker ({}) present", first, first + count,
+                            fmt::join(stable_slots, ", ")));
+  Eigen::Matrix3Xd reference(3, Eigen::Index(stable_slots.size()));
+  for (std::size_t i = 0; i < stable_slots.size(); ++i)
+    reference.col(Eigen::Index(i)) = frames[reference_frame].markers[std::size_t(stable_slots[i])].position;
   HeadStabiliser stabiliser(std::vector<int>(stable_slots.begin(), stable_slots.end()), reference);
   std::vector<std::vector<Eigen::Vector3d>> samples(K);
   for (std::size_t f = first; f < first + count; ++f) {
