@@ -68,7 +68,11 @@ case "$mode" in
     (cd "$here/tests/peers" && npm ci --no-audit --no-fund --loglevel=error)
     build
     status=0
-    (cd "$build_dir" && ctest --output-on-failure --parallel "$(nproc)" "$@") || status=$?
+    (cd "$build_dir" && ctest --output-on-failure --parallel "$(nproc)" --label-exclude realtime "$@") || status=$?
+    # The tests labelled realtime judge the solve loop's rate and deadlines, each alone on the
+    # machine. A neighbour on a shared machine can steal a few deadlines; a slow loop fails
+    # again, so each gets one more run after a failure (both runs are in the output).
+    (cd "$build_dir" && ctest --output-on-failure --label-regex realtime --repeat until-pass:2 "$@") || status=$?
     # In CI (CI set, as CI runs this command) also the sanitizer builds of the parsers',
     # recorder's and hand-offs' tests and the libFuzzer smoke (scripts/sanitize).
     if [ -n "${CI:-}" ]; then

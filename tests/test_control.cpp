@@ -457,7 +457,7 @@ TEST_CASE("metrics text passes promtool check metrics") {
   CHECK(said.empty());
 }
 
-TEST_CASE("control API end to end on the sim: status, metrics, takes, calibration, actor swap, stream, tokens") {
+TEST_CASE("control API end to end on the sim: status, metrics, takes, calibration, actor swap, stream, tokens", "[realtime]") {
   const fs::path dir = test::scratch_dir("control-e2e");
   test::write_text(dir / "token", "s3cret\n");
   fs::permissions(dir / "token", fs::perms::owner_read | fs::perms::owner_write);
@@ -829,7 +829,7 @@ TEST_CASE("the API holds against idle connections, a WebSocket flood and a doubt
   CHECK(d.stop() == 0);
 }
 
-TEST_CASE("with 90% of markers missing, the capture reads bad and STATUS says why (the issue's motivating failure)") {
+TEST_CASE("with 90% of markers missing, the capture reads bad and STATUS says why (the issue's motivating failure)", "[realtime]") {
   for (const double dropout : {0.005, 0.9}) {
     RunningDaemon d({"outputs.shm.name=" + unique_shm(fmt::format("quality{}", dropout)),
                      fmt::format("source.sim.dropout_probability={}", dropout), "control.status_interval_s=0.25"});

@@ -39,7 +39,7 @@ std::string unique_shm(const std::string& what) { return fmt::format("facecap-te
 
 }  // namespace
 
-TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth and stops cleanly on SIGTERM") {
+TEST_CASE("facecapd publishes sim frames at its rate close to the ground truth and stops cleanly on SIGTERM", "[realtime]") {
   const fs::path dir = test::scratch_dir("facecapd-run");
   const std::string shm = unique_shm("run");
   NotifyRecorder notify;
@@ -380,7 +380,7 @@ TEST_CASE("facecap daemon-demo (the quick start's run) shows facecapd working an
   CHECK(std::stod(out.substr(at + 18)) < 1.0);  // mm
 }
 
-TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file missing at most 50 ms of frames") {
+TEST_CASE("facecapd killed while recording at 240 Hz leaves a readable file missing at most 50 ms of frames", "[realtime]") {
   // SIGKILL: no handler runs, so the file holds what the recorder had handed to the
   // kernel. The last frame solved is the one in the shared memory the killed writer left.
   const fs::path dir = test::scratch_dir("facecapd-kill");

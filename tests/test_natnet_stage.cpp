@@ -196,7 +196,7 @@ std::vector<uint16_t> udp_ports_of(pid_t pid) {
 }  // namespace
 
 TEST_CASE("facecapd solves a real take from natnet-serve in each handshake style at bitstreams 3.1 and 4.1",
-          "[natnet][stage]") {
+          "[natnet][stage][realtime]") {
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   const fs::path dir = scratch_dir("natnet-styles");
   const Actor jaw = calibrated_actor(dir, animface / "JawMoCap.trc", "jaw");
@@ -245,7 +245,7 @@ TEST_CASE("facecapd solves a real take from natnet-serve in each handshake style
   }
 }
 
-TEST_CASE("two facecapd on one multicast stream each solve their own actor at the stream's rate", "[natnet][stage]") {
+TEST_CASE("two facecapd on one multicast stream each solve their own actor at the stream's rate", "[natnet][stage][realtime]") {
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   REQUIRE_LOOPBACK_MULTICAST();
   const fs::path dir = scratch_dir("natnet-two-actors");
@@ -307,7 +307,7 @@ TEST_CASE("two facecapd on one multicast stream each solve their own actor at th
 }
 
 TEST_CASE("facecapd labels an unlabelled point cloud from natnet-serve and solves it as the labelled take",
-          "[natnet][stage]") {
+          "[natnet][stage][realtime]") {
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   const fs::path dir = scratch_dir("natnet-cloud");
   const Actor jaw = calibrated_actor(dir, animface / "JawMoCap.trc", "jaw");
@@ -332,7 +332,7 @@ TEST_CASE("facecapd labels an unlabelled point cloud from natnet-serve and solve
   CHECK(c.worst_weight < 1e-4);
 }
 
-TEST_CASE("a NatNet server that falls silent is reported in STATUS and followed when it returns", "[natnet][stage]") {
+TEST_CASE("a NatNet server that falls silent is reported in STATUS and followed when it returns", "[natnet][stage][realtime]") {
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   const fs::path dir = scratch_dir("natnet-silence");
   const Actor jaw = calibrated_actor(dir, animface / "JawMoCap.trc", "jaw");
@@ -370,7 +370,7 @@ TEST_CASE("a NatNet server that falls silent is reported in STATUS and followed 
 }
 
 TEST_CASE("a NatNet server that restarts is followed: frame numbers from 1, the client connected again",
-          "[natnet][stage]") {
+          "[natnet][stage][realtime]") {
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   const fs::path dir = scratch_dir("natnet-restart");
   const Actor jaw = calibrated_actor(dir, animface / "JawMoCap.trc", "jaw");
@@ -404,7 +404,7 @@ TEST_CASE("a NatNet server that restarts is followed: frame numbers from 1, the 
 }
 
 TEST_CASE("a real Motive capture replayed through facecapd at its recorded timing delivers every frame to the loop",
-          "[natnet][stage]") {
+          "[natnet][stage][realtime]") {
   FACECAP_REQUIRE_SHARED_DATA(natnet, "natnet");
   const fs::path dir = scratch_dir("natnet-pcap");
   // The capture's rigid body (five markers of a quadcopter, in metres) pinned to five
@@ -435,7 +435,7 @@ TEST_CASE("a real Motive capture replayed through facecapd at its recorded timin
 }
 
 TEST_CASE("a spoofed NatNet sender changes no solved frame: its frames and SERVERINFO are dropped unread and counted",
-          "[natnet][stage]") {
+          "[natnet][stage][realtime]") {
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
   namespace nn = formats::natnet;
   using drivers::natnet::Endpoint;

@@ -195,7 +195,7 @@ TEST_CASE("a camera unplugged while streaming is reported, and the driver stream
   CHECK_THAT(std::string(health.state.view()), Contains("cameras back after a gap of"));
 }
 
-TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points and solves the sim's face") {
+TEST_CASE("facecapd streams two preloaded fake V4L2 cameras, labels their points and solves the sim's face", "[realtime]") {
 #ifndef FACECAP_FAKE_V4L2_PRELOAD
   WARN("SKIPPED: built with sanitizers, whose runtime must be the first library loaded: the fake cameras cannot be "
        "preloaded into facecapd (LD_PRELOAD)");
