@@ -335,7 +335,7 @@ TEST_CASE("JawMoCap solved with defaults leaves the shapes its markers cannot ob
 }
 
 TEST_CASE("on-box calibration of an AnimFace take with two markers dropping out 5 percent of the time succeeds, its residuals "
-          "at most 10 percent above the whole take's",
+          "within 10 percent of the whole take's",
           "[data]") {
   FACECAP_REQUIRE_SHARED_DATA(ict, "ict-face");
   FACECAP_REQUIRE_SHARED_DATA(animface, "markers/animface");
@@ -364,9 +364,10 @@ TEST_CASE("on-box calibration of an AnimFace take with two markers dropping out 
                    tolerant.residual_median_mm, tolerant.residual_max_mm, tolerant.result.frame,
                    fmt::join(tolerant.result.calibration.stable_markers, " ")));
   CHECK(tolerant.result.calibration.markers.size() == whole.result.calibration.markers.size());
-  // Which still stretch wins can change with the dropouts (their scores are close), and
-  // this actor's residuals to the ICT face depend on the expression held there: the
-  // dropouts must not make the calibration worse by more than 10%.
-  CHECK(tolerant.residual_median_mm <= 1.1 * whole.residual_median_mm);
-  CHECK(tolerant.residual_max_mm <= 1.1 * whole.residual_max_mm);
+  // The dropouts change neither the still stretch chosen (gaps bridged in the search) nor,
+  // beyond 10%, the residuals (this actor's residuals to the ICT face depend on the
+  // expression held there, so another stretch would show).
+  CHECK(tolerant.result.frame == Approx(double(whole.result.frame)).margin(0.25 * 60));
+  CHECK(tolerant.residual_median_mm == Approx(whole.residual_median_mm).epsilon(0.1));
+  CHECK(tolerant.residual_max_mm == Approx(whole.residual_max_mm).epsilon(0.1));
 }

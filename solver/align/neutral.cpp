@@ -17,6 +17,34 @@ namespace {
 
 bool usable(const Marker& m) { return m.present() && m.position.allFinite(); }
 
+// The frames with each gap of up to `longest` frames in a required marker bridged by linear
+// interpolation of its raw positions. A stable marker's dropout then changes neither the
+// head fit (five markers fit a slightly different pose than six on a face whose forehead
+// skin slides) nor the speed and distance of a frame: with and without dropouts the same
+// stretch wins.
+std::vector<MarkerFrame> bridge_gaps(std::span<const MarkerFrame> frames, const std::vector<uint8_t>& required,
+                                     std::size_t longest) {
+  std::vector<MarkerFrame> out(frames.begin(), frames.end());
+  const std::size_t K = required.size(), F = out.size();
+  for (std::size_t k = 0; k < K; ++k) {
+    if (!required[k]) continue;
+    std::size_t seen = F;  // the last frame where marker k is present
+    for (std::size_t f = 0; f < F; ++f) {
+      if (out[f].markers.size() != K || !usable(out[f].markers[k])) continue;
+      if (seen != F && f - seen > 1 && f - seen - 1 <= longest)
+        for (std::size_t g = seen + 1; g < f; ++g) {
+          if (out[g].markers.size() != K) continue;
+          const double t = double(g - seen) / double(f - seen);
+          Marker& m = out[g].markers[k];
+          m.position = (1.0 - t) * out[seen].markers[k].position + t * out[f].markers[k].position;
+          m.flags &= ~kMarkerMissing;
+        }
+      seen = f;
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<const int> stable_slots,
@@ -47,9 +75,11 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
   for (std::size_t i = 0; i < stable_slots.size(); ++i)
     reference.col(Eigen::Index(i)) = frames[first].markers[std::size_t(stable_slots[i])].position;
   HeadStabiliser stabiliser(std::vector<int>(stable_slots.begin(), stable_slots.end()), reference);
+  const std::vector<MarkerFrame> bridged = bridge_gaps(frames, required, W);
 
-  // Each frame whose head pose fits, stabilised; a missing marker is NaN. present_before[k][f]:
-  // frames before f where marker k is present (windowed presence by difference).
+  // Each frame whose head pose fits, stabilised, gaps bridged; a missing marker is NaN.
+  // present_before[k][f]: frames before f where marker k is present in the take (windowed
+  // presence by difference: a bridged gap still counts as missing).
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<uint8_t> ok(F, 0);
   std::vector<Eigen::Matrix3Xd> shape(F);
@@ -61,13 +91,13 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
       present_before[k][f + 1] = present_before[k][f] + (same_slots && usable(frames[f].markers[k]) ? 1 : 0);
     if (!same_slots) continue;
     HeadPoseResult pose;
-    if (stabiliser.process(frames[f].markers, pose)) continue;  // held: too few stable markers
+    if (stabiliser.process(bridged[f].markers, pose)) continue;  // held: too few stable markers
     ok[f] = 1;
     ++candidates;
     shape[f].resize(3, Eigen::Index(K));
     const Eigen::Matrix3d Rt = pose.pose.rotation.transpose();
     for (std::size_t k = 0; k < K; ++k) {
-      const Marker& m = frames[f].markers[k];
+      const Marker& m = bridged[f].markers[k];
       shape[f].col(Eigen::Index(k)) =
           required[k] && usable(m) ? Eigen::Vector3d(Rt * (m.position - pose.pose.translation)) : Eigen::Vector3d::Constant(nan);
     }
