@@ -182,9 +182,11 @@ void Daemon::start() {
   controller_ = std::make_unique<Controller>(
       ControllerParts{.rig = rig_, .source = source_.get(), .loop = loop_.get(), .takes = takes_, .config = &config_.values},
       std::move(calibration), actor);
-  loop_->start();
+  // The run's figures count from before the loop's first tick: in lockstep a short replay
+  // can end before this thread runs again.
   start_ns_ = monotonic_now_ns();
   start_sample_ = std::make_unique<Sample>(take_sample());
+  loop_->start();
   status_sample_ = std::make_unique<Sample>(*start_sample_);
   stats_sample_ = std::make_unique<Sample>(*start_sample_);
   next_status_ns_ = start_ns_ + int64_t(c.control.status_interval_s * kNsPerSecond);
