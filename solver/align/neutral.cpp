@@ -17,6 +17,12 @@ namespace {
 
 bool usable(const Marker& m) { return m.present() && m.position.allFinite(); }
 
+// A frame of K markers where every stable marker is usable: one that can anchor a head fit.
+bool has_every_stable(const MarkerFrame& frame, std::size_t K, std::span<const int> stable_slots) {
+  return frame.markers.size() == K &&
+         std::all_of(stable_slots.begin(), stable_slots.end(), [&](int s) { return usable(frame.markers[std::size_t(s)]); });
+}
+
 // The frames with each gap of up to `longest` frames in a required marker bridged by linear
 // interpolation of its raw positions. A stable marker's dropout then changes neither the
 // head fit (five markers fit a slightly different pose than six on a face whose forehead
@@ -63,13 +69,9 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
   if (F < W) throw Error(fmt::format("auto-neutral: the take has {} frames, shorter than the {}-frame window", F, W));
 
   // Head motion is removed relative to the first frame with every stable marker.
-  auto has_every_stable = [&](std::size_t f) {
-    return frames[f].markers.size() == K &&
-           std::all_of(stable_slots.begin(), stable_slots.end(), [&](int s) { return usable(frames[f].markers[std::size_t(s)]); });
-  };
   std::size_t first = F;
   for (std::size_t f = 0; f < F && first == F; ++f)
-    if (has_every_stable(f)) first = f;
+    if (has_every_stable(frames[f], K, stable_slots)) first = f;
   if (first == F) throw Error("auto-neutral: no frame has every stable marker present (name a frame with --frame)");
   Eigen::Matrix3Xd reference(3, Eigen::Index(stable_slots.size()));
   for (std::size_t i = 0; i < stable_slots.size(); ++i)
@@ -179,7 +181,7 @@ NeutralFrame find_neutral_frame(std::span<const MarkerFrame> frames, std::span<c
     // The returned frame anchors the average: every stable marker present, closest to rest.
     std::size_t anchor = F;
     for (std::size_t f = start; f < start + W; ++f)
-      if (has_every_stable(f) && (anchor == F || distance[f] < distance[anchor])) anchor = f;
+      if (has_every_stable(frames[f], K, stable_slots) && (anchor == F || distance[f] < distance[anchor])) anchor = f;
     const double score = (dsum + o.speed_weight_s * vsum) / double(W);
     if (anchor != F && score < best.window_score) {
       best.window_score = score;
@@ -221,17 +223,11 @@ Eigen::Matrix3Xd average_positions(std::span<const MarkerFrame> frames, std::siz
     if (s < 0 || std::size_t(s) >= K) throw Error("average: stable marker index out of range");
   // A dropout in the requested anchor must not fail the calibration: the head frame is taken
   // from the frame nearest to it, within the averaged frames, that has every stable marker.
-  auto has_every_stable = [&](std::size_t f) {
-    return frames[f].markers.size() == K &&
-           std::all_of(stable_slots.begin(), stable_slots.end(), [&](int s) { return usable(frames[f].markers[std::size_t(s)]); });
-  };
   std::size_t reference_frame = frames.size();
-  for (std::size_t step = 0; reference_frame == frames.size() && step < count; ++step) {
-    if (anchor >= step && anchor - step >= first && anchor - step < first + count && has_every_stable(anchor - step))
-      reference_frame = anchor - step;
-    else if (anchor + step >= first && anchor + step < first + count && has_every_stable(anchor + step))
-      reference_frame = anchor + step;
-  }
+  auto gap = [&](std::size_t f) { return f > anchor ? f - anchor : anchor - f; };
+  for (std::size_t f = first; f < first + count; ++f)
+    if (has_every_stable(frames[f], K, stable_slots) && (reference_frame == frames.size() || gap(f) < gap(reference_frame)))
+      reference_frame = f;
   if (reference_frame == frames.size())
     throw Error(fmt::format("average: no frame in {}..{} has every stable marker ({}) present", first, first + count,
                             fmt::join(stable_slots, ", ")));
