@@ -453,6 +453,58 @@ TEST_CASE("Labeller recovers shuffled points through ghosts and dropouts and cor
   CHECK(fixed == int(take.frames.size()));
 }
 
+TEST_CASE("A marker lost long enough for its gate to pass a tracked neighbour does not take the neighbour's point") {
+  // Five markers on a line 10 mm apart; marker 2 is hidden for 40 frames, long enough for
+  // its gate to grow to 20 mm, while the set drifts 0.3 mm a frame. Its neighbours keep
+  // their points (before, a lost marker cost its whole wide gate to leave missing, so it
+  // took a neighbour 10 mm away and left the neighbour missing).
+  Eigen::Matrix3Xd reference(3, 5);
+  for (int k = 0; k < 5; ++k) reference.col(k) = Eigen::Vector3d(10.0 * k, 3.0 * (k % 2), 0.0);
+  const std::vector<std::string> labels{"a", "b", "c", "d", "e"};
+  LabellerParams p;
+  p.gate = 6.0;  // mm
+  p.gate_growth = 1.0;
+  p.max_gate = 20.0;
+  p.label_margin = 1.0;
+  for (const bool checking : {false, true}) {
+    INFO((checking ? "check()" : "label()"));
+    MarkerLabeller labeller(labels, reference, p);
+    int right = 0, frames = 0;
+    for (int f = 0; f < 80; ++f, ++frames) {
+      const bool hidden = f >= 20 && f < 60;
+      MarkerFrame frame = make_marker_frame(labels);
+      std::vector<Eigen::Vector3d> points;
+      for (int k = 0; k < 5; ++k) {
+        Marker& m = frame.markers[std::size_t(k)];
+        // A small expression wobble on top of the drift: the tracked predictions are off by
+        // up to about 1 mm.
+        m.position = reference.col(k) + Eigen::Vector3d(0.3 * f, 0.8 * std::sin(0.7 * f + k), 0.0);
+        if (hidden && k == 2) {
+          m.flags = kMarkerMissing;
+          m.position.setConstant(std::numeric_limits<double>::quiet_NaN());
+        } else {
+          m.flags = 0;
+          points.push_back(m.position);
+        }
+      }
+      const MarkerFrame truth = frame;
+      MarkerFrame out;
+      if (checking) {
+        out = frame;
+        labeller.check(out);
+      } else {
+        labeller.label(points, out);
+      }
+      bool ok = true;
+      for (std::size_t k = 0; k < 5; ++k)
+        ok &= truth.markers[k].present() ? out.markers[k].present() && out.markers[k].position == truth.markers[k].position
+                                         : !out.markers[k].present();
+      right += ok;
+    }
+    CHECK(right == frames);
+  }
+}
+
 TEST_CASE("Auto-neutral picks the rest stretch and refuses a take that never rests") {
   SyntheticTakeOptions o;
   o.rest_frames = 0;

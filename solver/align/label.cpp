@@ -157,14 +157,17 @@ int MarkerLabeller::assign(int n, std::span<const int> own_label, bool use_margi
   for (int k = 0; k < K; ++k) {
     const double gate =
         gate_scale * std::min(params_.gate + params_.gate_growth * double(lost_frames_[std::size_t(k)]), params_.max_gate);
-    const double gate2 = gate * gate;
+    // Costs in units of each marker's own gate, "missing" at 1 for all: a lost marker's
+    // wider gate lets it find its point again but does not make it dearer to leave
+    // missing, so it does not outbid a tracked neighbour for the neighbour's own point.
+    const double inv_gate2 = 1.0 / (gate * gate);
     double* row = cost_.data() + std::size_t(k) * std::size_t(cols);
     for (int j = 0; j < n; ++j) {
       double d = (points_.col(j) - predicted_.col(k)).norm();
       if (use_margin && own_label[std::size_t(j)] == k) d = std::max(0.0, d - params_.label_margin);
-      row[j] = d <= gate ? d * d : big;
+      row[j] = d <= gate ? d * d * inv_gate2 : big;
     }
-    for (int j = 0; j < K; ++j) row[n + j] = j == k ? gate2 : big;  // "missing" for marker k only
+    for (int j = 0; j < K; ++j) row[n + j] = j == k ? 1.0 : big;  // "missing" for marker k only
   }
   const double total = solver_.solve(K, cols, std::span<const double>(cost_.data(), std::size_t(K) * std::size_t(cols)), row_to_col_);
   int assigned = 0;
