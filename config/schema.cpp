@@ -191,7 +191,7 @@ const std::vector<KeySpec>& schema_rows() {
                       "/var/lib/facecap): the control API lists them (GET /actors), loads one by name (POST /actor) "
                       "and saves a calibration made on the box there (POST /calibrate with \"save\")."},
       {FACECAP_KEY(calibration.face_markers), .default_value = int64_t{48}, .min = 3, .max = 1000,
-       .description = "Face markers of the default marker set, spread evenly over the rig (labels M000, M001, ...)."},
+       .description = "Face markers of the default marker set: first where they observe the rig's shapes (lids, brows, mouth), the rest spread evenly (labels M000, M001, ...)."},
       {FACECAP_KEY(calibration.head_markers), .default_value = int64_t{4}, .min = 0, .max = 16,
        .description = "Markers on a rigid headband in the default marker set (labels H0, H1, ...); 0 for none, else "
                       "at least 3."},

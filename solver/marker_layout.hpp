@@ -1,5 +1,6 @@
 #pragma once
 // Marker layouts for simulated and synthetic takes: where on the rig markers sit.
+#include <span>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,18 @@ namespace facecap {
 // vertex nearest the centre of the front), skipping vertices no shape moves and the
 // mesh border. Deterministic. Labels are "M000", "M001", ...
 std::vector<MarkerBinding> spread_marker_layout(const Rig& rig, int count);
+
+// `count` markers that first observe every shape they can: each at the usable vertex that
+// sees the most shapes no marker sees yet (moved by 1.5 x observable_mm at weight 1, the
+// calibration's threshold, or by 90% of the most the shape moves a vertex, if that is
+// less but above the threshold), kObservingMarkerSpacingMm from the others and from the
+// `taken` points (a head rig's) at rest and half that at any shape's full weight; then
+// spread as spread_marker_layout does. The built-in face's blinks and brows get markers.
+// Deterministic. Labels are "M000", "M001", ...
+std::vector<MarkerBinding> observing_marker_layout(const Rig& rig, int count, double observable_mm,
+                                                   std::span<const Eigen::Vector3d> taken = {});
+// Real markers sit about a centimetre apart at the least.
+inline constexpr double kObservingMarkerSpacingMm = 10.0;
 
 // Markers on the given vertex indices, labelled "V<index>".
 std::vector<MarkerBinding> vertex_marker_layout(const std::vector<int>& vertices);
@@ -34,7 +47,7 @@ struct MarkerSet {
   std::vector<std::string> labels() const;
 };
 
-// face_markers spread over the face (spread_marker_layout: labels M000...) and
+// face_markers observing the rig's shapes (observing_marker_layout: labels M000...) and
 // head_markers on a rigid headband above the brow (labels H0...), placed from the rig's
 // bounding box. head_markers is 0 or at least 3. Not RT-safe; throws Error.
 MarkerSet default_marker_set(const Rig& rig, int face_markers, int head_markers);

@@ -157,6 +157,10 @@ double PointErrors::median_mm() const {
   return sorted[sorted.size() / 2];
 }
 
+std::size_t PointErrors::count_above(double mm) const {
+  return std::size_t(std::count_if(errors_mm_.begin(), errors_mm_.end(), [&](double e) { return e > mm; }));
+}
+
 double PointErrors::worst_mm() const {
   return errors_mm_.empty() ? INFINITY : *std::max_element(errors_mm_.begin(), errors_mm_.end());
 }

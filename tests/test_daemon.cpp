@@ -129,6 +129,41 @@ TEST_CASE("lockstep replay solves every frame and the recorder writes them all")
   CHECK(last.weights.size() == rig->shape_count());
 }
 
+TEST_CASE("the default marker set observes the demo's blinks and brows: the sim solved follows them") {
+  // 8 s of the sim (blinks at 0, 3.7 and 7.4 s; brows raised and lowered on slow waves),
+  // replayed in lockstep and recorded; the solved weights against the sim's truth.
+  const fs::path dir = test::scratch_dir("demo-blinks");
+  const config::DaemonConfig defaults = config::default_config();
+  const auto rig = builtin_rig();
+  const pipeline::Calibration calibration = pipeline::load_calibration(pipeline::calibration_spec(defaults), *rig);
+  constexpr int64_t kFrames = 960;
+  test::write_sim_take(dir / "take.fcrec", defaults.source.sim, rig, pipeline::rest_marker_set(calibration), kFrames);
+  Daemon d({.handle_signals = false},
+           loaded({"source.driver=replay", "source.replay.file=" + (dir / "take.fcrec").string(), "loop.mode=lockstep",
+                   "outputs.shm.name=" + unique_shm("demo-blinks"), "outputs.recording.enabled=true",
+                   "outputs.recording.directory=" + (dir / "rec").string(), "loop.realtime=false"}));
+  d.start();
+  REQUIRE(d.run() == 0);
+  formats::RecordingReader reader(d.recording_file());
+  REQUIRE(reader.solved_frame_count() == std::size_t(kFrames));
+  for (const char* name : {"eyeBlink_L", "eyeBlink_R", "browInnerUp_L", "browInnerUp_R", "browDown_L", "browDown_R"}) {
+    const Eigen::Index s = *rig->shape_index(name);
+    double error = 0, peak_truth = 0, solved_at_peak = 0;
+    SolvedFrame f;
+    for (int64_t n = 0; n < kFrames; ++n) {
+      reader.read_solved_frame(std::size_t(n), f);
+      const double truth = BuiltinFace::instance().motion_weights(double(f.frame_no) / 120.0)[s];
+      error += std::abs(double(f.weights[s]) - truth);
+      if (truth > peak_truth) peak_truth = truth, solved_at_peak = f.weights[s];
+    }
+    INFO(name << ": mean |w - truth| " << error / kFrames << ", at the truth's peak " << peak_truth << " solved "
+              << solved_at_peak);
+    CHECK(peak_truth > 0.4);
+    CHECK(solved_at_peak > 0.6 * peak_truth);  // left at 0 when no marker observed them
+    CHECK(error / kFrames < 0.1);
+  }
+}
+
 TEST_CASE("a replay of unlabelled points, as facecapd records cameras, is labelled without being told and solves the face") {
   const fs::path dir = test::scratch_dir("unlabelled-replay");
   const config::DaemonConfig defaults = config::default_config();
