@@ -14,25 +14,12 @@
 #include <toml++/toml.h>
 
 #include "client/facecap_shm_layout.hpp"
+#include "core/text_list.hpp"
 #include "core/toml_reader.hpp"
 
 namespace facecap::config {
 namespace fs = std::filesystem;
 
-std::vector<std::string> split_comma_list(std::string_view text) {
-  std::vector<std::string> items;
-  std::string item;
-  for (const char c : text) {
-    if (c == ',' || c == ' ' || c == '\t') {
-      if (!item.empty()) items.push_back(std::move(item));
-      item.clear();
-    } else {
-      item.push_back(c);
-    }
-  }
-  if (!item.empty()) items.push_back(std::move(item));
-  return items;
-}
 namespace {
 
 std::size_t key_index(const KeySpec& key) { return std::size_t(&key - config_schema().data()); }
@@ -223,12 +210,12 @@ class Loader {
       if (!c.control.http.viewer_token_file.empty() && c.control.http.token_file.empty())
         problem(where("control.http.viewer_token_file"),
                 "a viewer's token needs the operator's (control.http.token_file): without it every client is the operator");
-      for (const std::string& origin : split_comma_list(c.control.http.allowed_origins))
+      for (const std::string& origin : split_list(c.control.http.allowed_origins, kListSeparators))
         if (!(origin.starts_with("http://") || origin.starts_with("https://")) ||
             origin.find('/', origin.find("//") + 2) != std::string::npos)
           problem(where("control.http.allowed_origins"),
                   fmt::format("\"{}\" is not an origin (scheme://host[:port], no path, as in http://tablet.lan:8080)", origin));
-      for (const std::string& host : split_comma_list(c.control.http.allowed_hosts))
+      for (const std::string& host : split_list(c.control.http.allowed_hosts, kListSeparators))
         if (host.find_first_of(":/[]@") != std::string::npos)
           problem(where("control.http.allowed_hosts"),
                   fmt::format("\"{}\" is not a host name (no port, scheme or path: stage-box.local)", host));

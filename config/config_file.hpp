@@ -3,6 +3,7 @@
 // reported together (file:line:col, key path, bad value, allowed range), and nothing is
 // returned unless the whole configuration is valid. Not real-time code.
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "config/daemon_config.hpp"
@@ -66,8 +67,8 @@ std::string render_markdown_reference();
 // The keys whose values differ.
 std::vector<const KeySpec*> changed_keys(const DaemonConfig& before, const DaemonConfig& after);
 
-// The entries of a comma-separated list setting ("a, b c" -> {"a", "b", "c"}).
-std::vector<std::string> split_comma_list(std::string_view text);
+// What separates the entries of a list setting (split_list): commas or spaces ("a, b c").
+inline constexpr std::string_view kListSeparators = ", \t";
 
 // The closest of `candidates` to `word` when it is close enough to be a likely typo.
 std::string closest_match(std::string_view word, const std::vector<std::string>& candidates);

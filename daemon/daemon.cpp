@@ -16,6 +16,7 @@
 #include "core/error.hpp"
 #include "core/io.hpp"
 #include "core/log.hpp"
+#include "core/text_list.hpp"
 #include "core/time.hpp"
 #include "core/units.hpp"
 #include "daemon/process_signals.hpp"
@@ -226,8 +227,8 @@ void Daemon::start_control() {
   };
   control::AccessOptions access{.operator_token = read_token(http.token_file),
                                 .viewer_token = read_token(http.viewer_token_file),
-                                .allowed_hosts = config::split_comma_list(http.allowed_hosts),
-                                .allowed_origins = config::split_comma_list(http.allowed_origins),
+                                .allowed_hosts = split_list(http.allowed_hosts, config::kListSeparators),
+                                .allowed_origins = split_list(http.allowed_origins, config::kListSeparators),
                                 .session_max_age_s = http.session_max_age_s};
   if (!access.viewer_token.empty() && access.viewer_token == access.operator_token)
     throw file_error(http.viewer_token_file, "the viewer's token is the operator's: give the viewer a token of its own");

@@ -9,6 +9,7 @@
 
 #include "config/config_file.hpp"
 #include "control/api.hpp"
+#include "core/text_list.hpp"
 #include "core/time.hpp"
 #include "tests/test_support.hpp"
 
@@ -306,5 +307,5 @@ TEST_CASE("token files others may read are refused, like ssh keys, and the lists
                     Contains("\"tablet.lan:8080\" is not an origin"));
   CHECK_THROWS_WITH(config::load_config("", {"control.http.enabled=true", "control.http.allowed_hosts=http://box"}),
                     Contains("\"http://box\" is not a host name"));
-  CHECK(config::split_comma_list(" a.lan, b.lan  c.lan,,") == std::vector<std::string>{"a.lan", "b.lan", "c.lan"});
+  CHECK(split_list(" a.lan, b.lan  c.lan,,", config::kListSeparators) == std::vector<std::string>{"a.lan", "b.lan", "c.lan"});
 }

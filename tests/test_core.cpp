@@ -16,6 +16,7 @@
 #include "core/log.hpp"
 #include "core/printable.hpp"
 #include "core/realtime.hpp"
+#include "core/text_list.hpp"
 #include "core/time.hpp"
 #include "core/toml_reader.hpp"
 #include "tests/test_support.hpp"
@@ -219,4 +220,14 @@ TEST_CASE("a log message carrying outside text stays one line: no journald prior
   spdlog::set_default_logger(previous);
   ::unsetenv("JOURNAL_STREAM");
   CHECK(text.str() == "<6>info: take started: evil\\x0a<0>facecapd: EMERGENCY\\x1b]0;owned\\x07\\xff\n");
+}
+
+TEST_CASE("split_list splits at its separators, trims spaces and tabs and drops empty items") {
+  using V = std::vector<std::string>;
+  CHECK(split_list("a, b ,,\tc ") == V{"a", "b", "c"});
+  CHECK(split_list("Marker 1, Marker 2") == V{"Marker 1", "Marker 2"});  // spaces inside an item stay
+  CHECK(split_list(" a.lan, b.lan  c.lan,,", ", \t") == V{"a.lan", "b.lan", "c.lan"});
+  CHECK(split_list("").empty());
+  CHECK(split_list(" , ,").empty());
+  CHECK(split_list("/dev/video0") == V{"/dev/video0"});
 }

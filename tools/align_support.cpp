@@ -10,17 +10,6 @@
 
 namespace facecap::tools {
 
-std::vector<std::string> split_list(const std::string& text) {
-  std::vector<std::string> out;
-  std::string item;
-  std::istringstream in(text);
-  while (std::getline(in, item, ',')) {
-    const auto b = item.find_first_not_of(" \t"), e = item.find_last_not_of(" \t");
-    if (b != std::string::npos) out.push_back(item.substr(b, e - b + 1));
-  }
-  return out;
-}
-
 double rig_mm_per_unit(const Rig& rig, const std::string& override_units) {
   const std::string units = override_units.empty() ? guess_face_units(bounding_box(rig.neutral)) : override_units;
   const auto mm = millimetres_per_unit(units);

@@ -16,9 +16,6 @@
 
 namespace facecap::tools {
 
-// "a,b , c" -> {"a","b","c"}; empty items dropped.
-std::vector<std::string> split_list(const std::string& text);
-
 // Millimetres per rig unit: the override ("mm", "cm", "m"), else guessed from the face's
 // size. Throws Error when neither names a unit.
 double rig_mm_per_unit(const Rig& rig, const std::string& override_units);

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.hpp"
+#include "core/text_list.hpp"
 #include "core/units.hpp"
 #include "formats/take.hpp"
 #include "solver/align/neutral.hpp"

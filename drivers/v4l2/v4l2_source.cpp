@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
+#include "core/text_list.hpp"
 #include "core/time.hpp"
 #include "drivers/v4l2/v4l2_feed.hpp"
 
@@ -19,20 +20,6 @@ constexpr int kWaitMs = 50;                          // the thread checks its st
 constexpr int64_t kSilentCameraNs = kNsPerSecond;    // a camera quiet this long is reported
 constexpr int64_t kStateRefreshNs = 250 * kNsPerMs;
 constexpr int64_t kReopenEveryNs = kNsPerSecond;      // a lost camera is looked for this often
-
-std::vector<std::string> split_devices(const std::string& list) {
-  std::vector<std::string> out;
-  std::size_t begin = 0;
-  while (begin <= list.size()) {
-    const std::size_t end = std::min(list.find(',', begin), list.size());
-    std::string item = list.substr(begin, end - begin);
-    item.erase(0, item.find_first_not_of(" \t"));
-    item.erase(item.find_last_not_of(" \t") + 1);
-    if (!item.empty()) out.push_back(item);
-    begin = end + 1;
-  }
-  return out;
-}
 
 }  // namespace
 
@@ -54,7 +41,7 @@ void V4l2Source::open() {
   camera_names_.clear();
   for (const v4l2::CameraModel& c : calibration.cameras) camera_names_.push_back(c.name);
   if (!feed_) {
-    const std::vector<std::string> devices = split_devices(options_.devices);
+    const std::vector<std::string> devices = split_list(options_.devices);
     if (devices.size() != calibration.cameras.size())
       throw Error(fmt::format("source.v4l2.devices names {} device(s) for the {} cameras of {}: the v4l2 driver needs "
                               "one V4L2 capture device per calibrated camera, comma-separated, in the calibration's "
