@@ -31,6 +31,13 @@ constexpr int32_t kRestartFrames = 16;
 constexpr int kReceiveBufferBytes = 4 << 20;
 constexpr nn::Version kOurNatNetVersion{4, 1, 0, 0};
 
+// The end of the warning for one more dropped datagram of a kind whose warnings so far
+// are `logged`, or nullptr past the first kErrorsLoggedEach (only counted, then summed up).
+const char* drop_warning_tail(uint64_t& logged) noexcept {
+  if (logged >= kErrorsLoggedEach) return nullptr;
+  return ++logged == kErrorsLoggedEach ? " (further ones are counted, and summed up every 10 s)" : "";
+}
+
 std::optional<nn::Version> asked_bitstream(NatNetBitstream b) {
   switch (b) {
     case NatNetBitstream::kServer: return std::nullopt;
@@ -231,11 +238,7 @@ template <typename Describe>
 void NatNetSource::count_bad(std::atomic<uint64_t>& counter, Describe&& describe) {
   counter.fetch_add(1, std::memory_order_relaxed);
   errors_.fetch_add(1, std::memory_order_relaxed);
-  if (errors_logged_ < kErrorsLoggedEach) {
-    ++errors_logged_;
-    spdlog::warn("natnet: dropped {}{}", describe(),
-                 errors_logged_ == kErrorsLoggedEach ? " (further ones are counted, and summed up every 10 s)" : "");
-  }
+  if (const char* tail = drop_warning_tail(errors_logged_)) spdlog::warn("natnet: dropped {}{}", describe(), tail);
 }
 
 bool NatNetSource::from_server(std::span<const char> datagram, const natnet::Endpoint& from) const noexcept {
@@ -253,12 +256,9 @@ void NatNetSource::handle(std::span<const char> datagram, bool truncated, const 
                           int64_t received_ns) {
   if (!from_server(datagram, from)) {
     foreign_.fetch_add(1, std::memory_order_relaxed);
-    if (foreign_logged_ < kErrorsLoggedEach) {
-      ++foreign_logged_;
-      spdlog::warn("natnet: dropped a datagram from {}, which is not the server {}{}", from.to_string(),
-                   server_.to_string(),
-                   foreign_logged_ == kErrorsLoggedEach ? " (further ones are counted, and summed up every 10 s)" : "");
-    }
+    if (const char* tail = drop_warning_tail(foreign_logged_))
+      spdlog::warn("natnet: dropped a datagram from {}, which is not the server {}{}", from.to_string(), server_.to_string(),
+                   tail);
     return;
   }
   if (truncated || datagram.size() > nn::kHeaderBytes + nn::kMaxPayloadBytes) {
