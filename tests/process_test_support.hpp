@@ -9,6 +9,7 @@
 #include <catch2/catch.hpp>
 #include <fcntl.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -56,12 +57,13 @@ class ChildProcess {
   ChildProcess& operator=(const ChildProcess&) = delete;
 
   pid_t pid() const { return pid_; }
-  // Exit status, or -1 if still running after timeout_ns.
-  int wait_exit(int64_t timeout_ns) {
+  // Exit status (128 + signal when killed), or -1 if still running after timeout_ns;
+  // `usage`, when given, gets the child's resource use (wait4) once it has exited.
+  int wait_exit(int64_t timeout_ns, rusage* usage = nullptr) {
     const int64_t give_up = monotonic_now_ns() + timeout_ns;
     for (;;) {
       int status = 0;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+      if (::wait4(pid_, &status, WNOHANG, usage) == pid_) {
         exited_ = true;
         return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
       }

@@ -653,34 +653,18 @@ struct Measured {
   std::string output;
 };
 Measured run_measured(const std::string& program, const std::vector<std::string>& args, const fs::path& log) {
-  const std::string path = std::string(FACECAP_BINARY_DIR) + "/" + program;
-  std::vector<std::string> argv_storage = {path};
-  argv_storage.insert(argv_storage.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (auto& a : argv_storage) argv.push_back(a.data());
-  argv.push_back(nullptr);
   const int64_t start = monotonic_now_ns();
-  const pid_t pid = ::fork();
-  REQUIRE(pid >= 0);
-  if (pid == 0) {
-    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(fd, 1);
-    ::dup2(fd, 2);
-    const rlimit address_space{4ul << 30, 4ul << 30};
-    ::setrlimit(RLIMIT_AS, &address_space);
-    ::execv(path.c_str(), argv.data());
-    ::_exit(127);
-  }
-  Measured m;
-  int status = 0;
+  ChildProcess child(program, args, {}, log);
+  const rlimit address_space{4ul << 30, 4ul << 30};
+  REQUIRE(::prlimit(child.pid(), RLIMIT_AS, &address_space, nullptr) == 0);
   rusage usage{};
-  for (;;) {
-    if (::wait4(pid, &status, WNOHANG, &usage) == pid) break;
-    if (monotonic_now_ns() - start > 10 * kNsPerSecond) ::kill(pid, SIGKILL);
-    usleep(1000);
+  Measured m;
+  m.exit_code = child.wait_exit(10 * kNsPerSecond, &usage);
+  if (m.exit_code < 0) {
+    ::kill(child.pid(), SIGKILL);
+    m.exit_code = child.wait_exit(10 * kNsPerSecond, &usage);
   }
   m.seconds = double(monotonic_now_ns() - start) / 1e9;
-  m.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   m.max_rss_kb = usage.ru_maxrss;
   m.output = slurp(log);
   return m;
