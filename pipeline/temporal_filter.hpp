@@ -45,7 +45,7 @@ class OneEuroFilter {
   // What the filter carries from one frame to the next.
   struct State {
     Eigen::MatrixXd raw, filtered, speed;  // D x N
-    std::vector<uint8_t> live;             // N
+    std::vector<uint8_t> live;             // N: the channel was filtered last frame
     int64_t last_ns = 0;
     bool started = false;
   };
@@ -58,17 +58,14 @@ class OneEuroFilter {
   // filter's. RT-safe.
   bool restore(const State& state) noexcept;
 
-  Eigen::Index rows() const noexcept { return filtered_.rows(); }
-  Eigen::Index channels() const noexcept { return filtered_.cols(); }
+  Eigen::Index rows() const noexcept { return state_.filtered.rows(); }
+  Eigen::Index channels() const noexcept { return state_.filtered.cols(); }
 
  private:
   bool same_shape(const State& state) const noexcept;
 
   OneEuroParams params_;
-  Eigen::MatrixXd raw_, filtered_, speed_;  // D x N: the previous frame's input, output and filtered speed
-  std::vector<uint8_t> live_;               // N: the channel was filtered last frame
-  int64_t last_ns_ = 0;
-  bool started_ = false;
+  State state_;  // raw, filtered, speed: the previous frame's input, output and filtered speed
 };
 
 }  // namespace facecap::pipeline

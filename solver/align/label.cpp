@@ -79,13 +79,13 @@ MarkerLabeller::MarkerLabeller(std::vector<std::string> labels, Eigen::Matrix3Xd
   if (params_.max_points < 1) throw Error("labeller: max_points must be positive");
   const std::size_t Ks = std::size_t(K), P = std::size_t(params_.max_points);
   points_.resize(3, params_.max_points);
-  last_ = reference_;
-  velocity_.setZero(3, K);
+  state_.last = reference_;
+  state_.velocity.setZero(3, K);
   predicted_ = reference_;
   aligned_reference_ = reference_;
-  last_in_reference_ = reference_;
-  lost_frames_.assign(Ks, 0);
-  ever_seen_.assign(Ks, 0);
+  state_.last_in_reference = reference_;
+  state_.lost_frames.assign(Ks, 0);
+  state_.ever_seen.assign(Ks, 0);
   cost_.assign(Ks * (P + Ks), 0.0);
   row_to_col_.assign(Ks, -1);
   assigned_point_.assign(Ks, -1);
@@ -98,16 +98,14 @@ MarkerLabeller::MarkerLabeller(std::vector<std::string> labels, Eigen::Matrix3Xd
 }
 
 void MarkerLabeller::reset() noexcept {
-  tracking_ = false;
-  std::fill(lost_frames_.begin(), lost_frames_.end(), 0);
-  std::fill(ever_seen_.begin(), ever_seen_.end(), uint8_t(0));
-  velocity_.setZero();
-  set_pose_known_ = false;
+  state_.tracking = false;
+  std::fill(state_.lost_frames.begin(), state_.lost_frames.end(), 0);
+  std::fill(state_.ever_seen.begin(), state_.ever_seen.end(), uint8_t(0));
+  state_.velocity.setZero();
+  state_.set_pose_known = false;
 }
 
-MarkerLabeller::State MarkerLabeller::make_state() const {
-  return {last_, velocity_, last_in_reference_, lost_frames_, ever_seen_, set_pose_, set_pose_known_, tracking_};
-}
+MarkerLabeller::State MarkerLabeller::make_state() const { return state_; }
 
 bool MarkerLabeller::fits(const State& state) const noexcept {
   const Eigen::Index K = marker_count();
@@ -117,36 +115,22 @@ bool MarkerLabeller::fits(const State& state) const noexcept {
 
 bool MarkerLabeller::save(State& state) const noexcept {
   if (!fits(state)) return false;
-  state.last = last_;  // same sizes: no allocation
-  state.velocity = velocity_;
-  state.last_in_reference = last_in_reference_;
-  state.lost_frames = lost_frames_;
-  state.ever_seen = ever_seen_;
-  state.set_pose = set_pose_;
-  state.set_pose_known = set_pose_known_;
-  state.tracking = tracking_;
+  state = state_;  // same sizes: no allocation
   return true;
 }
 
 bool MarkerLabeller::restore(const State& state) noexcept {
   if (!fits(state)) return false;
-  last_ = state.last;
-  velocity_ = state.velocity;
-  last_in_reference_ = state.last_in_reference;
-  lost_frames_ = state.lost_frames;
-  ever_seen_ = state.ever_seen;
-  set_pose_ = state.set_pose;
-  set_pose_known_ = state.set_pose_known;
-  tracking_ = state.tracking;
+  state_ = state;
   return true;
 }
 
 void MarkerLabeller::predict() noexcept {
   for (Eigen::Index k = 0; k < marker_count(); ++k) {
-    if (lost_frames_[std::size_t(k)] == 0)
-      predicted_.col(k) = last_.col(k) + velocity_.col(k);
+    if (state_.lost_frames[std::size_t(k)] == 0)
+      predicted_.col(k) = state_.last.col(k) + state_.velocity.col(k);
     else
-      predicted_.col(k) = set_pose_known_ ? set_pose_.apply(Eigen::Vector3d(last_in_reference_.col(k))) : Eigen::Vector3d(last_.col(k));
+      predicted_.col(k) = state_.set_pose_known ? state_.set_pose.apply(Eigen::Vector3d(state_.last_in_reference.col(k))) : Eigen::Vector3d(state_.last.col(k));
   }
 }
 
@@ -156,7 +140,7 @@ int MarkerLabeller::assign(int n, std::span<const int> own_label, bool use_margi
   const double big = 1e30;
   for (int k = 0; k < K; ++k) {
     const double gate =
-        gate_scale * std::min(params_.gate + params_.gate_growth * double(lost_frames_[std::size_t(k)]), params_.max_gate);
+        gate_scale * std::min(params_.gate + params_.gate_growth * double(state_.lost_frames[std::size_t(k)]), params_.max_gate);
     // Costs in units of each marker's own gate, "missing" at 1 for all: a lost marker's
     // wider gate lets it find its point again but does not make it dearer to leave
     // missing, so it does not outbid a tracked neighbour for the neighbour's own point.
@@ -190,7 +174,7 @@ void MarkerLabeller::acquire(int n) noexcept {
   pose.translation = centre_points - centre_ref;
   for (int it = 0; it < params_.initial_iterations; ++it) {
     for (Eigen::Index k = 0; k < K; ++k) predicted_.col(k) = pose.apply(Eigen::Vector3d(reference_.col(k)));
-    std::fill(lost_frames_.begin(), lost_frames_.end(), 0);
+    std::fill(state_.lost_frames.begin(), state_.lost_frames.end(), 0);
     // Wide gates early, the normal gate at the end.
     const double scale = it + 1 < params_.initial_iterations ? params_.max_gate / params_.gate * 2.0 : 1.0;
     assign(n, no_label_, false, scale);
@@ -211,15 +195,15 @@ void MarkerLabeller::update(int n) noexcept {
     const std::size_t ks = std::size_t(k);
     const int j = assigned_point_[ks];
     if (j < 0) {
-      lost_frames_[ks] = lost_frames_[ks] + 1;
-      velocity_.col(k).setZero();
+      state_.lost_frames[ks] = state_.lost_frames[ks] + 1;
+      state_.velocity.col(k).setZero();
       continue;
     }
-    velocity_.col(k) = lost_frames_[ks] == 0 && ever_seen_[ks] ? Eigen::Vector3d(points_.col(j) - last_.col(k))
+    state_.velocity.col(k) = state_.lost_frames[ks] == 0 && state_.ever_seen[ks] ? Eigen::Vector3d(points_.col(j) - state_.last.col(k))
                                                               : Eigen::Vector3d::Zero();
-    last_.col(k) = points_.col(j);
-    lost_frames_[ks] = 0;
-    ever_seen_[ks] = 1;
+    state_.last.col(k) = points_.col(j);
+    state_.lost_frames[ks] = 0;
+    state_.ever_seen[ks] = 1;
   }
   // The set's rigid motion from the markers seen this frame; their last positions carried
   // back by it (a lost marker keeps the one it had when last seen).
@@ -228,14 +212,14 @@ void MarkerLabeller::update(int n) noexcept {
     const bool found = assigned_point_[std::size_t(k)] >= 0;
     fit_weight_[std::size_t(k)] = found ? 1.0 : 0.0;
     fit_src_.col(k) = reference_.col(k);
-    fit_dst_.col(k) = found ? Eigen::Vector3d(last_.col(k)) : Eigen::Vector3d::Zero();
+    fit_dst_.col(k) = found ? Eigen::Vector3d(state_.last.col(k)) : Eigen::Vector3d::Zero();
     seen += found;
   }
-  set_pose_known_ = seen >= 3 && fit_similarity(fit_src_, fit_dst_, fit_weight_, false, set_pose_);
-  if (!set_pose_known_) return;
-  const Eigen::Matrix3d back = set_pose_.rotation.transpose();
+  state_.set_pose_known = seen >= 3 && fit_similarity(fit_src_, fit_dst_, fit_weight_, false, state_.set_pose);
+  if (!state_.set_pose_known) return;
+  const Eigen::Matrix3d back = state_.set_pose.rotation.transpose();
   for (Eigen::Index k = 0; k < marker_count(); ++k)
-    if (assigned_point_[std::size_t(k)] >= 0) last_in_reference_.col(k) = back * (last_.col(k) - set_pose_.translation);
+    if (assigned_point_[std::size_t(k)] >= 0) state_.last_in_reference.col(k) = back * (state_.last.col(k) - state_.set_pose.translation);
 }
 
 LabelStats MarkerLabeller::label(std::span<const Eigen::Vector3d> points, MarkerFrame& out) noexcept {
@@ -251,18 +235,18 @@ LabelStats MarkerLabeller::label(std::span<const Eigen::Vector3d> points, Marker
     points_.col(n++) = p;
   }
   int assigned = 0;
-  if (tracking_) {
+  if (state_.tracking) {
     predict();
     assigned = assign(n, no_label_, false, 1.0);
   }
-  if (!tracking_ || assigned < int(std::ceil(params_.reacquire_fraction * double(K)))) {
+  if (!state_.tracking || assigned < int(std::ceil(params_.reacquire_fraction * double(K)))) {
     acquire(n);
     // No prediction yet: the face may be far from the reference's expression, so the
     // widest gate; the optimal assignment keeps neighbours apart.
     assigned = assign(n, no_label_, false, params_.max_gate / params_.gate);
     stats.initialised = true;
   }
-  tracking_ = assigned >= int(std::ceil(params_.reacquire_fraction * double(K)));
+  state_.tracking = assigned >= int(std::ceil(params_.reacquire_fraction * double(K)));
   update(n);
   if (out.markers.size() != std::size_t(K)) out.markers.resize(std::size_t(K));  // allocates only the first time
   for (Eigen::Index k = 0; k < K; ++k) {
@@ -297,11 +281,11 @@ LabelStats MarkerLabeller::check(MarkerFrame& frame) noexcept {
     ++n;
   }
   int assigned = 0;
-  if (tracking_) {
+  if (state_.tracking) {
     predict();
     assigned = assign(n, own_label_, true, 1.0);
   }
-  if (!tracking_ || assigned < int(std::ceil(params_.reacquire_fraction * double(K)))) {
+  if (!state_.tracking || assigned < int(std::ceil(params_.reacquire_fraction * double(K)))) {
     // No usable prediction: the reference shape moved onto the points decides, with the
     // labels' margin (so a take that starts swapped, or is swapped when the set is lost,
     // is corrected); a marker no gate gives a point keeps the one its label gives, if free.
@@ -317,7 +301,7 @@ LabelStats MarkerLabeller::check(MarkerFrame& frame) noexcept {
     assigned = int(std::count_if(assigned_point_.begin(), assigned_point_.end(), [](int j) { return j >= 0; }));
     stats.initialised = true;
   }
-  tracking_ = true;
+  state_.tracking = true;
   update(n);
   for (Eigen::Index k = 0; k < K; ++k) {
     Marker& m = frame.markers[std::size_t(k)];

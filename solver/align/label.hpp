@@ -77,11 +77,16 @@ class MarkerLabeller {
   // What the labeller carries from one frame to the next: each marker's last position,
   // velocity and frames lost, and the set's motion.
   struct State {
-    Eigen::Matrix3Xd last, velocity, last_in_reference;  // 3 x K
-    std::vector<int> lost_frames;                        // K
-    std::vector<uint8_t> ever_seen;                      // K
+    Eigen::Matrix3Xd last, velocity;  // 3 x K
+    // The set's rigid motion (reference -> the last frame's points, fitted to the markers
+    // assigned) and each marker's last position carried back by it: a lost marker is
+    // predicted where the set's motion has taken it since, so it is found again after the
+    // head moved while it was hidden.
     Similarity set_pose;
     bool set_pose_known = false;
+    Eigen::Matrix3Xd last_in_reference;  // 3 x K
+    std::vector<int> lost_frames;        // K: frames since last seen (0 = seen last frame)
+    std::vector<uint8_t> ever_seen;      // K
     bool tracking = false;
   };
   // A state sized for this labeller. Not real-time.
@@ -109,22 +114,13 @@ class MarkerLabeller {
   Eigen::Matrix3Xd reference_;
   LabellerParams params_;
   AssignmentSolver solver_;
-  Eigen::Matrix3Xd points_, last_, velocity_, predicted_, aligned_reference_;
-  // The set's rigid motion (reference -> the last frame's points, fitted to the markers
-  // assigned) and each marker's last position carried back by it: a lost marker is
-  // predicted where the set's motion has taken it since, so it is found again after the
-  // head moved while it was hidden.
-  Similarity set_pose_;
-  bool set_pose_known_ = false;
-  Eigen::Matrix3Xd last_in_reference_;
-  std::vector<int> lost_frames_;      // K: frames since last seen (0 = seen last frame)
-  std::vector<uint8_t> ever_seen_;
+  Eigen::Matrix3Xd points_, predicted_, aligned_reference_;
+  State state_;
   std::vector<double> cost_;
   std::vector<int> row_to_col_, assigned_point_, own_label_, no_label_;
   std::vector<uint8_t> claimed_;  // max_points: check()'s (re)initialisation, a point taken
   std::vector<double> fit_weight_;
   Eigen::Matrix3Xd fit_src_, fit_dst_;
-  bool tracking_ = false;
 };
 
 }  // namespace facecap::align
