@@ -24,7 +24,7 @@
 namespace facecap::tools {
 namespace {
 
-struct Options {
+struct CalibrateOptions {
   std::string rig, take, output, markers, stable, head, units, rig_units;
   int64_t frame = 0;
   bool auto_neutral = false;
@@ -59,7 +59,7 @@ formats::MarkerTake select_markers(formats::MarkerTake take, const std::vector<s
   return out;
 }
 
-void run_calibrate(const Options& o, bool frame_given) {
+void run_calibrate(const CalibrateOptions& o, bool frame_given) {
   const Rig rig = load_rig(o.rig);
   const double rig_mm = rig_mm_per_unit(rig, o.rig_units);
   // --stable and --head markers stay in the take when --markers leaves them out: a stable
@@ -221,7 +221,7 @@ void run_calibrate(const Options& o, bool frame_given) {
 }  // namespace
 
 void add_calibrate_command(CLI::App& app, int& exit_code) {
-  auto opts = std::make_shared<Options>();
+  auto opts = std::make_shared<CalibrateOptions>();
   auto* cmd = app.add_subcommand("calibrate", "Calibrate an actor's markers to a rig from a neutral frame of a take");
   cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--take", opts->take, "Marker take (.trc, .c3d, .fcrec)")->required()->check(CLI::ExistingFile);

@@ -28,7 +28,7 @@
 namespace facecap::tools {
 namespace {
 
-struct Options {
+struct EvalOptions {
   std::string rig, take, truth, solvers = "all", rig_units_override;
   bool json = false;
   bool truth_weights = false;
@@ -87,7 +87,7 @@ struct SolverRun {
   std::size_t held = 0;
 };
 
-void run_eval(const Options& o, const SolverParams& params) {
+void run_eval(const EvalOptions& o, const SolverParams& params) {
   const auto solver_list = select_solvers(o.solvers);
   const std::filesystem::path take_path(o.take);
   const std::filesystem::path truth_path =
@@ -239,7 +239,7 @@ void run_eval(const Options& o, const SolverParams& params) {
 }  // namespace
 
 void add_eval_command(CLI::App& app, int& exit_code) {
-  auto o = std::make_shared<Options>();
+  auto o = std::make_shared<EvalOptions>();
   auto* cmd = app.add_subcommand("eval", "Evaluate solvers: a synthetic take against its ground truth, or a real take "
                                          "calibrated with --calib by held-out marker error");
   cmd->add_option("--rig", o->rig, "The rig the take was made from (or calibrated to)")->required();

@@ -43,7 +43,7 @@ std::optional<ExportKind> export_kind(const std::filesystem::path& output) {
   return std::nullopt;
 }
 
-struct Options {
+struct ExportOptions {
   std::string input, output, rig, map;
   bool weights_only = false, rig_names = false, force = false, progress = false;
   double scale = 1.0;
@@ -148,7 +148,7 @@ void for_each_solved_mesh(const formats::RecordingReader& reader, const std::str
   }
 }
 
-void export_point_cache(const Options& o, const formats::RecordingReader& reader, formats::PointCacheFormat format) {
+void export_point_cache(const ExportOptions& o, const formats::RecordingReader& reader, formats::PointCacheFormat format) {
   std::unique_ptr<formats::PointCacheWriter> writer;
   std::size_t frames = 0;
   Eigen::Index vertices = 0;
@@ -170,7 +170,7 @@ void export_point_cache(const Options& o, const formats::RecordingReader& reader
              format == formats::PointCacheFormat::kPc2 ? "PC2" : "MDD", frames, vertices, o.scale);
 }
 
-void export_obj_frame(const Options& o, const formats::RecordingReader& reader) {
+void export_obj_frame(const ExportOptions& o, const formats::RecordingReader& reader) {
   if (!o.frame) throw file_error(o.output, "an OBJ holds one frame: pass --frame N (0 is the first)");
   const Rig rig = recording_rig(reader, o.rig, "an OBJ (the rig's triangles)");
   std::optional<Eigen::Matrix3Xd> vertices;
@@ -204,7 +204,7 @@ double metres_per_rig_unit(const formats::RecordingReader& reader, const Rig* ri
   return *mm / 1000.0;
 }
 
-void export_gltf(const Options& o, const formats::RecordingReader& reader) {
+void export_gltf(const ExportOptions& o, const formats::RecordingReader& reader) {
   require_solved_frames(reader);
   const auto& h = reader.header();
   std::optional<Rig> rig;
@@ -314,7 +314,7 @@ void export_weights_csv(const WeightsCsvOptions& o) {
 }
 
 void add_export_command(CLI::App& app, int& exit_code) {
-  auto opts = std::make_shared<Options>();
+  auto opts = std::make_shared<ExportOptions>();
   auto* cmd = app.add_subcommand("export", "Export a solved take (.fcrec) as glTF animation, PC2/MDD point caches of the "
                                            "solved mesh, one frame as OBJ, or weights as CSV");
   cmd->add_option("in", opts->input, "A recording with solved frames (facecapd's, or facecap solve -o take.fcrec)")
@@ -334,7 +334,7 @@ void add_export_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--progress", opts->progress, "Show progress on stderr");
   cmd->add_flag("--force", opts->force, "Replace the output file if it exists");
   cmd->callback([opts, &exit_code] {
-    const Options& o = *opts;
+    const ExportOptions& o = *opts;
     const std::filesystem::path output(o.output);
     std::error_code ec;
     if (std::filesystem::equivalent(o.input, output, ec)) throw file_error(o.output, "output is the input file");

@@ -13,7 +13,7 @@
 namespace facecap::tools {
 namespace {
 
-struct Options {
+struct NatNetServeOptions {
   std::string take;
   std::string bitstream = "4.1";
   std::string mode = "multicast";
@@ -21,7 +21,7 @@ struct Options {
   ServeOptions serve;
 };
 
-int run_serve(Options& o) {
+int run_serve(NatNetServeOptions& o) {
   const auto bitstream = formats::natnet::parse_version(o.bitstream);
   if (!bitstream || !formats::natnet::is_supported_bitstream(*bitstream))
     throw Error(fmt::format("--bitstream {}: give 3.0, 3.1, 4.0, 4.1 or 4.2", o.bitstream));
@@ -42,7 +42,7 @@ int run_serve(Options& o) {
 }  // namespace
 
 void add_natnet_serve_command(CLI::App& app, int& exit_code) {
-  auto o = std::make_shared<Options>();
+  auto o = std::make_shared<NatNetServeOptions>();
   auto* cmd = app.add_subcommand("natnet-serve", "Stream a take (C3D, TRC, .fcrec) over NatNet as OptiTrack Motive would");
   cmd->add_option("take", o->take, "The take to stream")->required()->check(CLI::ExistingFile);
   cmd->add_option("--rate", o->serve.rate_hz, "Frames per second (default: the take's)");

@@ -27,7 +27,7 @@
 namespace facecap::tools {
 namespace {
 
-struct Options {
+struct SolveOptions {
   std::string rig, calib, take, output, solver, rig_units, units;
   bool force = false, quiet = false, vertices = false, check_labels = false;
   SolveConfigOptions settings;
@@ -84,7 +84,7 @@ std::vector<int> fold_deadline_rounds(const formats::RecordingReader& reader, st
   return rounds;
 }
 
-void run_solve(const Options& o) {
+void run_solve(const SolveOptions& o) {
   const std::filesystem::path output(o.output);
   const auto format = formats::format_from_extension(output);
   const bool csv = format == formats::TakeFormat::kLiveLinkFace;
@@ -167,7 +167,7 @@ void run_solve(const Options& o) {
 }  // namespace
 
 void add_solve_command(CLI::App& app, int& exit_code) {
-  auto opts = std::make_shared<Options>();
+  auto opts = std::make_shared<SolveOptions>();
   auto* cmd = app.add_subcommand("solve", "Solve a calibrated take offline to a Live Link Face CSV or a .fcrec recording");
   cmd->add_option("--rig", opts->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--calib", opts->calib, "Calibration profile (facecap calibrate) or hand-written calibration file; "

@@ -19,7 +19,7 @@ namespace {
 
 std::atomic<bool> interrupted{false};
 
-int64_t percentile(std::vector<int64_t>& values, double q) {
+int64_t latency_percentile(std::vector<int64_t>& values, double q) {
   if (values.empty()) return 0;
   const auto k = std::size_t(q * double(values.size() - 1) + 0.5);
   std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(k), values.end());
@@ -108,8 +108,8 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
     if (now - window_start >= kNsPerSecond) {
       const double seconds = double(now - window_start) / kNsPerSecond;
       const double fps = double(window_frames) / seconds;
-      const double p50 = double(percentile(window_latency, 0.5)) / kNsPerMs;
-      const double p99 = double(percentile(window_latency, 0.99)) / kNsPerMs;
+      const double p50 = double(latency_percentile(window_latency, 0.5)) / kNsPerMs;
+      const double p99 = double(latency_percentile(window_latency, 0.99)) / kNsPerMs;
       if (options.json) {
         nlohmann::json j = {{"t", double(now - start) / kNsPerSecond}, {"fps", fps}, {"latency_p50_ms", p50},
                             {"latency_p99_ms", p99}, {"dropped", window_dropped}, {"frame_no", frame.frame_no},
@@ -128,8 +128,8 @@ SubscriptionSummary run_subscription(const SubscriptionOptions& options) {
     if (interrupted.load() || (options.seconds > 0 && now - start >= int64_t(options.seconds * kNsPerSecond))) break;
   }
   summary.seconds = double(monotonic_now_ns() - start) / kNsPerSecond;
-  summary.latency_p50_ns = percentile(all_latency, 0.5);
-  summary.latency_p99_ns = percentile(all_latency, 0.99);
+  summary.latency_p50_ns = latency_percentile(all_latency, 0.5);
+  summary.latency_p99_ns = latency_percentile(all_latency, 0.99);
   summary.incomplete = sub.incomplete_frames();
   return summary;
 }

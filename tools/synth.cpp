@@ -45,7 +45,7 @@ class RandomStream {
 
 constexpr double kMeanGapFrames = 6.0;  // dropouts come in runs of this mean length
 
-struct Options {
+struct SynthOptions {
   std::string rig, weights, output, units, rig_units_override;
   int markers = 60;
   std::vector<int> marker_vertices;
@@ -57,7 +57,7 @@ struct Options {
   uint64_t seed = 1;
 };
 
-void run_synth(const Options& o) {
+void run_synth(const SynthOptions& o) {
   const std::filesystem::path out_path(o.output);
   const auto format = formats::format_from_extension(out_path);
   if (!format || *format == formats::TakeFormat::kLiveLinkFace)
@@ -194,7 +194,7 @@ void run_synth(const Options& o) {
 }  // namespace
 
 void add_synth_command(CLI::App& app, int& exit_code) {
-  auto o = std::make_shared<Options>();
+  auto o = std::make_shared<SynthOptions>();
   auto* cmd = app.add_subcommand("synth", "Write a synthetic marker take and its ground truth from a rig and weight curves");
   cmd->add_option("--rig", o->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--weights", o->weights, "Live Link Face CSV driving the rig (default: the built-in motion)")->check(CLI::ExistingFile);
