@@ -96,19 +96,21 @@ std::vector<MarkerBinding> observing_marker_layout(const Rig& rig, int count, do
   std::vector<MarkerBinding> layout;
   // Two markers stay a spacing apart at rest and half of it at any shape's full weight (a
   // blink brings an upper-lid marker down onto the lower lid: cameras see one blob).
+  // Whether vertex v crowds a point at `rest` that shape s moves by other_delta(s).
+  auto crowds = [&](Eigen::Index v, const Eigen::Vector3d& rest, auto other_delta) {
+    if ((rig.neutral.col(v) - rest).norm() < spacing) return true;
+    for (Eigen::Index s = 0; s < shapes; ++s)
+      if ((rig.neutral.col(v) + rig.deltas.col(s).segment<3>(3 * v) - rest - other_delta(s)).norm() < 0.5 * spacing)
+        return true;
+    return false;
+  };
   auto apart = [&](Eigen::Index v) {
-    for (const Eigen::Vector3d& point : taken) {
-      if ((rig.neutral.col(v) - point).norm() < spacing) return false;
-      for (Eigen::Index s = 0; s < shapes; ++s)
-        if ((rig.neutral.col(v) + rig.deltas.col(s).segment<3>(3 * v) - point).norm() < 0.5 * spacing) return false;
-    }
+    const auto rigid = [](Eigen::Index) { return Eigen::Vector3d::Zero(); };
+    for (const Eigen::Vector3d& point : taken)
+      if (crowds(v, point, rigid)) return false;
     for (const MarkerBinding& b : layout) {
       const Eigen::Index u = b.vertices[0];
-      if ((rig.neutral.col(v) - rig.neutral.col(u)).norm() < spacing) return false;
-      for (Eigen::Index s = 0; s < shapes; ++s)
-        if ((rig.neutral.col(v) + rig.deltas.col(s).segment<3>(3 * v) - rig.neutral.col(u) -
-             rig.deltas.col(s).segment<3>(3 * u)).norm() < 0.5 * spacing)
-          return false;
+      if (crowds(v, rig.neutral.col(u), [&](Eigen::Index s) { return rig.deltas.col(s).segment<3>(3 * u); })) return false;
     }
     return true;
   };
