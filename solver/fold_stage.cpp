@@ -10,7 +10,7 @@ namespace facecap {
 FoldStage::FoldStage(const SolverModel& model)
     : model_(model), blend_(*model.kernels, model.blend.vertex_blocks, model.blend.vertex_deltas, model.rig.neutral) {
   const SolverModel& m = model_;
-  detector_.configure(m.rig.triangles, triangle_regions(m.rig), m.params.fold_crease_degrees);
+  detector_.configure(m.rig.triangles, triangle_regions(m.rig), m.params.fold_crease_degrees, m.kernels);
   reference_.resize(3, m.vertex_count());
   pin_capacity_ = std::min<Eigen::Index>(m.vertex_count(), m.params.fold_max_pins);
   pin_columns_.resize(m.vertex_count(), pin_capacity_);
@@ -39,7 +39,7 @@ const FoldReport& FoldStage::measure(const float* weights, const Eigen::Matrix3X
 }
 
 const FoldReport& FoldStage::measure_again(const Eigen::Matrix3Xd& vertices) noexcept {
-  detector_.measure_again(vertices, reference_);
+  detector_.measure_again(vertices);
   return mark_fold_vertices();
 }
 

@@ -4,10 +4,11 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <span>
 
 #include <Eigen/Geometry>
 
-#include "solver/mesh_topology.hpp"
+#include "solver/kernels/kernels.hpp"
 #include "solver/rig.hpp"
 
 namespace facecap {
@@ -33,80 +34,126 @@ std::vector<uint8_t> triangle_regions(const Rig& rig) {
   return out;
 }
 
-void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees) {
+void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees,
+                             const kernels::KernelTable* kernels) {
+  kernels_ = kernels ? kernels : &kernels::table(KernelPath::kAuto);
   triangles_ = triangles;
   triangle_count_ = triangles.cols();
+  padded_count_ = (triangle_count_ + kernels::kFoldPadding - 1) / kernels::kFoldPadding * kernels::kFoldPadding;
+  vertex_count_ = triangle_count_ > 0 ? Eigen::Index(triangles.maxCoeff()) + 1 : 0;
   regions_ = regions.empty() ? std::vector<uint8_t>(std::size_t(triangle_count_), kRegionElsewhere) : std::move(regions);
   crease_radians_ = crease_degrees * std::numbers::pi / 180.0;
-  // Each edge once, and the pairs of triangles that share one.
+  // Padding triangles name vertex 0 three times: no area, never flipped or stretched.
+  corners_.assign(std::size_t(3 * padded_count_), 0);
+  for (Eigen::Index t = 0; t < triangle_count_; ++t)
+    for (int j = 0; j < 3; ++j) corners_[std::size_t(j * padded_count_ + t)] = triangles(j, t);
+  // Each later triangle on an edge paired with the first one found on it.
   std::map<std::pair<int, int>, int> first_triangle;
-  edges_.clear();
-  interior_edges_.clear();
+  std::vector<std::pair<int, int>> pairs;
   for (Eigen::Index t = 0; t < triangle_count_; ++t)
     for (int j = 0; j < 3; ++j) {
-      const int a = triangles(j, t), b = triangles((j + 1) % 3, t);
-      const auto key = std::minmax(a, b);
-      const auto [it, inserted] = first_triangle.try_emplace(key, int(t));
-      if (inserted) edges_.push_back(key);
-      else interior_edges_.push_back({it->second, int(t)});
+      const auto [it, inserted] = first_triangle.try_emplace(std::minmax(triangles(j, t), triangles((j + 1) % 3, t)), int(t));
+      if (!inserted) pairs.push_back({it->second, int(t)});
     }
-  solved_normals_.resize(3, triangle_count_);
-  reference_normals_.resize(3, triangle_count_);
+  neighbour_start_.assign(std::size_t(triangle_count_) + 1, 0);
+  for (const auto& [a, b] : pairs) ++neighbour_start_[std::size_t(a) + 1], ++neighbour_start_[std::size_t(b) + 1];
+  for (std::size_t t = 0; t < std::size_t(triangle_count_); ++t) neighbour_start_[t + 1] += neighbour_start_[t];
+  neighbours_.assign(std::size_t(neighbour_start_.back()), 0);
+  std::vector<int32_t> filled(neighbour_start_.begin(), neighbour_start_.end() - 1);
+  for (const auto& [a, b] : pairs) {
+    neighbours_[std::size_t(filled[std::size_t(a)]++)] = b;
+    neighbours_[std::size_t(filled[std::size_t(b)]++)] = a;
+  }
+  solved_.assign(std::size_t(3 * vertex_count_), 0.0f);
+  reference_.assign(std::size_t(3 * vertex_count_), 0.0f);
+  solved_normals_.assign(std::size_t(3 * padded_count_), 0.0f);
+  reference_normals_.assign(std::size_t(3 * padded_count_), 0.0f);
+  flipped_list_.assign(std::size_t(padded_count_), 0);
+  turned_list_.assign(std::size_t(padded_count_), 0);
+  turned_.assign(std::size_t(padded_count_), 0);
   folded_.assign(std::size_t(triangle_count_), 0);
   folded_list_.assign(std::size_t(triangle_count_), 0);
   report_ = {};
 }
 
-const FoldReport& FoldDetector::measure(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept {
-  for (Eigen::Index t = 0; t < triangle_count_; ++t) {
-    const int a = triangles_(0, t), b = triangles_(1, t), c = triangles_(2, t);
-    reference_normals_.col(t) = (reference.col(b) - reference.col(a)).cross(reference.col(c) - reference.col(a));
+void FoldDetector::copy_positions(const Eigen::Matrix3Xd& mesh, std::vector<float>& out) const noexcept {
+  const double* p = mesh.data();
+  float* x = out.data();
+  float* y = x + vertex_count_;
+  float* z = y + vertex_count_;
+  for (Eigen::Index v = 0; v < vertex_count_; ++v) {
+    x[v] = float(p[3 * v]);
+    y[v] = float(p[3 * v + 1]);
+    z[v] = float(p[3 * v + 2]);
   }
-  return measure_again(solved, reference);
 }
 
-const FoldReport& FoldDetector::measure_again(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept {
+Eigen::Vector3d FoldDetector::normal(const std::vector<float>& normals, int t) const noexcept {
+  const std::size_t i = std::size_t(t), stride = std::size_t(padded_count_);
+  return {normals[i], normals[i + stride], normals[i + 2 * stride]};
+}
+
+const FoldReport& FoldDetector::measure(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept {
+  copy_positions(reference, reference_);
+  copy_positions(solved, solved_);
+  return measure_solved(false);
+}
+
+const FoldReport& FoldDetector::measure_again(const Eigen::Matrix3Xd& solved) noexcept {
+  copy_positions(solved, solved_);
+  return measure_solved(true);
+}
+
+const FoldReport& FoldDetector::measure_solved(bool reference_known) noexcept {
+  for (uint32_t i = 0; i < report_.folded; ++i) folded_[std::size_t(folded_list_[i])] = 0;
   report_ = {};
-  for (Eigen::Index t = 0; t < triangle_count_; ++t) {
-    const int a = triangles_(0, t), b = triangles_(1, t), c = triangles_(2, t);
-    solved_normals_.col(t) = (solved.col(b) - solved.col(a)).cross(solved.col(c) - solved.col(a));
-    folded_[std::size_t(t)] = solved_normals_.col(t).dot(reference_normals_.col(t)) < 0.0;
-  }
-  // A crease past crease_radians_ needs the solve's normals more than crease_radians_
-  // apart, tested without square roots (dot < cos |n0| |n1|; for the default 90 degrees a
-  // negative dot product); the angles are only taken where it holds.
-  const double crease_cos = std::cos(crease_radians_), crease_cos2 = crease_cos * crease_cos;
+  if (triangle_count_ == 0) return report_;
+  kernels::FoldTrianglesView view;
+  view.count = padded_count_;
+  for (int j = 0; j < 3; ++j) view.corner[j] = corners_.data() + j * padded_count_;
+  view.solved = solved_.data();
+  view.reference = reference_.data();
+  view.vertex_stride = vertex_count_;
+  view.solved_normals = solved_normals_.data();
+  view.reference_normals = reference_normals_.data();
+  view.normal_stride = padded_count_;
+  view.cos_half_crease = float(std::cos(0.5 * crease_radians_));
+  view.flipped = flipped_list_.data();
+  view.turned = turned_list_.data();
+  const kernels::FoldTrianglesResult passed = kernels_->fold_triangles(view, reference_known);
+  report_.max_edge_stretch = passed.max_edge_stretch;
+  auto fold = [&](int t) {
+    if (folded_[std::size_t(t)]) return;
+    folded_[std::size_t(t)] = 1;
+    folded_list_[report_.folded++] = t;
+    ++report_.folded_by_region[regions_[std::size_t(t)]];
+  };
+  for (int64_t i = 0; i < passed.flipped; ++i) fold(flipped_list_[std::size_t(i)]);
+  report_.flipped = report_.folded;
+  // A crease: the angle between the solve's normals across an edge exceeds the
+  // reference's by more than crease_radians_. Only a pair with a turned triangle can; each
+  // such pair is taken once (at its lower turned triangle).
   auto angle = [](const Eigen::Vector3d& n0, const Eigen::Vector3d& n1) {
     const double norms = std::sqrt(n0.squaredNorm() * n1.squaredNorm());
     return norms > 0.0 ? std::acos(std::clamp(n0.dot(n1) / norms, -1.0, 1.0)) : 0.0;
   };
-  for (const auto& [t0, t1] : interior_edges_) {
-    const auto n0 = solved_normals_.col(t0), n1 = solved_normals_.col(t1);
-    const double dot = n0.dot(n1);
-    // At 90 degrees (the default) the bound is 0 and the norms are not needed.
-    auto dot2_bound = [&] { return crease_cos2 * n0.squaredNorm() * n1.squaredNorm(); };
-    const bool apart = crease_cos >= 0.0 ? (dot < 0.0 || (crease_cos2 > 0.0 && dot * dot < dot2_bound()))
-                                         : (dot < 0.0 && dot * dot > dot2_bound());
-    if (!apart) continue;
-    if (angle(n0, n1) - angle(reference_normals_.col(t0), reference_normals_.col(t1)) <= crease_radians_) continue;
-    folded_[std::size_t(t0)] = folded_[std::size_t(t1)] = 1;
+  const std::span<const int32_t> turned(turned_list_.data(), std::size_t(passed.turned));
+  for (const int32_t t : turned) turned_[std::size_t(t)] = 1;
+  for (const int32_t t : turned) {
+    if (t >= triangle_count_) break;  // padding, listed last
+    for (int32_t k = neighbour_start_[std::size_t(t)]; k < neighbour_start_[std::size_t(t) + 1]; ++k) {
+      const int32_t u = neighbours_[std::size_t(k)];
+      if (turned_[std::size_t(u)] && u < t) continue;
+      if (angle(normal(solved_normals_, t), normal(solved_normals_, u)) -
+              angle(normal(reference_normals_, t), normal(reference_normals_, u)) >
+          crease_radians_) {
+        fold(t);
+        fold(u);
+      }
+    }
   }
-  for (Eigen::Index t = 0; t < triangle_count_; ++t) {
-    if (!folded_[std::size_t(t)]) continue;
-    folded_list_[report_.folded++] = int(t);
-    ++report_.folded_by_region[regions_[std::size_t(t)]];
-    report_.flipped += solved_normals_.col(t).dot(reference_normals_.col(t)) < 0.0;
-  }
-  // | |e| - |e_ref| | = |e^2 - e_ref^2| / (|e| + |e_ref|) <= |e^2 - e_ref^2| / max(|e|, |e_ref|):
-  // an edge whose bound is within the largest so far is passed over without a square root.
-  double stretch = 0.0;
-  for (const auto& [a, b] : edges_) {
-    const double solved2 = (solved.col(a) - solved.col(b)).squaredNorm(), reference2 = (reference.col(a) - reference.col(b)).squaredNorm();
-    const double difference = std::abs(solved2 - reference2);
-    if (difference * difference <= stretch * stretch * std::max(solved2, reference2)) continue;
-    stretch = std::max(stretch, std::abs(std::sqrt(solved2) - std::sqrt(reference2)));
-  }
-  report_.max_edge_stretch = stretch;
+  for (const int32_t t : turned) turned_[std::size_t(t)] = 0;
+  std::sort(folded_list_.begin(), folded_list_.begin() + report_.folded);
   return report_;
 }
 

@@ -15,6 +15,9 @@
 #include <Eigen/Core>
 
 namespace facecap {
+namespace kernels {
+struct KernelTable;
+}
 
 struct Rig;
 
@@ -40,32 +43,45 @@ class FoldDetector {
   // triangles: 3 x T; regions: T (triangle_regions), or empty for all elsewhere. A crease
   // counts when the angle between the normals across an edge exceeds the reference's by
   // more than crease_degrees (SolverParams::fold_crease_degrees; 90: the skin doubles
-  // back on itself). Allocates; not real-time.
-  void configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees = 90.0);
+  // back on itself). kernels: the table whose fold passes measure (null: the widest this
+  // CPU runs). Allocates; not real-time.
+  void configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees = 90.0,
+                 const kernels::KernelTable* kernels = nullptr);
   bool configured() const noexcept { return triangle_count_ > 0; }
 
-  // Measures `solved` against `reference` (both 3 x N). Zero-area triangles (either mesh)
-  // are not counted as flipped. Real-time safe.
+  // Measures `solved` against `reference` (both 3 x N), in float (the kernels' fold
+  // passes). Zero-area triangles (either mesh) are not counted as flipped. Real-time safe.
   const FoldReport& measure(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept;
-  // measure() of another solve against the same reference as the last measure(): its
-  // normals are not computed again (the fold stage's rounds). Real-time safe.
-  const FoldReport& measure_again(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept;
+  // measure() of another solve against the same reference as the last measure(): the
+  // reference is not read again (the fold stage's rounds). Real-time safe.
+  const FoldReport& measure_again(const Eigen::Matrix3Xd& solved) noexcept;
 
   // After measure(): per triangle, 1 if folded; the folded triangles, ascending.
-  std::span<const uint8_t> folded_flags() const noexcept { return folded_; }
+  std::span<const uint8_t> folded_flags() const noexcept { return {folded_.data(), std::size_t(triangle_count_)}; }
   std::span<const int> folded_triangles() const noexcept { return {folded_list_.data(), std::size_t(report_.folded)}; }
   const FoldReport& report() const noexcept { return report_; }
   const Eigen::Matrix3Xi& triangles() const noexcept { return triangles_; }
 
  private:
+  // Coordinate-major float copy of a 3 x N mesh (the kernels' layout).
+  void copy_positions(const Eigen::Matrix3Xd& mesh, std::vector<float>& out) const noexcept;
+  const FoldReport& measure_solved(bool reference_known) noexcept;
+  Eigen::Vector3d normal(const std::vector<float>& normals, int t) const noexcept;
+
+  const kernels::KernelTable* kernels_ = nullptr;
   Eigen::Matrix3Xi triangles_;
-  Eigen::Index triangle_count_ = 0;
+  Eigen::Index triangle_count_ = 0, padded_count_ = 0, vertex_count_ = 0;
+  std::vector<int32_t> corners_;  // 3 x padded_count_, corner-major
+  // The triangles sharing an edge with triangle t: neighbours_[neighbour_start_[t] ..
+  // neighbour_start_[t + 1]).
+  std::vector<int32_t> neighbour_start_, neighbours_;
   std::vector<uint8_t> regions_;
-  std::vector<std::pair<int, int>> interior_edges_;  // triangles sharing an edge
-  std::vector<std::pair<int, int>> edges_;           // every edge once: (vertex, vertex)
   double crease_radians_ = 0.0;
-  Eigen::Matrix3Xd solved_normals_, reference_normals_;  // per triangle, not normalised
-  std::vector<uint8_t> folded_;
+  std::vector<float> solved_, reference_;                  // coordinate-major positions
+  std::vector<float> solved_normals_, reference_normals_;  // per triangle, coordinate-major, not normalised
+  std::vector<int32_t> flipped_list_, turned_list_;        // the kernel's lists
+  std::vector<uint8_t> turned_;                            // per triangle, set only while measuring
+  std::vector<uint8_t> folded_;                            // per triangle; cleared by folded_list_
   std::vector<int> folded_list_;
   FoldReport report_;
 };

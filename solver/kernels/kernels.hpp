@@ -87,6 +87,32 @@ struct PairVerdict {
   uint32_t apart = 0;  // apart by more than epsilon for certain
 };
 
+// The fold metric's per-triangle pass (collide/folds.hpp) over `count` triangles (a
+// multiple of kFoldPadding; padding triangles have three equal corners). Positions are
+// float, coordinate-major (x of every vertex, then y, then z: vertex_stride apart), as are
+// the normals (normal_stride apart). Lists, ascending, the triangles whose solved normal
+// points against the reference's (flipped) and those turned from it by more than half the
+// crease angle or without a reference normal (turned: only they can make a crease, since
+// angles between normals obey the triangle inequality).
+inline constexpr int kFoldPadding = 16;
+struct FoldTrianglesView {
+  int64_t count = 0;
+  const int32_t* corner[3] = {};
+  const float* solved = nullptr;
+  const float* reference = nullptr;
+  int64_t vertex_stride = 0;
+  float* solved_normals = nullptr;     // written
+  float* reference_normals = nullptr;  // written, or read when known
+  int64_t normal_stride = 0;
+  float cos_half_crease = 0.0f;        // >= 0
+  int32_t* flipped = nullptr;          // room for count each
+  int32_t* turned = nullptr;
+};
+struct FoldTrianglesResult {
+  float max_edge_stretch = 0.0f;  // the largest | |e| - |e_ref| | over the triangles' edges
+  int64_t flipped = 0, turned = 0;
+};
+
 struct KernelTable {
   KernelPath path = KernelPath::kPortable;
   // One block of x0 + B w into out (3 x elements, column-major).
@@ -97,6 +123,9 @@ struct KernelTable {
   void (*ldlt_solve)(const LdltView& factor, double* xyz, double* work) noexcept = nullptr;
   // The float pass over `count` (<= 16) pairs.
   PairVerdict (*pair_float_pass)(const PairLanes& lanes, int count, float epsilon) noexcept = nullptr;
+  // The fold metric's triangle pass; reference_known: reference_normals hold this
+  // reference's normals already (another solve measured against it).
+  FoldTrianglesResult (*fold_triangles)(const FoldTrianglesView& view, bool reference_known) noexcept = nullptr;
 };
 
 // Whether this CPU (and its OS) can run `path`'s kernels; kAuto always.

@@ -492,7 +492,98 @@ PairVerdict pair_float_pass(const PairLanes& lanes, int count, float epsilon) no
   return verdict;
 }
 
-constexpr KernelTable kTable{kPath, linear_blend_block, triangle_rhs, ldlt_solve, pair_float_pass};
+// ---- The fold metric (collide/folds.hpp) ------------------------------------------------
+
+inline Mask load_indices(const int32_t* p) noexcept {
+  Mask m;
+  std::memcpy(&m, p, sizeof m);
+  return m;
+}
+
+// base[index[i]] per lane.
+inline Float gather(const float* base, const Mask& index) noexcept {
+#if defined(__AVX512F__)
+  return Float(_mm512_i32gather_ps(__m512i(index), base, 4));
+#elif defined(__AVX2__)
+  return Float(_mm256_i32gather_ps(base, __m256i(index), 4));
+#else
+  Float out;
+  for (int i = 0; i < kLanes; ++i) out[i] = base[index[i]];
+  return out;
+#endif
+}
+
+inline Float vsqrt(const Float& x) noexcept {
+#if defined(__AVX512F__)
+  return Float(_mm512_sqrt_ps(__m512(x)));
+#elif defined(__AVX2__)
+  return Float(_mm256_sqrt_ps(__m256(x)));
+#elif defined(__SSE4_1__)
+  return Float(_mm_sqrt_ps(__m128(x)));
+#else
+  Float out;
+  for (int i = 0; i < kLanes; ++i) out[i] = std::sqrt(x[i]);
+  return out;
+#endif
+}
+
+inline Lanes3 gather3(const float* coordinates, int64_t stride, const Mask& index) noexcept {
+  return {gather(coordinates, index), gather(coordinates + stride, index), gather(coordinates + 2 * stride, index)};
+}
+inline Lanes3 load3(const float* p, int64_t stride) noexcept {
+  return {load<Float>(p), load<Float>(p + stride), load<Float>(p + 2 * stride)};
+}
+inline void store3(float* p, int64_t stride, const Lanes3& v) noexcept {
+  store(p, v.x);
+  store(p + stride, v.y);
+  store(p + 2 * stride, v.z);
+}
+// | |a| - |b| | per lane, from squared lengths.
+inline Float length_change(const Float& a2, const Float& b2) noexcept {
+  const Float d = vsqrt(a2) - vsqrt(b2);
+  return vmax(d, -d);
+}
+
+// Appends the indices first + i of the lanes set in `m` to list.
+inline int64_t append_lanes(const Mask& m, int64_t first, int32_t* list, int64_t count) noexcept {
+  for (uint32_t bits = lane_bits(m); bits != 0; bits &= bits - 1) list[count++] = int32_t(first + __builtin_ctz(bits));
+  return count;
+}
+
+FoldTrianglesResult fold_triangles(const FoldTrianglesView& v, bool reference_known) noexcept {
+  Float stretch{};
+  FoldTrianglesResult result;
+  const float cos2 = v.cos_half_crease * v.cos_half_crease;
+  for (int64_t t = 0; t < v.count; t += kLanes) {
+    const Mask ia = load_indices(v.corner[0] + t), ib = load_indices(v.corner[1] + t), ic = load_indices(v.corner[2] + t);
+    const Lanes3 sa = gather3(v.solved, v.vertex_stride, ia), sb = gather3(v.solved, v.vertex_stride, ib),
+                 sc = gather3(v.solved, v.vertex_stride, ic);
+    const Lanes3 ra = gather3(v.reference, v.vertex_stride, ia), rb = gather3(v.reference, v.vertex_stride, ib),
+                 rc = gather3(v.reference, v.vertex_stride, ic);
+    const Lanes3 su = sb - sa, sv = sc - sa, sw = sc - sb, ru = rb - ra, rv = rc - ra, rw = rc - rb;
+    const Lanes3 solved_normal = cross(su, sv);
+    Lanes3 reference_normal;
+    if (reference_known) {
+      reference_normal = load3(v.reference_normals + t, v.normal_stride);
+    } else {
+      reference_normal = cross(ru, rv);
+      store3(v.reference_normals + t, v.normal_stride, reference_normal);
+    }
+    store3(v.solved_normals + t, v.normal_stride, solved_normal);
+    const Float d = dot(solved_normal, reference_normal), reference2 = dot(reference_normal, reference_normal);
+    const Mask flipped = d < 0.0f;
+    const Mask turned = flipped | (d * d < cos2 * dot(solved_normal, solved_normal) * reference2) | (reference2 == 0.0f);
+    result.flipped = append_lanes(flipped, t, v.flipped, result.flipped);
+    result.turned = append_lanes(turned, t, v.turned, result.turned);
+    stretch = vmax(stretch, length_change(dot(su, su), dot(ru, ru)));
+    stretch = vmax(stretch, length_change(dot(sv, sv), dot(rv, rv)));
+    stretch = vmax(stretch, length_change(dot(sw, sw), dot(rw, rw)));
+  }
+  for (int k = 0; k < kLanes; ++k) result.max_edge_stretch = result.max_edge_stretch > stretch[k] ? result.max_edge_stretch : stretch[k];
+  return result;
+}
+
+constexpr KernelTable kTable{kPath, linear_blend_block, triangle_rhs, ldlt_solve, pair_float_pass, fold_triangles};
 
 }  // namespace
 
