@@ -7,8 +7,9 @@
 # Goal: 0 missed deadlines for every instance.
 #
 # Usage: scripts/actors-bench.sh [--actors N] [--rate HZ] [--seconds S] [--kernels PATH]
-#                                [--strict] [--build DIR]
+#                                [--set KEY=VALUE ...] [--strict] [--build DIR]
 #   --kernels PATH  facecapd's solver.kernels (auto, avx512, avx2, portable)
+#   --set KEY=VALUE another facecapd setting for every instance (repeatable)
 #   --strict        exit 1 when an instance missed a deadline
 # Exits 77 (skipped) when ../shared/data/ict-face is absent.
 set -euo pipefail
@@ -17,15 +18,17 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 . "$here/scripts/bench-lib.sh"
 build_dir=${FACECAP_BUILD_DIR:-$here/build}
 actors=2 rate=240 seconds=60 kernels=auto strict=0
+extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --actors) actors=$2; shift ;;
     --rate) rate=$2; shift ;;
     --seconds) seconds=$2; shift ;;
     --kernels) kernels=$2; shift ;;
+    --set) extra+=(--set "$2"); shift ;;
     --strict) strict=1 ;;
     --build) build_dir=$2; shift ;;
-    *) echo "usage: $0 [--actors N] [--rate HZ] [--seconds S] [--kernels PATH] [--strict] [--build DIR]" >&2; exit 2 ;;
+    *) echo "usage: $0 [--actors N] [--rate HZ] [--seconds S] [--kernels PATH] [--set KEY=VALUE ...] [--strict] [--build DIR]" >&2; exit 2 ;;
   esac
   shift
 done
@@ -48,7 +51,7 @@ trap cleanup EXIT
 
 make_ict_240hz_replay "$facecap" "$rig" "$work/ict-240.fcrec"
 cores=$(nproc)
-echo "actors-bench: $actors facecapd on $cores cores, ICT rig at $rate Hz for $seconds s, kernels $kernels; load average $(cut -d' ' -f1-3 /proc/loadavg) before"
+echo "actors-bench: $actors facecapd on $cores cores, ICT rig at $rate Hz for $seconds s, kernels $kernels${extra[*]:+, ${extra[*]}}; load average $(cut -d' ' -f1-3 /proc/loadavg) before"
 for i in $(seq 1 "$actors"); do
   pin=()
   [ "$actors" -le "$cores" ] && pin=(taskset -c $(( i - 1 )))
@@ -61,7 +64,7 @@ for i in $(seq 1 "$actors"); do
     --set "outputs.shm.name=facecap-actors-bench-$$-$i" \
     --set "control.run_seconds=$seconds" \
     --set "logging.stats_interval_s=$seconds" \
-    --set "logging.stats_file=$work/stats-$i.json" > "$work/log-$i.txt" 2>&1 &
+    --set "logging.stats_file=$work/stats-$i.json" "${extra[@]}" > "$work/log-$i.txt" 2>&1 &
   pids+=($!)
 done
 status=0

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "formats/take.hpp"
+#include "pipeline/calibration.hpp"
 #include "solver/builtin_face.hpp"
 #include "tests/test_support.hpp"
 #include "tools/synth_truth.hpp"
@@ -84,6 +85,16 @@ TEST_CASE("synth writes a take that reads back with the right marker and frame c
     const Marker& m = take.frames[5].markers[k];
     REQUIRE(m.present());
     CHECK((m.position - pose.col(truth.marker_vertices[k])).norm() < 1e-5);
+  }
+
+  // The markers are where facecapd's default calibration binds 20 face markers without a
+  // head rig (the benchmark scripts replay synth's takes with no profile): same labels,
+  // same vertices.
+  const auto defaults = pipeline::default_calibration(face.rig(), 20, 0);
+  REQUIRE(defaults.markers.size() == 20);
+  for (std::size_t k = 0; k < 20; ++k) {
+    CHECK(defaults.markers[k].label == truth.marker_labels[k]);
+    CHECK(defaults.markers[k].binding.vertices[0] == truth.marker_vertices[k]);
   }
 }
 

@@ -80,7 +80,8 @@ void run_synth(const SynthOptions& o) {
         throw Error(fmt::format("--marker-vertices: vertex {} is outside the rig's 0..{}", v, rig.vertex_count() - 1));
     layout = vertex_marker_layout(o.marker_vertices);
   } else {
-    layout = spread_marker_layout(rig, o.markers);
+    // Where facecapd's default calibration binds them, so that the take replays without one.
+    layout = default_marker_set(rig, o.markers, 0).face;
   }
   const Eigen::Index K = Eigen::Index(layout.size());
 
@@ -198,7 +199,7 @@ void add_synth_command(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("synth", "Write a synthetic marker take and its ground truth from a rig and weight curves");
   cmd->add_option("--rig", o->rig, "builtin, an OBJ directory, a rig.toml manifest, a .gltf/.glb or an .fbx file")->required();
   cmd->add_option("--weights", o->weights, "Live Link Face CSV driving the rig (default: the built-in motion)")->check(CLI::ExistingFile);
-  auto* markers = cmd->add_option("--markers", o->markers, "Markers spread over the face")->capture_default_str()->check(CLI::PositiveNumber);
+  auto* markers = cmd->add_option("--markers", o->markers, "Markers on the face, where facecapd's default calibration puts that many (calibration.face_markers, with head_markers = 0)")->capture_default_str()->check(CLI::PositiveNumber);
   cmd->add_option("--marker-vertices", o->marker_vertices, "Markers on these vertex indices instead (comma-separated)")
       ->delimiter(',')
       ->excludes(markers);
