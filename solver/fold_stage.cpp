@@ -10,7 +10,7 @@ namespace facecap {
 FoldStage::FoldStage(const SolverModel& model)
     : model_(model), blend_(*model.kernels, model.blend.vertex_blocks, model.blend.vertex_deltas, model.rig.neutral) {
   const SolverModel& m = model_;
-  detector_.configure(m.rig.triangles, triangle_regions(m.rig), m.params.fold_crease_degrees, m.kernels);
+  detector_.configure(m.rig.triangles, triangle_regions(m.rig), m.params.fold_crease_degrees, fold_tolerance(m.rig), m.kernels);
   reference_.resize(3, m.vertex_count());
   pin_capacity_ = std::min<Eigen::Index>(m.vertex_count(), m.params.fold_max_pins);
   pin_columns_.resize(m.vertex_count(), pin_capacity_);
@@ -69,14 +69,14 @@ const double* FoldStage::pin_column(int v) noexcept {
 // right-hand side, as a collision pin: A0^-1 e_v from the collision stage's precomputed
 // columns where the vertex has one, else from pin_column(): back-substituted once and
 // kept while it is used (a frame's cost is bounded by fold_max_pins).
-uint32_t FoldStage::add_pins(PinUpdate& update) noexcept {
+uint32_t FoldStage::add_pins(PinUpdate& update, bool with_neighbours) noexcept {
   const SolverModel& m = model_;
   uint32_t added = 0;
   if (++pin_stamp_now_ == 0) {  // wrapped: forget every old stamp
     std::fill(pin_stamp_.begin(), pin_stamp_.end(), 0u);
     pin_stamp_now_ = 1;
   }
-  for (const int t : detector_.folded_triangles())
+  auto pin_corners = [&](int t) {
     for (int j = 0; j < 3; ++j) {
       const int v = m.rig.triangles(j, t);
       if (pin_stamp_[std::size_t(v)] == pin_stamp_now_ || pins_ == pin_capacity_) continue;
@@ -88,11 +88,19 @@ uint32_t FoldStage::add_pins(PinUpdate& update) noexcept {
       } else {
         ok = update.add({v, v, v}, Eigen::Vector3d(1.0, 0.0, 0.0), pin_column(v), kPinWeight * m.params.beta, target);
       }
-      if (!ok) return added;
+      if (!ok) return false;
       pin_stamp_[std::size_t(v)] = pin_stamp_now_;
       ++pins_;
       ++added;
     }
+    return true;
+  };
+  for (const int t : detector_.folded_triangles()) {
+    if (!pin_corners(t)) return added;
+    if (with_neighbours)
+      for (const int u : detector_.neighbours(t))
+        if (!pin_corners(u)) return added;
+  }
   return added;
 }
 

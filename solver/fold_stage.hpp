@@ -36,9 +36,9 @@ class FoldStage {
 
   // Pins the vertices of the triangles the last measure() found folded to the linear
   // blend, each vertex once per call (a corner pinned in an earlier round and still on a
-  // fold is pinned again: its hold adds up), while capacity lasts. Returns the pins added.
-  // Real-time safe.
-  uint32_t add_pins(PinUpdate& update) noexcept;
+  // fold is pinned again: its hold adds up), while capacity lasts; with_neighbours: the
+  // corners of the triangles beside them too. Returns the pins added. Real-time safe.
+  uint32_t add_pins(PinUpdate& update, bool with_neighbours) noexcept;
   // Forgets this frame's pins (call once per frame before add_pins). Real-time safe.
   void begin_frame() noexcept;
 

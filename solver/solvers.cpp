@@ -190,7 +190,7 @@ class PoissonSolver final : public FaceSolver {
         break;
       }
       out.fold_rounds = uint32_t(round + 1);
-      const uint32_t added = folds_.add_pins(pins_);
+      const uint32_t added = folds_.add_pins(pins_, round >= kNeighbourRound);
       out.fold_pins += added;
       if (!released && (added == 0 || round == kReleaseRound)) {
         released = true;
@@ -228,6 +228,10 @@ class PoissonSolver final : public FaceSolver {
   // Pinning a folded triangle can fold a neighbour it pulls: up to this many rounds of
   // pins and measures, markers released from the kReleaseRound'th on.
   static constexpr int kFoldRounds = 8, kReleaseRound = 4;
+  // From this round on the triangles beside a fold are pinned with it: pinning only its
+  // corners can push the fold onto a neighbour, round after round. Not earlier: a widely
+  // folded frame needs its pins for the folds themselves.
+  static constexpr int kNeighbourRound = 2;
   // What a fold round is expected to take, for the deadline: the longest recent one,
   // forgotten by 1/kFoldRoundDecay a frame (a heavy fold once does not stop rounds for
   // good).

@@ -156,7 +156,7 @@ void run_eval(const EvalOptions& o, const SolverParams& params) {
   };
 
   FoldDetector folds;
-  folds.configure(rig.triangles, triangle_regions(rig), model->params.fold_crease_degrees);
+  folds.configure(rig.triangles, triangle_regions(rig), model->params.fold_crease_degrees, fold_tolerance(rig));
 
   Eigen::Matrix3Xd targets(3, K), truth_pose_now(3, rig.vertex_count());
   std::vector<uint8_t> present(static_cast<std::size_t>(K));

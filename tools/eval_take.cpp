@@ -214,7 +214,7 @@ nlohmann::json evaluate_take(const TakeEvalOptions& o) {
   };
   const std::vector<uint8_t> region = triangle_regions(rig);
   FoldDetector folds;
-  folds.configure(rig.triangles, region, model->params.fold_crease_degrees);
+  folds.configure(rig.triangles, region, model->params.fold_crease_degrees, fold_tolerance(rig));
   auto mapped = mapper.make_output();
   // With the filter on, the solvers see filtered targets; fit and held-out error are measured
   // against the unfiltered ones, so that the lag the filter adds counts as error.

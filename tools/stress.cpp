@@ -34,7 +34,7 @@ nlohmann::json run_stress(const StressOptions& o) {
   const std::vector<StressPose> corpus = stress_corpus(rig, layout);
   const double mm_per_rig = 1.0 / rig_units_per_mm(rig);
   FoldDetector folds;
-  folds.configure(rig.triangles, triangle_regions(rig), model->params.fold_crease_degrees);
+  folds.configure(rig.triangles, triangle_regions(rig), model->params.fold_crease_degrees, fold_tolerance(rig));
   const std::vector<uint8_t> present(layout.size(), 1);
 
   nlohmann::json report;

@@ -34,8 +34,10 @@ std::vector<uint8_t> triangle_regions(const Rig& rig) {
   return out;
 }
 
+double fold_tolerance(const Rig& rig) { return kFoldToleranceMm * rig_units_per_mm(rig); }
+
 void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees,
-                             const kernels::KernelTable* kernels) {
+                             double tolerance, const kernels::KernelTable* kernels) {
   kernels_ = kernels ? kernels : &kernels::table(KernelPath::kAuto);
   triangles_ = triangles;
   triangle_count_ = triangles.cols();
@@ -43,6 +45,7 @@ void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint
   vertex_count_ = triangle_count_ > 0 ? Eigen::Index(triangles.maxCoeff()) + 1 : 0;
   regions_ = regions.empty() ? std::vector<uint8_t>(std::size_t(triangle_count_), kRegionElsewhere) : std::move(regions);
   crease_radians_ = crease_degrees * std::numbers::pi / 180.0;
+  tolerance_ = tolerance;
   // Padding triangles name vertex 0 three times: no area, never flipped or stretched.
   corners_.assign(std::size_t(3 * padded_count_), 0);
   for (Eigen::Index t = 0; t < triangle_count_; ++t)
@@ -93,6 +96,17 @@ Eigen::Vector3d FoldDetector::normal(const std::vector<float>& normals, int t) c
   return {normals[i], normals[i + stride], normals[i + 2 * stride]};
 }
 
+Eigen::Vector3d FoldDetector::judged_normal(int t) const noexcept {
+  const std::size_t stride = std::size_t(vertex_count_);
+  for (int j = 0; j < 3; ++j) {
+    const std::size_t v = std::size_t(triangles_(j, t));
+    const float dx = solved_[v] - reference_[v], dy = solved_[v + stride] - reference_[v + stride],
+                dz = solved_[v + 2 * stride] - reference_[v + 2 * stride];
+    if (dx * dx + dy * dy + dz * dz > float(tolerance_ * tolerance_)) return normal(solved_normals_, t);
+  }
+  return normal(reference_normals_, t);
+}
+
 const FoldReport& FoldDetector::measure(const Eigen::Matrix3Xd& solved, const Eigen::Matrix3Xd& reference) noexcept {
   copy_positions(reference, reference_);
   copy_positions(solved, solved_);
@@ -118,6 +132,7 @@ const FoldReport& FoldDetector::measure_solved(bool reference_known) noexcept {
   view.reference_normals = reference_normals_.data();
   view.normal_stride = padded_count_;
   view.cos_half_crease = float(std::cos(0.5 * crease_radians_));
+  view.tolerance_squared = float(tolerance_ * tolerance_);
   view.flipped = flipped_list_.data();
   view.turned = turned_list_.data();
   const kernels::FoldTrianglesResult passed = kernels_->fold_triangles(view, reference_known);
@@ -131,8 +146,9 @@ const FoldReport& FoldDetector::measure_solved(bool reference_known) noexcept {
   for (int64_t i = 0; i < passed.flipped; ++i) fold(flipped_list_[std::size_t(i)]);
   report_.flipped = report_.folded;
   // A crease: the angle between the solve's normals across an edge exceeds the
-  // reference's by more than crease_radians_. Only a pair with a turned triangle can; each
-  // such pair is taken once (at its lower turned triangle).
+  // reference's by more than crease_radians_ (a triangle within the tolerance counted with
+  // the reference's normal). Only a pair with a turned triangle can; each such pair is
+  // taken once (at its lower turned triangle).
   auto angle = [](const Eigen::Vector3d& n0, const Eigen::Vector3d& n1) {
     const double norms = std::sqrt(n0.squaredNorm() * n1.squaredNorm());
     return norms > 0.0 ? std::acos(std::clamp(n0.dot(n1) / norms, -1.0, 1.0)) : 0.0;
@@ -144,7 +160,7 @@ const FoldReport& FoldDetector::measure_solved(bool reference_known) noexcept {
     for (int32_t k = neighbour_start_[std::size_t(t)]; k < neighbour_start_[std::size_t(t) + 1]; ++k) {
       const int32_t u = neighbours_[std::size_t(k)];
       if (turned_[std::size_t(u)] && u < t) continue;
-      if (angle(normal(solved_normals_, t), normal(solved_normals_, u)) -
+      if (angle(judged_normal(t), judged_normal(u)) -
               angle(normal(reference_normals_, t), normal(reference_normals_, u)) >
           crease_radians_) {
         fold(t);

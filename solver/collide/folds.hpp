@@ -3,7 +3,8 @@
 // reference mesh of the same weights, the rig's linear blend x0 + B w. A triangle is
 // folded when its normal points against the reference's (flipped), or when an edge it
 // shares bends more than a threshold beyond the reference's bend there (a crease the
-// shapes do not have: crumpled eyelids, mouth corners). Also the largest change of an
+// shapes do not have: crumpled eyelids, mouth corners). A triangle whose corners are all
+// within a tolerance of the reference's is taken as the reference's. Also the largest change of an
 // edge's length against the reference (a torn, stretched patch), and the folded count per
 // face region. Lifecycle: configure (allocates) -> measure() per frame (real-time safe).
 #include <array>
@@ -31,6 +32,14 @@ inline constexpr const char* kFaceRegionNames[kFaceRegionCount] = {"lips", "eyel
 // motion. A rig without those shapes has every triangle elsewhere. Allocates.
 std::vector<uint8_t> triangle_regions(const Rig& rig);
 
+// The tolerance facecap measures folds with: a solve this close to the linear blend at
+// every corner of a triangle looks like it, whatever the triangle's orientation (ICT's
+// lip corners have slivers whose blended area is a fourteenth of their rest area, which
+// a micrometre turns over).
+inline constexpr double kFoldToleranceMm = 0.01;
+// kFoldToleranceMm in the rig's units.
+double fold_tolerance(const Rig& rig);
+
 struct FoldReport {
   uint32_t folded = 0;   // triangles flipped or creased against the reference
   uint32_t flipped = 0;  // of those, flipped
@@ -43,10 +52,10 @@ class FoldDetector {
   // triangles: 3 x T; regions: T (triangle_regions), or empty for all elsewhere. A crease
   // counts when the angle between the normals across an edge exceeds the reference's by
   // more than crease_degrees (SolverParams::fold_crease_degrees; 90: the skin doubles
-  // back on itself). kernels: the table whose fold passes measure (null: the widest this
-  // CPU runs). Allocates; not real-time.
+  // back on itself); tolerance: in the meshes' units (fold_tolerance). kernels: the table
+  // whose fold pass measures (null: the widest this CPU runs). Allocates; not real-time.
   void configure(const Eigen::Matrix3Xi& triangles, std::vector<uint8_t> regions, double crease_degrees = 90.0,
-                 const kernels::KernelTable* kernels = nullptr);
+                 double tolerance = 0.0, const kernels::KernelTable* kernels = nullptr);
   bool configured() const noexcept { return triangle_count_ > 0; }
 
   // Measures `solved` against `reference` (both 3 x N), in float (the kernels' fold
@@ -60,12 +69,19 @@ class FoldDetector {
   std::span<const uint8_t> folded_flags() const noexcept { return {folded_.data(), std::size_t(triangle_count_)}; }
   std::span<const int> folded_triangles() const noexcept { return {folded_list_.data(), std::size_t(report_.folded)}; }
   const FoldReport& report() const noexcept { return report_; }
+  // The triangles sharing an edge with triangle t.
+  std::span<const int32_t> neighbours(int t) const noexcept {
+    return {neighbours_.data() + neighbour_start_[std::size_t(t)], std::size_t(neighbour_start_[std::size_t(t) + 1] - neighbour_start_[std::size_t(t)])};
+  }
   const Eigen::Matrix3Xi& triangles() const noexcept { return triangles_; }
 
  private:
   // Coordinate-major float copy of a 3 x N mesh (the kernels' layout).
   void copy_positions(const Eigen::Matrix3Xd& mesh, std::vector<float>& out) const noexcept;
   const FoldReport& measure_solved(bool reference_known) noexcept;
+  // Triangle t's solved normal, or its reference normal where its corners are all within
+  // the tolerance.
+  Eigen::Vector3d judged_normal(int t) const noexcept;
   Eigen::Vector3d normal(const std::vector<float>& normals, int t) const noexcept;
 
   const kernels::KernelTable* kernels_ = nullptr;
@@ -76,7 +92,7 @@ class FoldDetector {
   // neighbour_start_[t + 1]).
   std::vector<int32_t> neighbour_start_, neighbours_;
   std::vector<uint8_t> regions_;
-  double crease_radians_ = 0.0;
+  double crease_radians_ = 0.0, tolerance_ = 0.0;
   std::vector<float> solved_, reference_;                  // coordinate-major positions
   std::vector<float> solved_normals_, reference_normals_;  // per triangle, coordinate-major, not normalised
   std::vector<int32_t> flipped_list_, turned_list_;        // the kernel's lists

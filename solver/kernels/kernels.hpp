@@ -90,10 +90,11 @@ struct PairVerdict {
 // The fold metric's per-triangle pass (collide/folds.hpp) over `count` triangles (a
 // multiple of kFoldPadding; padding triangles have three equal corners). Positions are
 // float, coordinate-major (x of every vertex, then y, then z: vertex_stride apart), as are
-// the normals (normal_stride apart). Lists, ascending, the triangles whose solved normal
-// points against the reference's (flipped) and those turned from it by more than half the
-// crease angle or without a reference normal (turned: only they can make a crease, since
-// angles between normals obey the triangle inequality).
+// the normals (normal_stride apart). A triangle is visible where a corner of the solve is
+// further than the tolerance from the reference's. Lists, ascending, the visible triangles
+// whose solved normal points against the reference's (flipped) and those turned from it
+// by more than half the crease angle or without a reference normal (turned: only they can
+// make a crease, since angles between normals obey the triangle inequality).
 inline constexpr int kFoldPadding = 16;
 struct FoldTrianglesView {
   int64_t count = 0;
@@ -105,6 +106,7 @@ struct FoldTrianglesView {
   float* reference_normals = nullptr;  // written, or read when known
   int64_t normal_stride = 0;
   float cos_half_crease = 0.0f;        // >= 0
+  float tolerance_squared = 0.0f;
   int32_t* flipped = nullptr;          // room for count each
   int32_t* turned = nullptr;
 };

@@ -570,9 +570,11 @@ FoldTrianglesResult fold_triangles(const FoldTrianglesView& v, bool reference_kn
       store3(v.reference_normals + t, v.normal_stride, reference_normal);
     }
     store3(v.solved_normals + t, v.normal_stride, solved_normal);
+    const Lanes3 da = sa - ra, db = sb - rb, dc = sc - rc;
+    const Mask visible = vmax(vmax(dot(da, da), dot(db, db)), dot(dc, dc)) > v.tolerance_squared;
     const Float d = dot(solved_normal, reference_normal), reference2 = dot(reference_normal, reference_normal);
-    const Mask flipped = d < 0.0f;
-    const Mask turned = flipped | (d * d < cos2 * dot(solved_normal, solved_normal) * reference2) | (reference2 == 0.0f);
+    const Mask flipped = visible & (d < 0.0f);
+    const Mask turned = visible & ((d < 0.0f) | (d * d < cos2 * dot(solved_normal, solved_normal) * reference2) | (reference2 == 0.0f));
     result.flipped = append_lanes(flipped, t, v.flipped, result.flipped);
     result.turned = append_lanes(turned, t, v.turned, result.turned);
     stretch = vmax(stretch, length_change(dot(su, su), dot(ru, ru)));
