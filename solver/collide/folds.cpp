@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 
 #include "solver/kernels/kernels.hpp"
+#include "solver/mesh_topology.hpp"
 #include "solver/rig.hpp"
 
 namespace facecap {
@@ -50,23 +51,7 @@ void FoldDetector::configure(const Eigen::Matrix3Xi& triangles, std::vector<uint
   corners_.assign(std::size_t(3 * padded_count_), 0);
   for (Eigen::Index t = 0; t < triangle_count_; ++t)
     for (int j = 0; j < 3; ++j) corners_[std::size_t(j * padded_count_ + t)] = triangles(j, t);
-  // Each later triangle on an edge paired with the first one found on it.
-  std::map<std::pair<int, int>, int> first_triangle;
-  std::vector<std::pair<int, int>> pairs;
-  for (Eigen::Index t = 0; t < triangle_count_; ++t)
-    for (int j = 0; j < 3; ++j) {
-      const auto [it, inserted] = first_triangle.try_emplace(std::minmax(triangles(j, t), triangles((j + 1) % 3, t)), int(t));
-      if (!inserted) pairs.push_back({it->second, int(t)});
-    }
-  neighbour_start_.assign(std::size_t(triangle_count_) + 1, 0);
-  for (const auto& [a, b] : pairs) ++neighbour_start_[std::size_t(a) + 1], ++neighbour_start_[std::size_t(b) + 1];
-  for (std::size_t t = 0; t < std::size_t(triangle_count_); ++t) neighbour_start_[t + 1] += neighbour_start_[t];
-  neighbours_.assign(std::size_t(neighbour_start_.back()), 0);
-  std::vector<int32_t> filled(neighbour_start_.begin(), neighbour_start_.end() - 1);
-  for (const auto& [a, b] : pairs) {
-    neighbours_[std::size_t(filled[std::size_t(a)]++)] = b;
-    neighbours_[std::size_t(filled[std::size_t(b)]++)] = a;
-  }
+  adjacency_ = TriangleAdjacency(triangles);
   solved_.assign(std::size_t(3 * vertex_count_), 0.0f);
   reference_.assign(std::size_t(3 * vertex_count_), 0.0f);
   solved_normals_.assign(std::size_t(3 * padded_count_), 0.0f);
@@ -157,12 +142,10 @@ const FoldReport& FoldDetector::measure_solved(bool reference_known) noexcept {
   for (const int32_t t : turned) turned_[std::size_t(t)] = 1;
   for (const int32_t t : turned) {
     if (t >= triangle_count_) break;  // padding, listed last
-    for (int32_t k = neighbour_start_[std::size_t(t)]; k < neighbour_start_[std::size_t(t) + 1]; ++k) {
-      const int32_t u = neighbours_[std::size_t(k)];
+    const Eigen::Vector3d solved_t = normal(solved_normals_, t), reference_t = normal(reference_normals_, t);  // turned: visible
+    for (const int u : adjacency_.neighbours(t)) {
       if (turned_[std::size_t(u)] && u < t) continue;
-      if (angle(judged_normal(t), judged_normal(u)) -
-              angle(normal(reference_normals_, t), normal(reference_normals_, u)) >
-          crease_radians_) {
+      if (angle(solved_t, judged_normal(u)) - angle(reference_t, normal(reference_normals_, u)) > crease_radians_) {
         fold(t);
         fold(u);
       }

@@ -15,6 +15,8 @@
 
 #include <Eigen/Core>
 
+#include "solver/mesh_topology.hpp"
+
 namespace facecap {
 namespace kernels {
 struct KernelTable;
@@ -70,9 +72,7 @@ class FoldDetector {
   std::span<const int> folded_triangles() const noexcept { return {folded_list_.data(), std::size_t(report_.folded)}; }
   const FoldReport& report() const noexcept { return report_; }
   // The triangles sharing an edge with triangle t.
-  std::span<const int32_t> neighbours(int t) const noexcept {
-    return {neighbours_.data() + neighbour_start_[std::size_t(t)], std::size_t(neighbour_start_[std::size_t(t) + 1] - neighbour_start_[std::size_t(t)])};
-  }
+  std::span<const int> neighbours(int t) const noexcept { return adjacency_.neighbours(t); }
   const Eigen::Matrix3Xi& triangles() const noexcept { return triangles_; }
 
  private:
@@ -88,9 +88,7 @@ class FoldDetector {
   Eigen::Matrix3Xi triangles_;
   Eigen::Index triangle_count_ = 0, padded_count_ = 0, vertex_count_ = 0;
   std::vector<int32_t> corners_;  // 3 x padded_count_, corner-major
-  // The triangles sharing an edge with triangle t: neighbours_[neighbour_start_[t] ..
-  // neighbour_start_[t + 1]).
-  std::vector<int32_t> neighbour_start_, neighbours_;
+  TriangleAdjacency adjacency_{Eigen::Matrix3Xi(3, 0)};
   std::vector<uint8_t> regions_;
   double crease_radians_ = 0.0, tolerance_ = 0.0;
   std::vector<float> solved_, reference_;                  // coordinate-major positions
