@@ -133,6 +133,20 @@ class Loader {
               fmt::format("\"{}\" holds a token but group or others may access it (mode {:04o}): chmod 600 it", *secret,
                           info.st_mode & 07777));
     }
+    const HttpSection& http = out_.values.control.http;
+    if (http.enabled && http.tls) {
+      std::error_code ec;
+      const bool certificate = fs::exists(http.tls_certificate, ec), key = fs::exists(http.tls_key, ec);
+      if (certificate != key)
+        problem(where(certificate ? "control.http.tls_key" : "control.http.tls_certificate"),
+                fmt::format("\"{}\" does not exist but \"{}\" does: give both, or remove both to have a new pair made at start",
+                            certificate ? http.tls_key : http.tls_certificate, certificate ? http.tls_certificate : http.tls_key));
+      struct stat info {};
+      if (key && ::stat(http.tls_key.c_str(), &info) == 0 && (info.st_mode & 077) != 0)
+        problem(where("control.http.tls_key"),
+                fmt::format("\"{}\" holds the TLS private key but group or others may access it (mode {:04o}): chmod 600 it",
+                            http.tls_key, info.st_mode & 07777));
+    }
   }
 
   // Rules that involve more than one key.

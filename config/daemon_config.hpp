@@ -151,6 +151,9 @@ struct HttpSection {
   int64_t max_connections = 0;
   int64_t max_connections_per_address = 0;
   int64_t max_stream_clients = 0;
+  bool tls = false;
+  std::string tls_certificate;  // PEM; made with tls_key on first start when neither exists
+  std::string tls_key;
 };
 
 struct ControlSection {

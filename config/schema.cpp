@@ -450,6 +450,20 @@ const std::vector<KeySpec>& schema_rows() {
       {FACECAP_KEY(control.http.max_stream_clients), .default_value = int64_t{16}, .min = 0, .max = 4096,
        .description = "Most WebSocket /stream clients at once (at most control.http.max_connections - 8); more are "
                       "answered 503."},
+      {FACECAP_KEY(control.http.tls), .default_value = false,
+       .description = "Serve the control API and the dashboard over TLS only (https://, wss://): the token, the "
+                      "session cookie (then Secure) and the stream are encrypted on the stage network. The "
+                      "certificate and key are control.http.tls_certificate and tls_key, made on first start when "
+                      "neither exists (docs/control-api.md#tls)."},
+      {FACECAP_KEY(control.http.tls_certificate), .default_value = std::string("tls/facecapd.crt"),
+       .description = "The control API's TLS certificate (PEM, the chain after it). When neither it nor "
+                      "control.http.tls_key exists, facecapd makes a self-signed one naming control.http.address (every "
+                      "interface's address for 0.0.0.0 or ::), localhost and control.http.allowed_hosts, valid 825 days, "
+                      "and logs its SHA-256 fingerprint. Relative to the working directory (/var/lib/facecap under "
+                      "systemd)."},
+      {FACECAP_KEY(control.http.tls_key), .default_value = std::string("tls/facecapd.key"),
+       .description = "The private key of control.http.tls_certificate (PEM, no passphrase); refused when group or "
+                      "others may read it (chmod 600)."},
       {FACECAP_KEY(control.http.dashboard_dir), .default_value = std::string(),
        .description = "Directory of the operator dashboard's built files, served at / (docs/dashboard.md). Empty: "
                       "the dashboard built with this facecapd (in its build tree) or installed with it "

@@ -94,7 +94,7 @@ std::string_view url_origin(std::string_view url) noexcept {
 }
 
 bool origin_allowed(std::string_view origin, std::string_view host, const AccessOptions& options) {
-  constexpr std::string_view kScheme = "http://";
+  const std::string_view kScheme = options.tls ? "https://" : "http://";
   if (origin.size() == kScheme.size() + host.size() && same_text_ignoring_case(origin.substr(0, kScheme.size()), kScheme) &&
       same_text_ignoring_case(origin.substr(kScheme.size()), host))
     return true;

@@ -27,6 +27,7 @@ struct AccessOptions {
   std::vector<std::string> allowed_hosts;    // further names the box is reached by ("stage-box.local")
   std::vector<std::string> allowed_origins;  // further pages that may command ("http://tablet.lan:8080")
   int64_t session_max_age_s = 12 * 3600;
+  bool tls = false;  // served over TLS: the box's own origin is https://, the session cookie Secure
 };
 
 // Whether the Host header names this box: the address listened on (any IP literal when
@@ -37,8 +38,8 @@ bool host_allowed(std::string_view host, const AccessOptions& options);
 // The origin ("http://name:port") of a URL (a Referer), or "" when it has none.
 std::string_view url_origin(std::string_view url) noexcept;
 
-// Whether a page of `origin` may use the API: the box's own origin (http:// and the Host
-// the request came with) or an allowed origin. "null" never is.
+// Whether a page of `origin` may use the API: the box's own origin (http://, or https://
+// with TLS, and the Host the request came with) or an allowed origin. "null" never is.
 bool origin_allowed(std::string_view origin, std::string_view host, const AccessOptions& options);
 
 // Equal in time independent of where the first difference is.

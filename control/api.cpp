@@ -344,8 +344,9 @@ HttpResponse login(const HttpRequest& request, ApiContext& context, const std::s
   context.throttle.succeeded(peer);
   const std::string id = context.sessions.open(role, now, access.session_max_age_s * kNsPerSecond);
   HttpResponse response = answer({200, {{"role", role_name(role)}, {"max_age_s", access.session_max_age_s}}});
-  response.set(http::field::set_cookie, fmt::format("{}={}; Path=/; Max-Age={}; HttpOnly; SameSite=Strict",
-                                                    session_cookie_name(access), id, access.session_max_age_s));
+  response.set(http::field::set_cookie, fmt::format("{}={}; Path=/; Max-Age={}; HttpOnly; SameSite=Strict{}",
+                                                    session_cookie_name(access), id, access.session_max_age_s,
+                                                    access.tls ? "; Secure" : ""));
   return response;
 }
 
@@ -354,7 +355,8 @@ HttpResponse logout(const HttpRequest& request, ApiContext& context) {
   const std::string name = session_cookie_name(context.access);
   const bool ended = context.sessions.close(session_cookie(request, name));
   HttpResponse response = make_response(request, {200, {{"logged_out", ended}}}, context.version);
-  response.set(http::field::set_cookie, fmt::format("{}=; Path=/; Max-Age=0; HttpOnly; SameSite=Strict", name));
+  response.set(http::field::set_cookie,
+               fmt::format("{}=; Path=/; Max-Age=0; HttpOnly; SameSite=Strict{}", name, context.access.tls ? "; Secure" : ""));
   return response;
 }
 

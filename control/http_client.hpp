@@ -1,5 +1,5 @@
 #pragma once
-// A small blocking HTTP/1.1 client for the control API: `facecap ctl`, the load benchmark
+// A small blocking HTTP/1.1 client (plain or TLS) for the control API: `facecap ctl`, the load benchmark
 // and the tests. One kept-alive connection, opened again when the server closed it.
 // Not real-time code.
 #include <cstdint>
@@ -18,8 +18,10 @@ struct HttpResult {
 class HttpClient {
  public:
   // token: sent as "Authorization: Bearer <token>" when not empty. timeout_s bounds each
-  // request (a calibration takes as long as its capture and then some).
-  HttpClient(std::string address, uint16_t port, std::string token = {}, double timeout_s = 120.0);
+  // request (a calibration takes as long as its capture and then some). tls_ca_file: speak
+  // HTTPS, trusting the certificates in that PEM file (facecapd's own certificate, for a
+  // self-signed one), and check that the certificate names `address`.
+  HttpClient(std::string address, uint16_t port, std::string token = {}, double timeout_s = 120.0, std::string tls_ca_file = {});
   ~HttpClient();
   HttpClient(const HttpClient&) = delete;
   HttpClient& operator=(const HttpClient&) = delete;
@@ -33,6 +35,7 @@ class HttpClient {
   uint16_t port_;
   std::string token_;
   double timeout_s_;
+  std::string tls_ca_file_;
   std::unique_ptr<Connection> connection_;
 };
 

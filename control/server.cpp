@@ -8,15 +8,20 @@
 
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/post.hpp>
+#include <boost/asio/ssl/context.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <boost/beast/core.hpp>
+#include <boost/beast/core/detect_ssl.hpp>
+#include <boost/beast/ssl/ssl_stream.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
+#include <boost/beast/websocket/ssl.hpp>
 #include <fmt/format.h>
 
 #include "core/error.hpp"
 #include "core/log.hpp"
 #include "core/time.hpp"
+#include "control/tls.hpp"
 
 namespace facecap::control {
 namespace net = boost::asio;
@@ -24,6 +29,7 @@ namespace beast = boost::beast;
 namespace http = beast::http;
 namespace websocket = beast::websocket;
 using tcp = net::ip::tcp;
+using TlsStream = beast::ssl_stream<beast::tcp_stream>;
 
 namespace {
 
@@ -43,7 +49,7 @@ constexpr int64_t kStatusMessageIntervalNs = kNsPerSecond;
 
 }  // namespace
 
-class StreamSession;
+class StreamClient;
 
 // What the server can close to make room: an HTTP session or a stream client.
 class Connection {
@@ -64,8 +70,8 @@ struct ControlServer::Impl : std::enable_shared_from_this<ControlServer::Impl> {
     table.remove(id);
     live.erase(id);
   }
-  void add_client(const std::shared_ptr<StreamSession>& client);
-  void remove_client(const std::shared_ptr<StreamSession>& client);
+  void add_client(const std::shared_ptr<StreamClient>& client);
+  void remove_client(const std::shared_ptr<StreamClient>& client);
   void update_stream_rate();
   void pump();
   void close_all();
@@ -79,7 +85,8 @@ struct ControlServer::Impl : std::enable_shared_from_this<ControlServer::Impl> {
   ConnectionTable table;
   std::unordered_map<ConnectionTable::Id, std::weak_ptr<Connection>> live;  // to abort the evicted
   AcceptBackoff accept_backoff;
-  std::set<std::shared_ptr<StreamSession>> clients;
+  std::set<std::shared_ptr<StreamClient>> clients;
+  std::shared_ptr<net::ssl::context> tls;  // null: plain HTTP
   bool pumping = false;
   bool closed = false;
 };
@@ -96,29 +103,11 @@ HttpResponse unreadable_request(int status, std::string what, const std::string&
 
 }  // namespace
 
-class StreamSession : public Connection, public std::enable_shared_from_this<StreamSession> {
+// A /stream client: which frames are due for it and whether its last message has gone,
+// whatever it is carried over (StreamSession below).
+class StreamClient : public Connection {
  public:
-  StreamSession(beast::tcp_stream&& stream, StreamRequest request, std::shared_ptr<ControlServer::Impl> server,
-                ConnectionTable::Id id)
-      : ws_(std::move(stream)), request_(request), server_(std::move(server)), id_(id) {}
-  ~StreamSession() override { server_->forget(id_); }
-
-  void start(HttpRequest upgrade) {
-    server_->live[id_] = weak_from_this();
-    beast::get_lowest_layer(ws_).expires_never();
-    websocket::stream_base::timeout timeout;
-    timeout.handshake_timeout = kWriteTimeout;
-    timeout.idle_timeout = kStreamIdleTimeout;
-    timeout.keep_alive_pings = true;
-    ws_.set_option(timeout);
-    ws_.async_accept(upgrade, [self = shared_from_this()](beast::error_code ec) {
-      if (ec) return;
-      // The schema first: frames and status messages only follow it.
-      self->send(schema_message(self->server_->stream->schema(), self->request_.rate_hz, self->request_.vertices).dump());
-      self->server_->add_client(self);
-      self->read();
-    });
-  }
+  explicit StreamClient(StreamRequest request) : request_(request) {}
   // Whether the frame at time_ns is due for this client and the last message has gone.
   bool wants(int64_t time_ns) const noexcept { return !writing_ && time_ns >= next_due_ns_; }
   bool due(int64_t time_ns) const noexcept { return time_ns >= next_due_ns_; }
@@ -136,22 +125,66 @@ class StreamSession : public Connection, public std::enable_shared_from_this<Str
     writing_ = true;
     write_started_ns_ = monotonic_now_ns();
     out_ = std::move(text);
-    ws_.text(true);
-    ws_.async_write(net::buffer(out_), [self = shared_from_this()](beast::error_code ec, std::size_t) {
-      self->writing_ = false;
-      if (ec) self->server_->remove_client(self);
+    write_out();
+  }
+  virtual void close() = 0;
+  void abort() override { close(); }
+
+ protected:
+  // Writes out_ and then calls written().
+  virtual void write_out() = 0;
+  void written() noexcept { writing_ = false; }
+
+  StreamRequest request_;
+  std::string out_;
+
+ private:
+  bool writing_ = false;
+  int64_t write_started_ns_ = 0;
+  int64_t next_due_ns_ = 0;
+  int64_t next_status_ns_ = 0;
+};
+
+// A WebSocket /stream client over `Stream` (plain TCP or TLS).
+template <class Stream>
+class StreamSession : public StreamClient, public std::enable_shared_from_this<StreamSession<Stream>> {
+ public:
+  StreamSession(Stream&& stream, StreamRequest request, std::shared_ptr<ControlServer::Impl> server, ConnectionTable::Id id)
+      : StreamClient(request), ws_(std::move(stream)), server_(std::move(server)), id_(id) {}
+  ~StreamSession() override { server_->forget(id_); }
+
+  void start(HttpRequest upgrade) {
+    server_->live[id_] = this->weak_from_this();
+    beast::get_lowest_layer(ws_).expires_never();
+    websocket::stream_base::timeout timeout;
+    timeout.handshake_timeout = kWriteTimeout;
+    timeout.idle_timeout = kStreamIdleTimeout;
+    timeout.keep_alive_pings = true;
+    ws_.set_option(timeout);
+    ws_.async_accept(upgrade, [self = this->shared_from_this()](beast::error_code ec) {
+      if (ec) return;
+      // The schema first: frames and status messages only follow it.
+      self->send(schema_message(self->server_->stream->schema(), self->request_.rate_hz, self->request_.vertices).dump());
+      self->server_->add_client(self);
+      self->read();
     });
   }
-  void close() {
+  void close() override {
     beast::error_code ec;
     beast::get_lowest_layer(ws_).socket().close(ec);
   }
-  void abort() override { close(); }
 
  private:
+  void write_out() override {
+    ws_.text(true);
+    ws_.async_write(net::buffer(out_), [self = this->shared_from_this()](beast::error_code ec, std::size_t) {
+      self->written();
+      if (ec) self->server_->remove_client(self);
+    });
+  }
   // Reads (and ignores) what the client sends, to see it close.
   void read() {
-    ws_.async_read(in_, [self = shared_from_this()](beast::error_code ec, std::size_t) {
+    ws_.async_read(in_, [self = this->shared_from_this()](beast::error_code ec, std::size_t) {
       if (ec) {
         self->server_->remove_client(self);
         return;
@@ -161,16 +194,10 @@ class StreamSession : public Connection, public std::enable_shared_from_this<Str
     });
   }
 
-  websocket::stream<beast::tcp_stream> ws_;
-  StreamRequest request_;
+  websocket::stream<Stream> ws_;
   std::shared_ptr<ControlServer::Impl> server_;
   beast::flat_buffer in_;
-  std::string out_;
   ConnectionTable::Id id_;
-  bool writing_ = false;
-  int64_t write_started_ns_ = 0;
-  int64_t next_due_ns_ = 0;
-  int64_t next_status_ns_ = 0;
 };
 
 namespace {
@@ -184,21 +211,40 @@ bool acceptable_transfer_encoding(const http::request_parser<http::string_body>&
   return beast::iequals(field->value(), "chunked") && header.count(http::field::transfer_encoding) == 1;
 }
 
-class HttpSession : public Connection, public std::enable_shared_from_this<HttpSession> {
+// An HTTP/1.1 connection over `Stream`: beast::tcp_stream, or TlsStream when the API
+// serves TLS (then the handshake comes first, within the header's time).
+template <class Stream>
+class HttpSession : public Connection, public std::enable_shared_from_this<HttpSession<Stream>> {
+  static constexpr bool kTls = std::is_same_v<Stream, TlsStream>;
+
  public:
   HttpSession(tcp::socket&& socket, std::shared_ptr<ControlServer::Impl> server, ConnectionTable::Id id)
-      : stream_(std::move(socket)), server_(std::move(server)), id_(id) {}
+      : stream_(make_stream(std::move(socket), *server)), server_(std::move(server)), id_(id) {}
   ~HttpSession() override {
     if (!handed_over_) server_->forget(id_);
   }
 
   void start() {
-    server_->live[id_] = weak_from_this();
-    read(kHeaderTimeout);
+    server_->live[id_] = this->weak_from_this();
+    if constexpr (kTls) {
+      lowest().expires_after(kHeaderTimeout);
+      beast::async_detect_ssl(lowest(), buffer_, [self = this->shared_from_this()](beast::error_code ec, bool tls) {
+        if (ec) return self->abort();
+        if (!tls) return self->refuse_plain_http();
+        self->stream_.async_handshake(net::ssl::stream_base::server, self->buffer_.data(),
+                                      [self](beast::error_code handshake_error, std::size_t used) {
+                                        if (handshake_error) return self->abort();
+                                        self->buffer_.consume(used);
+                                        self->read(kHeaderTimeout);
+                                      });
+      });
+    } else {
+      read(kHeaderTimeout);
+    }
   }
   void abort() override {
     beast::error_code ec;
-    stream_.socket().close(ec);
+    lowest().socket().close(ec);
   }
 
  private:
@@ -208,13 +254,13 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
     parser_.emplace();
     parser_->header_limit(kMaxHeaderBytes);
     parser_->body_limit(kMaxBodyBytes);
-    stream_.expires_after(header_timeout);
-    http::async_read_header(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, std::size_t) {
+    lowest().expires_after(header_timeout);
+    http::async_read_header(stream_, buffer_, *parser_, [self = this->shared_from_this()](beast::error_code ec, std::size_t) {
       if (ec) return self->on_read(ec);
       if (!acceptable_transfer_encoding(*self->parser_))
         return self->write(unreadable_request(400, "Transfer-Encoding must be absent or exactly \"chunked\"",
                                               self->server_->options.version));
-      self->stream_.expires_after(kBodyTimeout);
+      self->lowest().expires_after(kBodyTimeout);
       http::async_read(self->stream_, self->buffer_, *self->parser_,
                        [self](beast::error_code ec, std::size_t) { self->on_read(ec); });
     });
@@ -222,7 +268,7 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
 
   void on_read(beast::error_code ec) {
     if (ec == http::error::end_of_stream || ec == net::error::operation_aborted || ec == beast::error::timeout ||
-        ec == net::error::connection_reset || server_->closed)
+        ec == net::error::connection_reset || ec == net::ssl::error::stream_truncated || server_->closed)
       return close();
     if (ec == http::error::body_limit)
       return write(unreadable_request(413, fmt::format("the body is larger than {} bytes", kMaxBodyBytes), server_->options.version));
@@ -243,25 +289,49 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
         return write(make_response(request, full, server_->options.version));
       }
       handed_over_ = true;
-      std::make_shared<StreamSession>(std::move(stream_), std::get<StreamRequest>(accepted), server_, id_)->start(std::move(request));
+      std::make_shared<StreamSession<Stream>>(std::move(stream_), std::get<StreamRequest>(accepted), server_, id_)
+          ->start(std::move(request));
       return;
     }
-    auto respond = [self = shared_from_this(), executor = stream_.get_executor()](HttpResponse response) {
+    auto respond = [self = this->shared_from_this(), executor = stream_.get_executor()](HttpResponse response) {
       net::post(executor, [self, response = std::move(response)]() mutable { self->write(std::move(response)); });
     };
     if (auto immediate = handle_request(request, server_->context, std::move(respond), peer_address())) write(std::move(*immediate));
   }
 
-  std::string peer_address() const {
+  static Stream make_stream(tcp::socket&& socket, ControlServer::Impl& server) {
+    if constexpr (kTls)
+      return Stream(std::move(socket), *server.tls);
+    else
+      return Stream(std::move(socket));
+  }
+  beast::tcp_stream& lowest() { return beast::get_lowest_layer(stream_); }
+
+  std::string peer_address() {
     beast::error_code ec;
-    const tcp::endpoint peer = stream_.socket().remote_endpoint(ec);
+    const tcp::endpoint peer = lowest().socket().remote_endpoint(ec);
     return ec ? std::string() : peer.address().to_string();
+  }
+
+  // Plain HTTP sent to the TLS port: a short answer a person can read, then closed.
+  void refuse_plain_http() {
+    const auto& o = server_->options;
+    const std::string body = fmt::format("This facecapd's control API speaks HTTPS only: https://{}:{}/\n",
+                                         o.address.find(':') == std::string::npos ? o.address : "[" + o.address + "]",
+                                         server_->context.access.port);
+    plain_answer_ = fmt::format("HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: {}\r\n"
+                                "Connection: close\r\n\r\n{}", body.size(), body);
+    lowest().expires_after(kWriteTimeout);
+    net::async_write(lowest(), net::buffer(plain_answer_), [self = this->shared_from_this()](beast::error_code, std::size_t) {
+      beast::error_code ignored;
+      self->lowest().socket().shutdown(tcp::socket::shutdown_send, ignored);
+    });
   }
 
   void write(HttpResponse response) {
     response_ = std::move(response);
-    stream_.expires_after(kWriteTimeout);
-    http::async_write(stream_, response_, [self = shared_from_this()](beast::error_code ec, std::size_t) {
+    lowest().expires_after(kWriteTimeout);
+    http::async_write(stream_, response_, [self = this->shared_from_this()](beast::error_code ec, std::size_t) {
       if (ec || !self->response_.keep_alive()) return self->close();
       self->response_ = {};  // an answer of a recording's frames can be megabytes
       self->read(kKeepAliveTimeout);
@@ -269,17 +339,24 @@ class HttpSession : public Connection, public std::enable_shared_from_this<HttpS
   }
 
   void close() {
-    beast::error_code ec;
-    stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
+    if constexpr (kTls) {
+      // close_notify, then the socket; a peer that never answers it is cut at the timeout.
+      lowest().expires_after(kWriteTimeout);
+      stream_.async_shutdown([self = this->shared_from_this()](beast::error_code) { self->abort(); });
+    } else {
+      beast::error_code ec;
+      lowest().socket().shutdown(tcp::socket::shutdown_send, ec);
+    }
   }
 
-  beast::tcp_stream stream_;
+  Stream stream_;
   std::shared_ptr<ControlServer::Impl> server_;
   ConnectionTable::Id id_;
   bool handed_over_ = false;  // to a StreamSession, with its id
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   HttpResponse response_;
+  std::string plain_answer_;
 };
 
 }  // namespace
@@ -300,8 +377,10 @@ void ControlServer::Impl::accept() {
         self->live.erase(evicted);
       }
     }
-    if (admission.admitted) {
-      std::make_shared<HttpSession>(std::move(socket), self, *admission.admitted)->start();
+    if (admission.admitted && self->tls) {
+      std::make_shared<HttpSession<TlsStream>>(std::move(socket), self, *admission.admitted)->start();
+    } else if (admission.admitted) {
+      std::make_shared<HttpSession<beast::tcp_stream>>(std::move(socket), self, *admission.admitted)->start();
     } else {
       beast::error_code ignored;
       socket.close(ignored);
@@ -323,7 +402,7 @@ void ControlServer::Impl::accept_failed(const beast::error_code& ec) {
   });
 }
 
-void ControlServer::Impl::add_client(const std::shared_ptr<StreamSession>& client) {
+void ControlServer::Impl::add_client(const std::shared_ptr<StreamClient>& client) {
   if (closed) return client->close();
   clients.insert(client);
   update_stream_rate();
@@ -333,7 +412,7 @@ void ControlServer::Impl::add_client(const std::shared_ptr<StreamSession>& clien
   }
 }
 
-void ControlServer::Impl::remove_client(const std::shared_ptr<StreamSession>& client) {
+void ControlServer::Impl::remove_client(const std::shared_ptr<StreamClient>& client) {
   clients.erase(client);
   update_stream_rate();
 }
@@ -408,7 +487,10 @@ ControlServer::ControlServer(net::io_context& io, ServerOptions options, const S
   const net::ip::address address = net::ip::make_address(options.address, ec);
   if (ec) throw Error(fmt::format("control API: \"{}\" is not an IP address", options.address));
   const tcp::endpoint endpoint(address, options.port);
+  std::shared_ptr<net::ssl::context> tls = options.tls ? make_tls_server_context(*options.tls) : nullptr;
+  options.access.tls = tls != nullptr;
   impl_ = std::make_shared<Impl>(io, std::move(options), board, commands, stream);
+  impl_->tls = std::move(tls);
   tcp::acceptor& acceptor = impl_->acceptor;
   acceptor.open(endpoint.protocol(), ec);
   if (!ec) acceptor.set_option(net::socket_base::reuse_address(true), ec);

@@ -1,15 +1,17 @@
 #pragma once
 // The control API's sockets: an HTTP/1.1 listener and its sessions, and the WebSocket
-// /stream, all asynchronous on facecapd's one I/O thread (daemon/io_thread.hpp), so a slow
+// /stream, plain or over TLS, all asynchronous on facecapd's one I/O thread (daemon/io_thread.hpp), so a slow
 // or malicious client never holds up anything but itself. What each request means is
 // control/api.hpp. Not real-time code.
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "control/api.hpp"
 #include "control/connection_limits.hpp"
 #include "control/stream_sink.hpp"
+#include "control/tls.hpp"
 
 namespace boost::asio {
 class io_context;
@@ -24,13 +26,15 @@ struct ServerOptions {
   std::string version;  // "facecapd 0.1.0 (git ...)", for the Server header
   std::string dashboard_dir;  // the dashboard's files, served at "/"; "": none (a 404 page says so)
   ConnectionLimits limits;     // control.http.max_connections and the like
+  std::optional<TlsFiles> tls;  // HTTPS and WSS only, with this certificate (control.http.tls)
 };
 
 class ControlServer {
  public:
   // Listens at once (so that a taken port fails the start) and accepts on `io` once it
   // runs. The board, the queue and the stream (may be null) must outlive the server.
-  // Throws Error naming the address when it cannot listen.
+  // Throws Error naming the address when it cannot listen, or the file when options.tls's
+  // certificate or key cannot be used.
   ControlServer(boost::asio::io_context& io, ServerOptions options, const StatusBoard& board, CommandQueue& commands,
                 StreamSink* stream);
   // stop().

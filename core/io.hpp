@@ -32,8 +32,10 @@ class MappedFile {
   std::size_t size_ = 0;
 };
 
-// Writes via a temporary file and rename, so readers never see a half-written file.
-void write_file_atomically(const std::filesystem::path& path, std::span<const char> bytes);
+// Writes via a temporary file and rename, so readers never see a half-written file. The
+// file is created with `mode` (less the umask): 0600 for a secret, which is then never
+// readable by others, not even for a moment.
+void write_file_atomically(const std::filesystem::path& path, std::span<const char> bytes, unsigned mode = 0644);
 
 // 64-bit FNV-1a: stable across runs and machines, used for identities and checksums.
 struct Fnv1a64 {

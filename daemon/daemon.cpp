@@ -6,9 +6,11 @@
 #include <cstring>
 #include <csignal>
 #include <fstream>
+#include <optional>
 #include <utility>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 #include <sys/resource.h>
 #include <unistd.h>
@@ -232,6 +234,17 @@ void Daemon::start_control() {
                                 .session_max_age_s = http.session_max_age_s};
   if (!access.viewer_token.empty() && access.viewer_token == access.operator_token)
     throw file_error(http.viewer_token_file, "the viewer's token is the operator's: give the viewer a token of its own");
+  std::optional<control::TlsFiles> tls;
+  if (http.tls) {
+    tls = control::TlsFiles{.certificate = http.tls_certificate, .key = http.tls_key};
+    std::vector<std::string> names{http.address};
+    names.insert(names.end(), access.allowed_hosts.begin(), access.allowed_hosts.end());
+    const control::TlsIdentity id = control::ensure_tls_identity(*tls, names);
+    spdlog::info("control API TLS certificate {} ({}; valid until {}; names {}); SHA-256 fingerprint {}; public key pin "
+                 "sha256//{}", tls->certificate, id.generated ? "made now, self-signed" : "loaded", id.not_after,
+                 fmt::join(id.names, ", "), id.sha256_fingerprint, id.spki_sha256_base64);
+    for (const std::string& warning : id.warnings) spdlog::warn("{}", warning);
+  }
   publish_status(monotonic_now_ns());
   const std::string dashboard = http.dashboard_dir.empty() ? default_dashboard_dir() : http.dashboard_dir;
   server_ = std::make_unique<control::ControlServer>(
@@ -241,9 +254,10 @@ void Daemon::start_control() {
                              .dashboard_dir = dashboard,
                              .limits = {.max_connections = std::size_t(http.max_connections),
                                         .max_per_address = std::size_t(http.max_connections_per_address),
-                                        .max_stream_clients = std::size_t(http.max_stream_clients)}},
+                                        .max_stream_clients = std::size_t(http.max_stream_clients)},
+                             .tls = std::move(tls)},
       board_, commands_, stream_);
-  spdlog::info("control API on http://{}:{}{}", http.address.find(':') == std::string::npos ? http.address : "[" + http.address + "]",
+  spdlog::info("control API on {}://{}:{}{}", http.tls ? "https" : "http", http.address.find(':') == std::string::npos ? http.address : "[" + http.address + "]",
                server_->port(), http.token_file.empty() ? "" : " (token or login required)");
 }
 

@@ -16,7 +16,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libsuitesparse-dev libqhull-dev libnanoflann-dev
   libtomlplusplus-dev libtinygltf-dev libassimp-dev nlohmann-json3-dev
-  libboost-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev libdtl-dev libpcap-dev
+  libboost-dev libssl-dev libsystemd-dev libspdlog-dev libfmt-dev libcli11-dev libdtl-dev libpcap-dev
   catch2 libbenchmark-dev
   libusb-1.0-0-dev libhidapi-dev libopencv-dev linux-libc-dev  # the usb, hid and v4l2 drivers
   umockdev libumockdev-dev  # the usb and hid drivers' tests fake their devices

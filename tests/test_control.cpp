@@ -1,7 +1,8 @@
 // The control API: request handling on bytes (routes, JSON bodies, tokens, a full queue),
 // then facecapd in-process on the sim with the API on: status, Prometheus metrics checked
 // by promtool, takes, markers-only takes, calibration on the box, actor swaps, the
-// WebSocket stream; the capture-quality state of the issue's motivating failure; --version.
+// WebSocket stream, and all of it over TLS; the capture-quality state of the issue's
+// motivating failure; --version.
 #include <algorithm>
 #include <cstdio>
 #include <future>
@@ -11,7 +12,10 @@
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
+#include <boost/asio/ssl.hpp>
+#include <boost/beast/ssl.hpp>
 #include <boost/beast/websocket.hpp>
+#include <boost/beast/websocket/ssl.hpp>
 #include <catch2/catch.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -24,6 +28,7 @@
 #include "control/connection_limits.hpp"
 #include "control/http_client.hpp"
 #include "control/static_files.hpp"
+#include "control/tls.hpp"
 #include "core/error.hpp"
 #include "core/time.hpp"
 #include "daemon/daemon.hpp"
@@ -1038,4 +1043,143 @@ TEST_CASE("a take started mid-run re-solves to itself from its first frame: the 
   CHECK(differs["weights"]["largest"]["frame"].get<int64_t>() - first.frame_no < 360);
   WARN("the same take re-solved from a cold start: largest weight difference " << differs["weights"]["max"] << " at frame "
        << differs["weights"]["largest"]["frame"].get<int64_t>() - first.frame_no << " of the take");
+}
+
+TEST_CASE("TLS: a certificate made on first start and kept after, trusted by curl, openssl and facecap ctl's client; "
+          "login cookie Secure, WSS stream, plain HTTP told to use HTTPS", "[tls]") {
+  const fs::path dir = test::scratch_dir("control-tls");
+  const fs::path certificate = dir / "tls" / "facecapd.crt", key = dir / "tls" / "facecapd.key";
+  test::write_text(dir / "token", "tls-operator-token\n");
+  fs::permissions(dir / "token", fs::perms::owner_read | fs::perms::owner_write);
+  const std::vector<std::string> settings = {
+      "outputs.shm.name=" + unique_shm("tls"), "control.http.enabled=true", "control.http.port=0", "control.http.tls=true",
+      "control.http.tls_certificate=" + certificate.string(), "control.http.tls_key=" + key.string(),
+      "control.http.token_file=" + (dir / "token").string(), "control.http.allowed_hosts=stage-box.local"};
+  auto sh = [](const std::string& command, int* status = nullptr) {
+    int ignored = 0;
+    return test::run_and_capture(command + " 2>&1", status ? status : &ignored);
+  };
+  std::string fingerprint;
+  {
+    std::ostringstream log;
+    struct LogCapture {  // removed after the daemon below has stopped
+      explicit LogCapture(std::ostringstream& out) {
+        spdlog::default_logger()->sinks().push_back(std::make_shared<spdlog::sinks::ostream_sink_mt>(out));
+      }
+      ~LogCapture() { spdlog::default_logger()->sinks().pop_back(); }
+    } capture(log);
+    RunningDaemon d(settings);
+    const uint16_t port = d->control_port();
+    REQUIRE(port != 0);
+    INFO(log.str());
+    CHECK_THAT(log.str(), Contains(fmt::format("control API on https://127.0.0.1:{}", port)) && Contains("made now, self-signed"));
+    // The key is the owner's only, from the moment it exists; the certificate names the box.
+    CHECK((fs::status(key).permissions() & (fs::perms::group_all | fs::perms::others_all)) == fs::perms::none);
+    CHECK((fs::status(certificate.parent_path()).permissions() & (fs::perms::group_all | fs::perms::others_all)) == fs::perms::none);
+    const std::string text = sh(fmt::format("openssl x509 -in '{}' -noout -text", certificate.string()));
+    CHECK_THAT(text, Contains("IP Address:127.0.0.1") && Contains("DNS:localhost") && Contains("DNS:stage-box.local") &&
+                         Contains("ASN1 OID: prime256v1") && Contains("TLS Web Server Authentication") && Contains("CA:FALSE"));
+    fingerprint = sh(fmt::format("openssl x509 -in '{}' -noout -fingerprint -sha256", certificate.string()));
+    CHECK_THAT(log.str(), Contains(fingerprint.substr(fingerprint.find('=') + 1, 95)));
+
+    // curl trusting only this certificate (which also checks that it names 127.0.0.1).
+    const std::string url = fmt::format("https://127.0.0.1:{}", port);
+    int status = 0;
+    CHECK(sh(fmt::format("curl -sS --cacert '{}' -o /dev/null -w '%{{http_code}}' -H 'Authorization: Bearer tls-operator-token' {}/status",
+                         certificate.string(), url), &status) == "200");
+    CHECK(WEXITSTATUS(status) == 0);
+    // Without trusting it curl refuses the connection (exit 60: certificate not trusted).
+    sh(fmt::format("curl -sS -o /dev/null {}/status", url), &status);
+    CHECK(WEXITSTATUS(status) == 60);
+    // TLS 1.1 is refused; plain HTTP on the TLS port is told, in words, to use HTTPS.
+    sh(fmt::format("openssl s_client -connect 127.0.0.1:{} -tls1_1 < /dev/null", port), &status);
+    CHECK(WEXITSTATUS(status) != 0);
+    CHECK_THAT(sh(fmt::format("curl -sS -i http://127.0.0.1:{}/status", port)),
+               Contains("400 Bad Request") && Contains(fmt::format("speaks HTTPS only: https://127.0.0.1:{}/", port)));
+    // The login's cookie is Secure over TLS.
+    CHECK_THAT(sh(fmt::format("curl -sS -i --cacert '{}' -H 'Content-Type: application/json' -H 'Origin: {}' "
+                              "--data '{{\"token\": \"tls-operator-token\"}}' {}/login", certificate.string(), url, url)),
+               Contains("HttpOnly; SameSite=Strict; Secure"));
+
+    // facecap ctl's client: the certificate as its trust, and another certificate refused.
+    control::HttpClient client("127.0.0.1", port, "tls-operator-token", 10.0, certificate.string());
+    CHECK(get_json(client, "/status").contains("loop"));
+    sh(fmt::format("openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -subj /CN=other -days 1 "
+                   "-keyout '{}' -out '{}'", (dir / "other.key").string(), (dir / "other.crt").string()));
+    control::HttpClient stranger("127.0.0.1", port, "tls-operator-token", 10.0, (dir / "other.crt").string());
+    CHECK_THROWS_WITH(stranger.request("GET", "/status"), Contains("TLS with https://127.0.0.1:") && Contains("certificate verify failed"));
+
+    // The stream over WSS: the schema first, then frames.
+    namespace ssl = boost::asio::ssl;
+    namespace websocket = boost::beast::websocket;
+    boost::asio::io_context io;
+    ssl::context trust(ssl::context::tls_client);
+    trust.load_verify_file(certificate.string());
+    websocket::stream<boost::beast::ssl_stream<boost::asio::ip::tcp::socket>> ws(io, trust);
+    boost::beast::get_lowest_layer(ws).connect({boost::asio::ip::make_address("127.0.0.1"), port});
+    ws.next_layer().set_verify_mode(ssl::verify_peer);
+    ws.next_layer().handshake(ssl::stream_base::client);
+    ws.set_option(websocket::stream_base::decorator(
+        [](websocket::request_type& r) { r.set(http::field::authorization, "Bearer tls-operator-token"); }));
+    ws.handshake(fmt::format("127.0.0.1:{}", port), "/stream?rate=30");
+    std::vector<std::string> types;
+    for (int i = 0; i < 3; ++i) {
+      boost::beast::flat_buffer buffer;
+      ws.read(buffer);
+      types.push_back(json::parse(boost::beast::buffers_to_string(buffer.data()))["type"]);
+    }
+    CHECK(types[0] == "schema");
+    CHECK(std::count(types.begin(), types.end(), "frame") >= 1);
+    boost::system::error_code ignored;
+    ws.close(websocket::close_code::normal, ignored);
+    CHECK(d.stop() == 0);
+  }
+  // The next start keeps the pair: the same certificate.
+  {
+    RunningDaemon d(settings);
+    REQUIRE(d->control_port() != 0);
+    CHECK(sh(fmt::format("openssl x509 -in '{}' -noout -fingerprint -sha256", certificate.string())) == fingerprint);
+    CHECK(d.stop() == 0);
+  }
+}
+
+TEST_CASE("TLS files that cannot be used are refused at start, naming the file and what is wrong", "[tls]") {
+  const fs::path dir = test::scratch_dir("control-tls-refused");
+  const control::TlsFiles files{(dir / "a.crt").string(), (dir / "a.key").string()};
+  const control::TlsIdentity made = control::ensure_tls_identity(files, {"10.1.2.3", "box.lan"});
+  CHECK(made.generated);
+  CHECK(made.names == std::vector<std::string>{"DNS:localhost", "IP:10.1.2.3", "DNS:box.lan"});
+  const control::TlsIdentity loaded = control::ensure_tls_identity(files, {"10.1.2.3"});
+  CHECK_FALSE(loaded.generated);
+  CHECK(loaded.sha256_fingerprint == made.sha256_fingerprint);
+  CHECK(loaded.warnings.empty());
+  // A name the certificate does not cover is a warning (browsers would refuse it there).
+  const control::TlsIdentity moved = control::ensure_tls_identity(files, {"10.9.9.9", "box.lan"});
+  REQUIRE(moved.warnings.size() == 1);
+  CHECK_THAT(moved.warnings[0], Contains("does not name 10.9.9.9"));
+
+  // One file without the other.
+  const control::TlsFiles lone{(dir / "a.crt").string(), (dir / "missing.key").string()};
+  CHECK_THROWS_WITH(control::ensure_tls_identity(lone, {}), Contains("missing.key") && Contains("does not exist but") &&
+                                                                 Contains("a.crt"));
+  // A key others may read.
+  fs::permissions(files.key, fs::perms::others_read, fs::perm_options::add);
+  CHECK_THROWS_WITH(control::ensure_tls_identity(files, {}), Contains("a.key") && Contains("chmod 600"));
+  CHECK_THROWS_WITH(control::make_tls_server_context(files), Contains("a.key") && Contains("chmod 600"));
+  fs::permissions(files.key, fs::perms::others_read, fs::perm_options::remove);
+  // Not a certificate; another certificate's key.
+  test::write_text(dir / "b.crt", "-----BEGIN CERTIFICATE-----\nnot base64 at all\n-----END CERTIFICATE-----\n");
+  fs::copy_file(files.key, dir / "b.key");
+  CHECK_THROWS_WITH(control::ensure_tls_identity({(dir / "b.crt").string(), (dir / "b.key").string()}, {}),
+                    Contains("b.crt") && Contains("not a PEM certificate"));
+  const control::TlsFiles other{(dir / "c.crt").string(), (dir / "c.key").string()};
+  control::ensure_tls_identity(other, {});
+  CHECK_THROWS_WITH(control::ensure_tls_identity({other.certificate, files.key}, {}),
+                    Contains("a.key") && Contains("is not the key of the certificate") && Contains("c.crt"));
+
+  // --check-config says the same before anything starts.
+  CHECK_THROWS_WITH(config::load_config("", {"control.http.enabled=true", "control.http.tls=true",
+                                             "control.http.tls_certificate=" + files.certificate,
+                                             "control.http.tls_key=" + (dir / "missing.key").string()}),
+                    Contains("control.http.tls_certificate") || Contains("control.http.tls_key"));
 }

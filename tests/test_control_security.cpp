@@ -309,3 +309,19 @@ TEST_CASE("token files others may read are refused, like ssh keys, and the lists
                     Contains("\"http://box\" is not a host name"));
   CHECK(split_list(" a.lan, b.lan  c.lan,,", config::kListSeparators) == std::vector<std::string>{"a.lan", "b.lan", "c.lan"});
 }
+
+TEST_CASE("over TLS the box's own origin is https:// and the session cookie is Secure") {
+  Api api;
+  api.context.access.tls = true;
+  api.context.access.operator_token = "op-s3cret";
+  api.board.publish(std::make_shared<control::Published>(control::Published{"{}\n", "", "{}\n"}));
+  // The page the box serves over TLS may log in; the same host over plain http:// is another origin.
+  CHECK(api.status(request(http::verb::post, "/login", {.origin = "http://127.0.0.1:8765"}, R"({"token": "op-s3cret"})")) == 403);
+  REQUIRE(api.status(request(http::verb::post, "/login", {.origin = "https://127.0.0.1:8765"}, R"({"token": "op-s3cret"})")) == 200);
+  CHECK_THAT(std::string((*api.last)[http::field::set_cookie]), Catch::EndsWith("; HttpOnly; SameSite=Strict; Secure"));
+  const std::string cookie = cookie_pair(*api.last);
+  CHECK(api.status(request(http::verb::post, "/record/start", {.origin = "https://127.0.0.1:8765", .cookie = cookie}, "{}")) == 0);
+  CHECK(api.status(request(http::verb::post, "/record/start", {.origin = "http://127.0.0.1:8765", .cookie = cookie}, "{}")) == 403);
+  REQUIRE(api.status(request(http::verb::post, "/logout", {.origin = "https://127.0.0.1:8765", .cookie = cookie}, "{}")) == 200);
+  CHECK_THAT(std::string((*api.last)[http::field::set_cookie]), Catch::EndsWith("; Secure"));
+}

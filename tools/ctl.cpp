@@ -28,6 +28,7 @@ struct CtlOptions {
   std::string address = "127.0.0.1";
   int port = 8765;
   std::string token_file;
+  std::string tls_ca;  // HTTPS, trusting this certificate (facecapd's control.http.tls_certificate)
   bool json = false;
   // Commands' arguments.
   std::string actor_name, actor_file;
@@ -39,13 +40,15 @@ struct CtlOptions {
 
 // The API's answer as JSON; throws Error with its message unless it is a 2xx.
 json call(const CtlOptions& o, std::string_view method, std::string_view target, const json& body = nullptr) {
-  std::string address = o.address, token_file = o.token_file;
+  std::string address = o.address, token_file = o.token_file, tls_ca = o.tls_ca;
   int port = o.port;
   if (!o.config.empty()) {
     const config::LoadedConfig loaded = config::load_config(o.config, {}, config::Checks::kValues);
-    address = loaded.values.control.http.address;
-    port = int(loaded.values.control.http.port);
-    if (token_file.empty()) token_file = loaded.values.control.http.token_file;
+    const config::HttpSection& http = loaded.values.control.http;
+    address = http.address;
+    port = int(http.port);
+    if (token_file.empty()) token_file = http.token_file;
+    if (tls_ca.empty() && http.tls) tls_ca = http.tls_certificate;
   }
   std::string token;
   if (!token_file.empty()) {
@@ -54,7 +57,10 @@ json call(const CtlOptions& o, std::string_view method, std::string_view target,
     token.erase(token.find_last_not_of(" \t\r\n") + 1);
     token.erase(0, token.find_first_not_of(" \t\r\n"));
   }
-  control::HttpClient client(address, uint16_t(port), token);
+  // A box listening on every address is asked on loopback.
+  if (address == "0.0.0.0") address = "127.0.0.1";
+  if (address == "::") address = "::1";
+  control::HttpClient client(address, uint16_t(port), token, 120.0, tls_ca);
   const control::HttpResult result = client.request(method, target, body.is_null() ? std::string() : body.dump());
   if (result.content_type.rfind("text/plain", 0) == 0 && result.status == 200) return result.body;
   json answer = json::parse(result.body, nullptr, false);
@@ -122,6 +128,10 @@ void add_ctl_command(CLI::App& app, int& exit_code) {
   ctl->add_option("--address", o->address, "Address of facecapd's control API")->capture_default_str();
   ctl->add_option("--port", o->port, "Port of facecapd's control API")->capture_default_str()->check(CLI::Range(1, 65535));
   ctl->add_option("--token-file", o->token_file, "File holding the bearer token")->check(CLI::ExistingFile);
+  ctl->add_option("--tls-ca", o->tls_ca,
+                  "Speak HTTPS, trusting this certificate (facecapd's control.http.tls_certificate; with --config and "
+                  "control.http.tls on, that file)")
+      ->check(CLI::ExistingFile);
   ctl->add_flag("--json", o->json, "Print the API's JSON answer");
   auto done = [o, &exit_code](const json& answer, auto&& print) {
     if (o->json) print_json(answer);

@@ -10,12 +10,16 @@
 //     with that session cookie in the browser the attacking page still cannot start or
 //     stop a take nor read the stream; a viewer's login cannot record; DNS rebinding (a
 //     name mapped to ADDRESS) gets 421; logout ends the session.
+//  With `tls` (third argument): part 2 over HTTPS and WSS (control.http.tls), facecapd
+//  making its certificate at start; chromium trusts exactly that key (its public key pin
+//  from the log), this script's requests exactly that certificate, and the cookie is Secure.
 // Every verdict is checked from facecapd's side: its takes directory and /status.
-// Usage: node dashboard/tests/cross_origin.mjs <build dir> [ADDRESS]; exits 77 when chromium
-// or the built dashboard is absent.
+// Usage: node dashboard/tests/cross_origin.mjs <build dir> [ADDRESS] [tls]; exits 77 when
+// chromium or the built dashboard is absent.
 import { spawn } from 'node:child_process';
 import { chmodSync, existsSync, mkdirSync, mkdtempSync, readdirSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
-import { createServer } from 'node:http';
+import { createServer, request as httpRequest } from 'node:http';
+import { request as httpsRequest } from 'node:https';
 import { tmpdir } from 'node:os';
 import { join, resolve } from 'node:path';
 import { launchChromium, missingBrowser } from './chromium.mjs';
@@ -23,6 +27,8 @@ import { launchChromium, missingBrowser } from './chromium.mjs';
 const kSkipped = 77;
 const build = resolve(process.argv[2] ?? 'build');
 const address = process.argv[3] ?? '127.0.0.1';
+const tls = process.argv[4] === 'tls';
+const scheme = tls ? 'https' : 'http';
 if (missingBrowser()) {
   console.log(`SKIPPED: ${missingBrowser()}`);
   process.exit(kSkipped);
@@ -60,16 +66,20 @@ function startDaemon(name, settings) {
     '--set', `outputs.shm.name=facecap-cross-origin-${process.pid}-${name}`,
     '--set', `outputs.recording.directory=${takes}`, '--set', 'control.status_interval_s=0.25',
     '--set', 'control.run_seconds=300', ...settings.flatMap((s) => ['--set', s]),
+    ...(tls ? ['--set', 'control.http.tls=true', '--set', `control.http.tls_certificate=${join(takes, 'tls', 'facecapd.crt')}`,
+               '--set', `control.http.tls_key=${join(takes, 'tls', 'facecapd.key')}`] : []),
   ], { env: { ...process.env, FACECAPD_ALLOW_ROOT: '1' }, stdio: ['ignore', 'pipe', 'pipe'] });
   let log = '';
   child.stdout.on('data', (c) => (log += c));
   child.stderr.on('data', (c) => (log += c));
   return new Promise((resolvePort, reject) => {
     const timer = setInterval(() => {
-      const port = /control API on http:\/\/[^:]+:(\d+)/.exec(log)?.[1];
+      const port = /control API on https?:\/\/[^:]+:(\d+)/.exec(log)?.[1];
       if (port && log.includes('ready: first frame solved')) {
         clearInterval(timer);
-        resolvePort({ child, port: Number(port), takes, log: () => log });
+        const pin = /public key pin sha256\/\/([A-Za-z0-9+/=]+)/.exec(log)?.[1];
+        const ca = tls ? readFileSync(join(takes, 'tls', 'facecapd.crt')) : undefined;
+        resolvePort({ child, port: Number(port), takes, pin, ca, log: () => log });
       }
     }, 100);
     child.on('exit', (code) => {
@@ -80,13 +90,31 @@ function startDaemon(name, settings) {
   });
 }
 
-// The API as a script (no Origin, as curl): with the operator's token when there is one.
-async function api(daemon, path, body, token) {
+// A request to `daemon` as a script sends it (no Origin), over HTTPS trusting only its
+// certificate when the API serves TLS: { status, body (JSON or null) }.
+function send(daemon, path, { method = 'GET', headers = {}, body } = {}) {
+  return new Promise((done, fail) => {
+    const options = { host: address, port: daemon.port, path, method, headers, ca: daemon.ca };
+    const r = (tls ? httpsRequest : httpRequest)(options, (response) => {
+      let text = '';
+      response.on('data', (c) => (text += c));
+      response.on('end', () => {
+        let json = null;
+        try { json = JSON.parse(text); } catch { /* not JSON */ }
+        done({ status: response.statusCode, body: json });
+      });
+    });
+    r.on('error', fail);
+    r.end(body);
+  });
+}
+
+// The API as a script: with the operator's token when there is one.
+function api(daemon, path, body, token) {
   const headers = token ? { Authorization: `Bearer ${token}` } : {};
-  if (body !== undefined) headers['Content-Type'] = 'application/json';
-  const response = await fetch(`http://${address}:${daemon.port}${path}`,
-                               body === undefined ? { headers } : { method: 'POST', headers, body: JSON.stringify(body) });
-  return { status: response.status, body: await response.json().catch(() => null) };
+  if (body === undefined) return send(daemon, path, { headers });
+  headers['Content-Type'] = 'application/json';
+  return send(daemon, path, { method: 'POST', headers, body: JSON.stringify(body) });
 }
 const takesIn = (daemon) => readdirSync(daemon.takes).filter((f) => f.endsWith('.fcrec'));
 
@@ -130,7 +158,7 @@ async function attack(target) {
   await new Promise((r) => setTimeout(r, 1000));
   result.stream = await new Promise((done) => {
     let opened = false, messages = 0;
-    const ws = new WebSocket(`${target.replace('http:', 'ws:')}/stream?rate=30`);
+    const ws = new WebSocket(`${target.replace(/^http/, 'ws')}/stream?rate=30`);
     ws.onopen = () => (opened = true);
     ws.onmessage = () => (messages += 1);
     const finish = () => done({ opened, messages });
@@ -145,7 +173,7 @@ async function attackAndCheck(context, daemon, token, label) {
   const page = await context.newPage();
   await page.goto(attackerUrl);
   const before = takesIn(daemon);
-  const result = await page.evaluate(attack, `http://${address}:${daemon.port}`);
+  const result = await page.evaluate(attack, `${scheme}://${address}:${daemon.port}`);
   await page.waitForTimeout(500);
   const after = takesIn(daemon);
   const status = (await api(daemon, '/status', undefined, token)).body;
@@ -158,7 +186,7 @@ async function attackAndCheck(context, daemon, token, label) {
   const started = await api(daemon, '/record/start', { take: `${label}-kept` }, token);
   check(`${label}: a script (no Origin${token ? ', bearer token' : ''}) still starts a take`, started.status === 200,
         JSON.stringify(started.body));
-  await page.evaluate(attack, `http://${address}:${daemon.port}`);
+  await page.evaluate(attack, `${scheme}://${address}:${daemon.port}`);
   const still = (await api(daemon, '/status', undefined, token)).body;
   check(`${label}: the page cannot stop the running take`, still.recording.active === true, JSON.stringify(still.recording));
   await api(daemon, '/record/stop', {}, token);
@@ -168,10 +196,11 @@ async function attackAndCheck(context, daemon, token, label) {
 let browser = null;
 const daemons = [];
 try {
-  browser = await launchChromium([`--host-resolver-rules=MAP rebind.test ${address}`]);
+  const rebinding = `--host-resolver-rules=MAP rebind.test ${address}`;
 
   // ---------------------------------------------------------------- 1. loopback, no token
-  if (address === '127.0.0.1') {
+  if (address === '127.0.0.1' && !tls) {
+    browser = await launchChromium([rebinding]);
     const open = await startDaemon('open', []);
     daemons.push(open);
     await attackAndCheck(await browser.newContext(), open, undefined, 'no token');
@@ -181,7 +210,15 @@ try {
   const box = await startDaemon('login', [`control.http.token_file=${join(work, 'token')}`,
                                           `control.http.viewer_token_file=${join(work, 'viewer-token')}`]);
   daemons.push(box);
-  const base = `http://${address}:${box.port}`;
+  if (tls) {
+    check('with TLS facecapd logs the public key pin of the certificate it made', Boolean(box.pin) &&
+          box.log().includes('made now, self-signed'), box.pin);
+    // Chromium trusts this key and no other: not a blanket --ignore-certificate-errors.
+    browser = await launchChromium([rebinding, `--ignore-certificate-errors-spki-list=${box.pin}`]);
+  } else if (!browser) {
+    browser = await launchChromium([rebinding]);
+  }
+  const base = `${scheme}://${address}:${box.port}`;
   const context = await browser.newContext({ viewport: { width: 1400, height: 860 } });
   context.setDefaultTimeout(60000);  // a loaded 2-core machine renders the face slowly
   const page = await context.newPage();
@@ -196,7 +233,7 @@ try {
   await page.waitForFunction(() => document.getElementById('login-message').classList.contains('error'), null, { timeout: 10000 });
   const refused = await page.textContent('#login-message');
   check('a wrong token is refused on the page, in words', refused.includes('the token is wrong') && refused.includes('401'), refused);
-  await page.screenshot({ path: join(shots, 'login.png') });
+  await page.screenshot({ path: join(shots, tls ? 'login-tls.png' : 'login.png') });
   await page.fill('#token', kOperatorToken);
   await page.click('#login');
   await page.waitForURL((url) => !url.pathname.endsWith('login.html'), { timeout: 10000 });
@@ -204,8 +241,8 @@ try {
   const frames = Number(await page.evaluate(() => document.body.dataset.frames));
   check(`${address}: after login the live page draws the stream`, frames >= 10, `${frames} frames`);
   const cookie = (await context.cookies()).find((c) => c.name === `facecap_session_${box.port}`);
-  check('the session cookie is HttpOnly, SameSite=Strict, expiring', cookie && cookie.httpOnly && cookie.sameSite === 'Strict' &&
-        cookie.expires > Date.now() / 1000 + 3600, JSON.stringify(cookie));
+  check(`the session cookie is HttpOnly, SameSite=Strict, expiring${tls ? ', Secure' : ''}`, cookie && cookie.httpOnly &&
+        cookie.sameSite === 'Strict' && cookie.expires > Date.now() / 1000 + 3600 && cookie.secure === tls, JSON.stringify(cookie));
   await page.fill('#take', 'stage-take');
   await page.click('#record-start');
   await page.waitForFunction(() => /^recording take/.test(document.getElementById('record-message').textContent), null, { timeout: 10000 });
@@ -214,15 +251,15 @@ try {
   await page.waitForFunction(() => /^saved /.test(document.getElementById('record-message').textContent), null,
                              { timeout: 10000 });
   check(`${address}: the logged-in page records a take`, takesIn(box).some((f) => f.includes('stage-take')), takesIn(box).join(', '));
-  await page.screenshot({ path: join(shots, 'live-after-login.png') });
+  await page.screenshot({ path: join(shots, tls ? 'live-after-login-tls.png' : 'live-after-login.png') });
 
   await attackAndCheck(context, box, kOperatorToken, 'logged in');
 
   // DNS rebinding: a name the attacker controls, resolved to the box (chromium's resolver
   // maps rebind.test to ADDRESS), opened in the browser that holds the session.
   const rebindPage = await context.newPage();
-  const rebound = (await rebindPage.goto(`http://rebind.test:${box.port}/status`)).status();
-  const reboundFiles = (await rebindPage.goto(`http://rebind.test:${box.port}/`)).status();
+  const rebound = (await rebindPage.goto(`${scheme}://rebind.test:${box.port}/status`)).status();
+  const reboundFiles = (await rebindPage.goto(`${scheme}://rebind.test:${box.port}/`)).status();
   await rebindPage.close();
   check('DNS rebinding: Host rebind.test gets 421 for the API and the dashboard\'s files',
         rebound === 421 && reboundFiles === 421, `${rebound}, ${reboundFiles}`);
@@ -230,7 +267,7 @@ try {
   // Logout: back to the login page; the old cookie no longer works.
   await page.click('#logout');
   await page.waitForURL(/login\.html/, { timeout: 10000 });
-  const after = await fetch(`${base}/status`, { headers: { Cookie: `${cookie.name}=${cookie.value}` } });
+  const after = await send(box, '/status', { headers: { Cookie: `${cookie.name}=${cookie.value}` } });
   check('logout ends the session: its cookie gets 401', after.status === 401, `HTTP ${after.status}`);
   await page.close();  // one rendering page at a time on a small machine
 
