@@ -48,7 +48,9 @@ ShapeMap parse_shape_map(std::string_view text, const std::string& name) {
   ShapeMap map{.file = name, .entries = {}};
   std::vector<std::string_view> arkit_names;
   for (const auto& shape : formats::kArkitShapes) arkit_names.push_back(shape.arkit);
-  for (const auto& [key, value] : table) {
+  for (const auto& entry : table) {
+    const auto& key = entry.first;  // not a structured binding: clang 14 cannot capture one
+    const auto& value = entry.second;
     const auto& at = value.source().begin;
     auto fail = [&](std::string what) {
       return Error(std::move(what), ErrorLocation{.file = name, .line = at.line, .column = at.column,
