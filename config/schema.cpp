@@ -215,8 +215,8 @@ const std::vector<KeySpec>& schema_rows() {
                       "under the last frame's weights); one further than this from their median is left out of the "
                       "frame, and two that trade places are swapped back; such a frame is flagged "
                       "inconsistent_marker. Catches label swaps that glide too slowly for max_marker_speed_mm_s. 0 "
-                      "(the default, until the check is cheap enough for the loop) turns it off; 10 is the suggested "
-                      "value."},
+                      "(the default: on clean takes it also leaves out markers that truly moved unlike their "
+                      "neighbours, docs/alignment.md \"Label swaps\") turns it off; 10 is the suggested value."},
       {FACECAP_KEY(calibration.label_markers), .default_value = false, .reload = Reload::kRebuild,
        .description = "Label every frame afresh: its points go to the labeller, which matches them to the "
                       "calibration's markers (tracking them from frame to frame, re-acquiring the set from the "

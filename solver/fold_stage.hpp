@@ -3,10 +3,11 @@
 // collision pins, it measures the solve against the rig's linear blend x0 + B w of the
 // same weights (FoldDetector: triangles flipped or creased against it, the largest edge
 // stretch), and where the non-linear blend folded a triangle it pins that triangle's
-// vertices to the linear blend through the same low-rank update as the collision pins,
-// then measures again. A frame still folded after that is flagged kSolvedFolded.
+// vertices to the linear blend's shape (moved to where the solve put the skin around it)
+// through the same low-rank update as the collision pins, then measures again. A frame still folded after that is flagged kSolvedFolded.
 // Lifecycle: construct (allocates) -> per frame measure(), add_pins() (real-time safe).
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -35,10 +36,19 @@ class FoldStage {
   const FoldReport& measure_again(const Eigen::Matrix3Xd& vertices) noexcept;
 
   // Pins the vertices of the triangles the last measure() found folded to the linear
-  // blend, each vertex once per call (a corner pinned in an earlier round and still on a
-  // fold is pinned again: its hold adds up), while capacity lasts; with_neighbours: the
-  // corners of the triangles beside them too. Returns the pins added. Real-time safe.
-  uint32_t add_pins(PinUpdate& update, bool with_neighbours) noexcept;
+  // blend's shape: each edge-connected patch of them to the blend moved by the mean offset
+  // (vertices - blend) of the unfolded corners around the patch, so the patch takes the
+  // blend's unfolded shape where the solve put the skin around it. Each vertex once per
+  // call (a corner pinned in an earlier round and still on a fold is pinned again: its
+  // hold adds up), while capacity lasts; with_neighbours: the corners of the triangles
+  // beside them too, with their patch's offset. to_blend: to the linear blend itself (the
+  // last rounds, for a fold the moved shape does not undo: far pins pull the skin around
+  // it apart). vertices: 3 x N, the solve being measured. Returns the pins added.
+  // Real-time safe.
+  uint32_t add_pins(PinUpdate& update, bool with_neighbours, bool to_blend, const Eigen::Matrix3Xd& vertices) noexcept;
+  // This frame's pins to a moved blend put back onto the blend itself (their PinUpdate
+  // changes retargeted: no capacity spent). Returns how many. Real-time safe.
+  uint32_t pins_to_blend(PinUpdate& update) noexcept;
   // Forgets this frame's pins (call once per frame before add_pins). Real-time safe.
   void begin_frame() noexcept;
 
@@ -68,6 +78,10 @@ class FoldStage {
   Eigen::VectorXd pin_work_;
   uint32_t pin_stamp_now_ = 0;        // this round's
   std::vector<uint32_t> pin_stamp_;  // per vertex: the round it was last pinned
+  std::vector<std::pair<Eigen::Index, int>> moved_pins_;  // this frame's pins to a moved blend: PinUpdate change, vertex
+  std::vector<int> cluster_;              // a patch of folded triangles (capacity T)
+  uint32_t cluster_stamp_now_ = 0;
+  std::vector<uint32_t> cluster_stamp_;  // per triangle: the add_pins call that put it in a patch
   uint32_t measure_stamp_ = 0;
   std::vector<uint32_t> fold_vertex_stamp_;  // per vertex: the measure that found it on a fold
 

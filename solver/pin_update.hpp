@@ -60,6 +60,9 @@ class PinUpdate {
   // column of PinColumns). Real-time safe.
   bool add(int vertex, const int16_t* column, float column_scale, double scale, const Eigen::Vector3d& target) noexcept;
 
+  // Gives change `index` (0 .. size() - 1, in the order added) another target. Real-time safe.
+  void retarget(Eigen::Index index, const Eigen::Vector3d& target) noexcept { changes_[std::size_t(index)].target = target; }
+
   Eigen::Index size() const noexcept { return count_; }
   Eigen::Index capacity() const noexcept { return Eigen::Index(changes_.size()); }
 

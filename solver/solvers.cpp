@@ -176,13 +176,17 @@ class PoissonSolver final : public FaceSolver {
     if (collided.pins > 0 && !pins_.apply(rhs_, out.vertices)) out.status |= kSolvedSingularCorrection;
 
     // Folds (timed with the collisions: both are pins to the linear blend): the folded
-    // triangles' corners pinned to the linear blend, then measured again, round by round
+    // triangles' corners pinned to the linear blend's shape where the skin around them is
+    // (FoldStage::add_pins), then measured again, round by round
     // (a corner still on a fold is pinned again). From round kReleaseRound, or when
     // capacity is spent, a marker pinning a corner of a fold that remains pulls the skin
     // through itself (a far pin, a swapped label): it is released for this frame.
     out.folds = folds_.measure(active_.data(), out.vertices);
     folds_.begin_frame();
     bool released = false;
+    // A frame folded widely needs its pins for the folds themselves: the blend itself
+    // from the first round.
+    const int blend_round = int64_t(out.folds.folded) * kMovedShapeShare <= int64_t(folds_.pin_capacity()) ? kBlendRound : 0;
     for (int round = 0; round < kFoldRounds && out.folds.folded > 0 && folds_.pin_capacity() > 0; ++round) {
       const int64_t round_start_ns = monotonic_now_ns();
       if ((deadline_ns_ != 0 && round_start_ns + longest_fold_round_ns_ > deadline_ns_) || round == fold_round_stop_) {
@@ -190,13 +194,17 @@ class PoissonSolver final : public FaceSolver {
         break;
       }
       out.fold_rounds = uint32_t(round + 1);
-      const uint32_t added = folds_.add_pins(pins_, round >= kNeighbourRound);
-      out.fold_pins += added;
-      if (!released && (added == 0 || round == kReleaseRound)) {
-        released = true;
-        if (release_folding_markers(targets, present, out) == 0 && added == 0) break;
-      } else if (added == 0) {
-        break;
+      // At blend_round a round of its own, when there are any: the pins so far put back
+      // onto the blend itself, and measured as they are.
+      if (round != blend_round || folds_.pins_to_blend(pins_) == 0) {
+        const uint32_t added = folds_.add_pins(pins_, round >= kNeighbourRound, round >= blend_round, out.vertices);
+        out.fold_pins += added;
+        if (!released && (added == 0 || round == kReleaseRound)) {
+          released = true;
+          if (release_folding_markers(targets, present, out) == 0 && added == 0) break;
+        } else if (added == 0) {
+          break;
+        }
       }
       if (!pins_.apply(rhs_, out.vertices)) out.status |= kSolvedSingularCorrection;
       out.folds = folds_.measure_again(out.vertices);
@@ -232,6 +240,13 @@ class PoissonSolver final : public FaceSolver {
   // corners can push the fold onto a neighbour, round after round. Not earlier: a widely
   // folded frame needs its pins for the folds themselves.
   static constexpr int kNeighbourRound = 2;
+  // From this round on a fold still there is pinned to the linear blend itself, not to its
+  // shape moved to the skin around it (far pins pull that skin apart).
+  static constexpr int kBlendRound = 2;
+  // The moved shape only while the folded triangles' corners (3 each) fit 4 times into
+  // the pin capacity: its rounds cost pins a widely folded frame (CheeksMoCap's 160s:
+  // 61 frames left folded) needs for the blend itself.
+  static constexpr int64_t kMovedShapeShare = 12;
   // What a fold round is expected to take, for the deadline: the longest recent one,
   // forgotten by 1/kFoldRoundDecay a frame (a heavy fold once does not stop rounds for
   // good).
