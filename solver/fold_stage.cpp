@@ -72,8 +72,8 @@ const double* FoldStage::pin_column(int v) noexcept {
 // Each call is a round: a corner still on a fold is pinned again (its hold adds up), once
 // per round. Its target is the linear blend moved by its patch's offset (below): the
 // blend's own shape, which is unfolded, where the solve put the skin around it; the blend
-// where it is (an earlier version) pulled a brow whose neighbour marker was held out 5 mm
-// off the markers (EyebrowsMoCap's held-out p95 +3.1%; with the offset -0.2%). A pinned
+// where it is (an earlier version) pulled a brow whose neighbour marker was held out 4-5 mm
+// off the markers (EyebrowsMoCap's held-out p95 +3.1%; with the offset -0.1%). A pinned
 // vertex gains beta e_v e_v^T in A0 and beta e_v (target)^T in the right-hand side, as a
 // collision pin: A0^-1 e_v from the collision stage's precomputed
 // columns where the vertex has one, else from pin_column(): back-substituted once and
@@ -136,6 +136,7 @@ uint32_t FoldStage::add_pins(PinUpdate& update, bool with_neighbours, bool to_bl
           }
           continue;
         }
+        if (to_blend) continue;  // no offset to take
         for (int j = 0; j < 3; ++j) {
           const int w = m.rig.triangles(j, u);
           if (on_fold(w)) continue;
@@ -143,7 +144,7 @@ uint32_t FoldStage::add_pins(PinUpdate& update, bool with_neighbours, bool to_bl
           ++n;
         }
       }
-    const Eigen::Vector3d offset = n > 0 && !to_blend ? Eigen::Vector3d(sum / n) : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d offset = n > 0 ? Eigen::Vector3d(sum / n) : Eigen::Vector3d::Zero();
     bool room = true;
     for (std::size_t i = 0; i < size && room; ++i) {
       room = pin_corners(cluster_[i], offset);

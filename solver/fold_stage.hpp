@@ -4,7 +4,8 @@
 // same weights (FoldDetector: triangles flipped or creased against it, the largest edge
 // stretch), and where the non-linear blend folded a triangle it pins that triangle's
 // vertices to the linear blend's shape (moved to where the solve put the skin around it)
-// through the same low-rank update as the collision pins, then measures again. A frame still folded after that is flagged kSolvedFolded.
+// through the same low-rank update as the collision pins, then measures again. A frame
+// still folded after that is flagged kSolvedFolded.
 // Lifecycle: construct (allocates) -> per frame measure(), add_pins() (real-time safe).
 #include <cstdint>
 #include <utility>
