@@ -16,6 +16,7 @@
 
 #include "core/error.hpp"
 #include "core/io.hpp"
+#include "core/printable.hpp"
 
 namespace facecap {
 namespace {
@@ -49,7 +50,8 @@ Rig rig_from_scene(const aiScene& scene, const std::string& name, FbxContents* c
     throw file_error(name, scene.mNumMeshes == 0 ? "no mesh" : fmt::format("none of its {} meshes has blendshape channels",
                                                                              scene.mNumMeshes));
   const aiMesh& mesh = *rig_mesh;
-  const std::string mesh_name = fmt::format("mesh '{}'", mesh.mName.C_Str());
+  // Names from the file, shown in messages: made safe for a terminal and a log first.
+  const std::string mesh_name = fmt::format("mesh '{}'", printable(mesh.mName.C_Str()));
   aiMatrix4x4 to_scene;
   if (scene.mRootNode) find_mesh_transform(*scene.mRootNode, unsigned(found.rig_mesh), aiMatrix4x4(), to_scene);
 
@@ -65,7 +67,7 @@ Rig rig_from_scene(const aiScene& scene, const std::string& name, FbxContents* c
     std::string channel = shape->mName.C_Str();
     if (channel.empty()) channel = fmt::format("shape{}", s);
     if (!seen.insert(channel).second)
-      throw file_error(name, fmt::format("{}: blendshape channel name '{}' appears twice", mesh_name, channel));
+      throw file_error(name, fmt::format("{}: blendshape channel name '{}' appears twice", mesh_name, printable(channel)));
     names.push_back(std::move(channel));
   }
 
@@ -81,7 +83,7 @@ Rig rig_from_scene(const aiScene& scene, const std::string& name, FbxContents* c
       const aiVector3D& p = position(s, corner);
       if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
         throw file_error(name, fmt::format("{}: vertex {} of {} is not a finite number", mesh_name, corner,
-                                           s == 0 ? std::string("the neutral") : "channel '" + names[s - 1] + "'"));
+                                           s == 0 ? std::string("the neutral") : "channel '" + printable(names[s - 1]) + "'"));
       key[3 * s] = p.x + 0.0f;  // + 0: -0 and 0 are one position
       key[3 * s + 1] = p.y + 0.0f;
       key[3 * s + 2] = p.z + 0.0f;
