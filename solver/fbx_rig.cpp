@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <map>
 #include <set>
 #include <string_view>
+#include <vector>
 
 #include <assimp/Importer.hpp>
 #include <assimp/mesh.h>
@@ -141,6 +143,86 @@ bool looks_like_fbx(std::span<const char> bytes) {
   return head.starts_with(kBinaryMagic) || head.find("FBXHeaderExtension") != std::string_view::npos;
 }
 
+// A binary FBX's records walked before assimp sees them (its reader allocates what an
+// array's header claims: 13.8 KB of hostile file asked for 2.55 GB). Every record and
+// property must lie inside its parent, and an array may hold no more than its stored
+// bytes can: as many (raw) or 1032 times as many (zlib's largest ratio). Layout: the
+// 27-byte header (magic, 0x1A 0x00, version u32), then records of end offset, property
+// count and property bytes (u64 each from version 7500, else u32), a name (u8 length),
+// the properties, the nested records and a null record.
+void check_binary_fbx_arrays(std::span<const char> bytes, const std::string& name) {
+  constexpr std::size_t kHeader = 27;
+  if (bytes.size() < kHeader) throw file_error(name, "a binary FBX shorter than its header");
+  auto u32 = [&](std::size_t at) {
+    uint32_t v;
+    std::memcpy(&v, bytes.data() + at, 4);
+    return uint64_t(v);
+  };
+  auto u64 = [&](std::size_t at) {
+    uint64_t v;
+    std::memcpy(&v, bytes.data() + at, 8);
+    return v;
+  };
+  const bool wide = u32(23) >= 7500;
+  const std::size_t word = wide ? 8 : 4;
+  auto bad = [&](std::size_t at, std::string what) { return offset_error(name, int64_t(at), std::move(what)); };
+  std::vector<uint64_t> ends{bytes.size()};  // the enclosing records' ends
+  std::size_t at = kHeader;
+  while (!ends.empty()) {
+    if (at == ends.back()) {
+      ends.pop_back();
+      continue;
+    }
+    if (at + 3 * word + 1 > ends.back()) {
+      if (ends.size() == 1) break;  // the file's footer
+      throw bad(at, "an FBX record runs past the record holding it");
+    }
+    const uint64_t end = wide ? u64(at) : u32(at);
+    const uint64_t properties = wide ? u64(at + 8) : u32(at + 4), property_bytes = wide ? u64(at + 16) : u32(at + 8);
+    const std::size_t name_length = uint8_t(bytes[at + 3 * word]);
+    if (end == 0) {  // a null record ends the list; after the top level's, the footer
+      if (ends.size() == 1) break;
+      at = ends.back();
+      ends.pop_back();
+      continue;
+    }
+    std::size_t p = at + 3 * word + 1 + name_length;
+    if (end <= at || end > ends.back() || p > end || property_bytes > end - p)
+      throw bad(at, "an FBX record's end or properties lie outside the record holding it");
+    const std::size_t properties_end = p + std::size_t(property_bytes);
+    for (uint64_t i = 0; i < properties; ++i) {
+      if (p >= properties_end) throw bad(p, "an FBX record has fewer property bytes than its properties need");
+      const char type = bytes[p++];
+      std::size_t size = 0;
+      switch (type) {
+        case 'C': size = 1; break;
+        case 'Y': size = 2; break;
+        case 'I': case 'F': size = 4; break;
+        case 'D': case 'L': size = 8; break;
+        case 'S': case 'R':
+          if (p + 4 > properties_end) throw bad(p, "an FBX string runs past its record");
+          size = 4 + std::size_t(u32(p));
+          break;
+        case 'f': case 'i': case 'd': case 'l': case 'b': {
+          if (p + 12 > properties_end) throw bad(p, "an FBX array header runs past its record");
+          const uint64_t count = u32(p), encoding = u32(p + 4), stored = u32(p + 8);
+          const uint64_t element = type == 'b' ? 1 : (type == 'd' || type == 'l') ? 8 : 4;
+          if ((encoding == 0 && count * element != stored) || (encoding != 0 && count * element > 1032 * stored + 64))
+            throw bad(p, fmt::format("an FBX array claims {} values in {} stored bytes", count, stored));
+          size = 12 + std::size_t(stored);
+          break;
+        }
+        default: throw bad(p - 1, fmt::format("an FBX property of unknown type {}", int(uint8_t(type))));
+      }
+      if (size > properties_end - p) throw bad(p, "an FBX property runs past its record");
+      p += size;
+    }
+    ends.push_back(end);
+    if (ends.size() > 64) throw bad(at, "FBX records nested deeper than 64");
+    at = properties_end;
+  }
+}
+
 }  // namespace
 
 bool is_fbx_path(const std::filesystem::path& path) {
@@ -158,6 +240,8 @@ Rig parse_fbx_rig(std::span<const char> bytes, const std::string& name, FbxConte
   if (bytes.empty()) throw file_error(name, "empty file");
   if (!looks_like_fbx(bytes))
     throw file_error(name, "not an FBX file (neither the binary 'Kaydara FBX Binary' header nor an ASCII FBXHeaderExtension)");
+  if (std::string_view(bytes.data(), std::min<std::size_t>(bytes.size(), 18)) == "Kaydara FBX Binary")
+    check_binary_fbx_arrays(bytes, name);
   Assimp::Importer importer;
   const aiScene* scene = importer.ReadFileFromMemory(bytes.data(), bytes.size(), aiProcess_ValidateDataStructure, "fbx");
   if (!scene) throw file_error(name, fmt::format("assimp cannot read it: {}", importer.GetErrorString()));

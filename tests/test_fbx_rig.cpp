@@ -281,3 +281,21 @@ TEST_CASE("bad FBX files are refused naming the file and what is wrong", "[fbx]"
   CHECK(half.find("half.fbx") != std::string::npos);
   CHECK(half != "no error");
 }
+
+// Found by the fbx fuzz target: tests/make_tiny_fbx.py's cube with one array's length set
+// to 0x12ffffff doubles (2.55 GB) over 41 stored bytes. assimp allocated what the header
+// claimed (inspect-rig took 8 s and 3.75 GB before refusing the file); the records are now
+// walked first and the file refused at that array, before assimp reads it.
+TEST_CASE("a binary FBX whose array claims far more values than it stores is refused at that byte, before assimp",
+          "[fbx][hostile]") {
+  const fs::path fbx = fs::path(FACECAP_SOURCE_DIR) / "tests" / "data" / "hostile_array_length.fbx";
+  try {
+    load_fbx_rig(fbx.string());
+    FAIL("the file was read");
+  } catch (const Error& e) {
+    CHECK_THAT(std::string(e.what()), Catch::Contains("hostile_array_length.fbx @ byte 9726") &&
+                                          Catch::Contains("an FBX array claims 318767103 values in 41 stored bytes"));
+  }
+  // The same file with a header we did not damage reads (the walk refuses nothing valid).
+  CHECK_NOTHROW(load_fbx_rig((fs::path(FACECAP_SOURCE_DIR) / "tests" / "data" / "tiny_rig_blender.fbx").string()));
+}
