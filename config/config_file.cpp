@@ -126,14 +126,20 @@ class Loader {
       if (!fs::exists(value, ec)) problem(where(key), fmt::format("\"{}\" does not exist", value));
     }
     // Secrets, like ssh's keys: refused when others may read them.
-    for (const std::string* secret : {&out_.values.control.http.token_file, &out_.values.control.http.viewer_token_file}) {
-      struct stat info {};
-      if (secret->empty() || ::stat(secret->c_str(), &info) != 0 || (info.st_mode & 077) == 0) continue;
-      problem(where(secret == &out_.values.control.http.token_file ? "control.http.token_file" : "control.http.viewer_token_file"),
-              fmt::format("\"{}\" holds a token but group or others may access it (mode {:04o}): chmod 600 it", *secret,
-                          info.st_mode & 07777));
-    }
     const HttpSection& http = out_.values.control.http;
+    const struct {
+      const char* key;
+      const std::string* path;
+      const char* holds;
+    } secrets[] = {{"control.http.token_file", &http.token_file, "a token"},
+                   {"control.http.viewer_token_file", &http.viewer_token_file, "a token"},
+                   {"control.http.tls_key", http.enabled && http.tls ? &http.tls_key : nullptr, "the TLS private key"}};
+    for (const auto& secret : secrets) {
+      struct stat info {};
+      if (!secret.path || secret.path->empty() || ::stat(secret.path->c_str(), &info) != 0 || (info.st_mode & 077) == 0) continue;
+      problem(where(secret.key), fmt::format("\"{}\" holds {} but group or others may access it (mode {:04o}): chmod 600 it",
+                                             *secret.path, secret.holds, info.st_mode & 07777));
+    }
     if (http.enabled && http.tls) {
       std::error_code ec;
       const bool certificate = fs::exists(http.tls_certificate, ec), key = fs::exists(http.tls_key, ec);
@@ -141,11 +147,6 @@ class Loader {
         problem(where(certificate ? "control.http.tls_key" : "control.http.tls_certificate"),
                 fmt::format("\"{}\" does not exist but \"{}\" does: give both, or remove both to have a new pair made at start",
                             certificate ? http.tls_key : http.tls_certificate, certificate ? http.tls_certificate : http.tls_key));
-      struct stat info {};
-      if (key && ::stat(http.tls_key.c_str(), &info) == 0 && (info.st_mode & 077) != 0)
-        problem(where("control.http.tls_key"),
-                fmt::format("\"{}\" holds the TLS private key but group or others may access it (mode {:04o}): chmod 600 it",
-                            http.tls_key, info.st_mode & 07777));
     }
   }
 

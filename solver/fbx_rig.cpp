@@ -137,8 +137,9 @@ Rig rig_from_scene(const aiScene& scene, const std::string& name, FbxContents* c
 
 // assimp would read any format it knows from these bytes; a rig.path ending in .fbx must
 // be an FBX (binary, or ASCII with its header block).
+constexpr std::string_view kBinaryMagic = "Kaydara FBX Binary";
+
 bool looks_like_fbx(std::span<const char> bytes) {
-  constexpr std::string_view kBinaryMagic = "Kaydara FBX Binary";
   const std::string_view head(bytes.data(), std::min<std::size_t>(bytes.size(), 4096));
   return head.starts_with(kBinaryMagic) || head.find("FBXHeaderExtension") != std::string_view::npos;
 }
@@ -240,8 +241,7 @@ Rig parse_fbx_rig(std::span<const char> bytes, const std::string& name, FbxConte
   if (bytes.empty()) throw file_error(name, "empty file");
   if (!looks_like_fbx(bytes))
     throw file_error(name, "not an FBX file (neither the binary 'Kaydara FBX Binary' header nor an ASCII FBXHeaderExtension)");
-  if (std::string_view(bytes.data(), std::min<std::size_t>(bytes.size(), 18)) == "Kaydara FBX Binary")
-    check_binary_fbx_arrays(bytes, name);
+  if (std::string_view(bytes.data(), bytes.size()).starts_with(kBinaryMagic)) check_binary_fbx_arrays(bytes, name);
   Assimp::Importer importer;
   const aiScene* scene = importer.ReadFileFromMemory(bytes.data(), bytes.size(), aiProcess_ValidateDataStructure, "fbx");
   if (!scene) throw file_error(name, fmt::format("assimp cannot read it: {}", importer.GetErrorString()));

@@ -2,14 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <numbers>
 #include <span>
 
 #include <Eigen/Geometry>
 
 #include "solver/kernels/kernels.hpp"
-#include "solver/mesh_topology.hpp"
 #include "solver/rig.hpp"
 
 namespace facecap {
